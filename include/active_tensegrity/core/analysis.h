@@ -1,0 +1,44 @@
+/// Running a scene's analysis (static path or dynamic run) and measuring what the batch command
+/// writes: the common CSV columns and the run summary.
+#pragma once
+
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "active_tensegrity/core/state.h"
+
+namespace active_tensegrity::core
+{
+/// Force the actuator applies along its directions, summed over its targets (N); positive when it
+/// pushes the nodes the way they are driven. From the multipliers: the constraint force on a body
+/// is -Phi_q^T lambda, so each target contributes -lambda.
+double actuationForce(const Model& model, const State& state, int actuator);
+
+/// Highest z of the model's height nodes above the ground level (m).
+double structureHeight(const Model& model, const Eigen::VectorXd& q);
+
+/// Smallest surface gap between the checked strut pairs (m, negative when they overlap); +inf when
+/// the scene checks no pair.
+double minimumGap(const Model& model, const Eigen::VectorXd& q);
+
+/// Column names of the CSV: t, actuation, actuation_force, height, active_contacts, min_gap,
+/// max_normal_force, max_friction_force, then actuation_<name> and actuation_force_<name> per
+/// actuator when there are several.
+std::vector<std::string> csvColumns(const Model& model);
+std::vector<double> csvRow(const Model& model, const State& state);
+
+struct RunResult
+{
+  Summary summary;
+  int steps = 0;         // output steps written
+  int solver_steps = 0;  // time steps or load increments taken
+  double wall_time = 0.0;  // s
+  State final_state;
+};
+
+/// Runs model.analysis; calls on_output for every output step (the initial state included).
+RunResult runAnalysis(const Model& model, const std::function<void(const State&)>& on_output,
+                      const std::function<void(double fraction)>& on_progress = {});
+
+}  // namespace active_tensegrity::core

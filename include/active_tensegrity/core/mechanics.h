@@ -1,0 +1,115 @@
+/// Kinematics, forces and constraints of a Model, and their assembly into global vectors and a
+/// fixed-pattern sparse matrix.
+///
+/// Sign convention (paper Eq. 60 and 67): the equations of motion are
+///   M(q) qdd + Qv(q, qd) - F(q, qd, t) + Phi_q^T lambda = 0,  Phi(q, t) = 0,
+/// with F the applied forces (cables, springs, gravity), Qv the quadratic velocity term, and the
+/// tangents K = -dF/dq (stiffness) and C = -dF/dqd (damping).
+#pragma once
+
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "active_tensegrity/core/block_sparse.h"
+#include "active_tensegrity/core/model.h"
+
+namespace active_tensegrity::core
+{
+using Mat37 = Eigen::Matrix<double, 3, 7>;
+
+/// Position, velocity and their derivatives of a material point. Only the first nq columns of the
+/// matrices are meaningful (7 for a strut, 3 for a point mass, 0 for the ground).
+struct PointKinematics
+{
+  Vec3 p = Vec3::Zero();     // world position, m
+  Vec3 v = Vec3::Zero();     // world velocity, m/s
+  Mat37 jac = Mat37::Zero();  // B_P = dp/dq = dv/dqd
+  Mat37 dv_dq = Mat37::Zero();  // dv/dq = [0, B_Theta(Theta_dot, u)]
+  int body = -1;
+  int nq = 0;
+};
+
+PointKinematics pointKinematics(const Model& model, const PointRef& point, const Eigen::VectorXd& q,
+                                const Eigen::VectorXd& qd);
+
+/// The state of a cable after evaluation.
+struct CableState
+{
+  double length = 0.0;   // m
+  double rate = 0.0;     // m/s
+  double tension = 0.0;  // N (>= 0 for tension-only elements)
+  bool slack = false;
+};
+
+/// Evaluates one cable at (q, qd); adds its generalized force into F (if not null) and
+/// k_weight * K + c_weight * C into jac (if not null).
+CableState evaluateCable(const Model& model, const Cable& cable, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                         bool damping, Eigen::VectorXd* F, BlockSparseMatrix* jac, double k_weight, double c_weight);
+
+/// Actuation values of every actuator at one instant.
+using ActuationValues = std::vector<ActuationValue>;
+
+/// The equations of one model plus optional extra constraints (e.g. statics' spin locks), with a
+/// sparse Jacobian whose pattern is fixed at construction: rows and columns are [q; lambda], one
+/// group per body then one per constraint.
+class System
+{
+public:
+  explicit System(const Model& model, std::vector<Constraint> extra_constraints = {});
+
+  const Model& model() const { return model_; }
+  const std::vector<Constraint>& constraints() const { return constraints_; }
+  int nq() const { return model_.nq; }
+  int nLambda() const { return n_lambda_; }
+  int size() const { return model_.nq + n_lambda_; }
+  int constraintRow(int c) const { return constraint_rows_[c]; }
+
+  /// F(q, qd): cables, springs, gravity. Adds k_weight K + c_weight C into jac when not null.
+  void appliedForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, Eigen::VectorXd& F, BlockSparseMatrix* jac,
+                    double k_weight, double c_weight) const;
+  /// M(q) qdd + Qv(q, qd). Adds m_weight M + k_weight d(M qdd + Qv)/dq + c_weight dQv/dqd into jac.
+  void inertialForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd,
+                     Eigen::VectorXd& out, BlockSparseMatrix* jac, double m_weight, double k_weight,
+                     double c_weight) const;
+  /// Mass matrix M(q) into jac (weighted).
+  void addMass(const Eigen::VectorXd& q, BlockSparseMatrix& jac, double weight) const;
+  /// Phi(q, t) with actuation values u.
+  void constraintValue(const Eigen::VectorXd& q, const ActuationValues& u, Eigen::VectorXd& phi) const;
+  /// Phi_q^T lambda.
+  void constraintForce(const Eigen::VectorXd& q, const Eigen::VectorXd& lambda, Eigen::VectorXd& out) const;
+  /// Adds Phi_q (rows of lambda, columns of q) and its transpose into jac.
+  void addConstraintJacobian(const Eigen::VectorXd& q, BlockSparseMatrix& jac) const;
+  /// Adds weight * d(Phi_q^T lambda)/dq into jac.
+  void addLambdaHessian(const Eigen::VectorXd& q, const Eigen::VectorXd& lambda, BlockSparseMatrix& jac,
+                        double weight) const;
+  /// The right-hand side of Phi_q qd = -Phi_t.
+  void velocityRhs(const ActuationValues& u, Eigen::VectorXd& rhs) const;
+  /// The right-hand side of Phi_q qdd = gamma (acceleration-level constraint).
+  void accelerationRhs(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const ActuationValues& u,
+                       Eigen::VectorXd& rhs) const;
+  /// Phi_q as a dense matrix (tests and small checks only).
+  Eigen::MatrixXd constraintJacobianDense(const Eigen::VectorXd& q) const;
+
+  /// Kinetic and potential energy (J).
+  double kineticEnergy(const Eigen::VectorXd& q, const Eigen::VectorXd& qd) const;
+  double potentialEnergy(const Eigen::VectorXd& q) const;
+
+  /// A fresh matrix with this system's pattern (zero values).
+  BlockSparseMatrix makeMatrix() const { return pattern_; }
+
+private:
+  int bodyGroup(int body) const { return body; }
+  int constraintGroup(int c) const { return static_cast<int>(model_.bodies.size()) + c; }
+
+  const Model& model_;
+  std::vector<Constraint> constraints_;
+  std::vector<int> constraint_rows_;
+  int n_lambda_ = 0;
+  BlockSparseMatrix pattern_;
+};
+
+/// Generalized inertia of one strut: the 4x4 rotational mass 4 L^T J L.
+Mat4 rotationalMass(const Body& body, const Vec4& theta);
+
+}  // namespace active_tensegrity::core

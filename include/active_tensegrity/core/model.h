@@ -1,0 +1,181 @@
+/// The immutable description of a tensegrity scene: bodies, named nodes, force elements,
+/// constraints, actuators, contact pairs and the analysis. Built by loadScene() (scene.h) and
+/// validated there; algorithms take it by const reference.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "active_tensegrity/core/rotation.h"
+#include "active_tensegrity/core/schedule.h"
+
+namespace active_tensegrity::core
+{
+/// A strut is a rigid body with q = [R; Theta] (7 numbers, R the centre of mass, body z the axis);
+/// a point mass has q = R (3 numbers) and no orientation.
+enum class BodyKind
+{
+  kStrut,
+  kPointMass
+};
+
+/// One layer of a strut's cross-section (a solid core has inner_radius 0).
+struct StrutLayer
+{
+  std::string material;
+  double inner_radius = 0.0;  // m
+  double outer_radius = 0.0;  // m
+  double density = 0.0;       // kg/m^3
+  double youngs_modulus = 0.0;  // Pa
+  double poisson_ratio = 0.0;
+};
+
+struct Body
+{
+  std::string name;
+  BodyKind kind = BodyKind::kStrut;
+  int nq = 7;      // coordinates of this body
+  int offset = 0;  // first coordinate in the global q
+  double mass = 0.0;  // kg
+  Vec3 inertia = Vec3::Zero();  // principal moments about the centre of mass in the body frame, kg m^2
+  double length = 0.0;  // m (struts)
+  std::vector<StrutLayer> layers;  // innermost first (struts)
+
+  double radius() const { return layers.empty() ? 0.0 : layers.back().outer_radius; }
+};
+
+/// A material point: body -1 is the ground, and then `local` is the world position.
+struct PointRef
+{
+  int body = -1;
+  Vec3 local = Vec3::Zero();  // body frame (m) or world frame for the ground
+};
+
+/// A named node of the scene (strut end, point mass, ground point).
+struct Node
+{
+  std::string name;
+  PointRef point;
+};
+
+/// Tension element between two points: T = k (l - l0) + c l_dot while l > l0 (never below zero
+/// when tension_only), else 0. A cable has k = EA / l0; a spring has a given k.
+struct Cable
+{
+  std::string name;
+  PointRef a, b;
+  double stiffness = 0.0;     // k, N/m
+  double rest_length = 0.0;   // l0, m
+  double damping = 0.0;       // c, N s/m
+  bool tension_only = true;
+  double area = 0.0;          // m^2, for stresses (0 when not a material cable)
+};
+
+/// A constraint block. kPoints: rows d_k . (p_a - p_b) - offset_k - (actuator >= 0 ? s(t) : 0) = 0,
+/// p_b the ground when b.body < 0 (covers ball joints, ground pins, and rheonomic actuation);
+/// kQuatNorm: Theta.Theta - 1 = 0; kSpinLock: a . Theta = 0 (statics only, spin about a strut axis).
+struct Constraint
+{
+  enum class Kind
+  {
+    kPoints,
+    kQuatNorm,
+    kSpinLock
+  };
+  Kind kind = Kind::kPoints;
+  std::string name;
+  PointRef a, b;
+  std::vector<Vec3> directions;   // one per row (kPoints)
+  std::vector<double> offsets;    // one per row (kPoints)
+  int actuator = -1;              // index into Model::actuators, or -1
+  int body = -1;                  // kQuatNorm, kSpinLock
+  Vec4 coefficients = Vec4::Zero();  // kSpinLock
+
+  int rows() const { return kind == Kind::kPoints ? static_cast<int>(directions.size()) : 1; }
+};
+
+/// A group of node motions driven by one value s (m): each target point moves by s along its
+/// direction. The actuation force is the sum over targets of the force the actuator applies
+/// along its direction (positive when it pushes the way the node is driven).
+struct Actuator
+{
+  std::string name;
+  double min_value = 0.0;  // m
+  double max_value = 0.0;  // m
+  std::vector<int> constraints;  // indices into Model::constraints
+};
+
+/// A pair of struts whose surface gap is measured (and, once contact is on, whose contact is computed).
+struct StrutPair
+{
+  int body_a = -1;
+  int body_b = -1;
+};
+
+enum class Integrator
+{
+  kNewmark,
+  kGeneralizedAlpha
+};
+
+struct SolverOptions
+{
+  double dt = 2e-4;  // s
+  Integrator integrator = Integrator::kNewmark;
+  double newmark_gamma = 0.6;
+  double newmark_beta = 0.3025;
+  double rho_infinity = 0.8;    // generalized-alpha spectral radius at infinite frequency
+  double newton_tolerance = 1e-6;  // on the position increment (m, or quaternion units)
+  int max_iterations = 25;
+  int max_step_cuts = 10;          // halvings of a step (or load increment) before failure
+};
+
+enum class AnalysisType
+{
+  kStatic,
+  kDynamic
+};
+
+struct AnalysisSettings
+{
+  AnalysisType type = AnalysisType::kStatic;
+  double max_actuation = 0.0;  // m (static path end)
+  int steps = 100;             // static load steps
+  double duration = 0.0;       // s (dynamic)
+  double output_interval = 0.0;  // s (dynamic, 0 = every step)
+  RampSchedule schedule;       // dynamic actuation law for every actuator
+};
+
+struct Model
+{
+  std::string name;
+  std::string source;  // file it came from
+  std::vector<Body> bodies;
+  std::vector<Node> nodes;
+  std::vector<Cable> cables;
+  std::vector<Constraint> constraints;
+  std::vector<Actuator> actuators;
+  std::vector<StrutPair> checked_pairs;
+  std::vector<int> height_nodes;  // node indices whose highest z gives the height
+  double ground_level = 0.0;      // z of the ground points, m
+  bool gravity_enabled = false;
+  Vec3 gravity = Vec3(0.0, 0.0, -9.81);
+  bool damping_enabled = true;
+  bool contact_enabled = false;
+  SolverOptions solver;
+  AnalysisSettings analysis;
+  Eigen::VectorXd q0;  // initial configuration
+  int nq = 0;          // total coordinates
+  int n_lambda = 0;    // total constraint rows (model constraints only)
+
+  int findNode(const std::string& name) const;
+  int findBody(const std::string& name) const;
+  int findActuator(const std::string& name) const;
+};
+
+/// Sizes, offsets and the initial configuration; call after bodies are filled.
+void finalizeModel(Model& model);
+
+}  // namespace active_tensegrity::core

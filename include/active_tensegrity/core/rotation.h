@@ -1,0 +1,49 @@
+/// Euler-parameter (unit quaternion) kinematics of Kan et al. 2019, Sec. 2.
+///
+/// Theta = (e0, e1, e2, e3) is stored scalar first in an Eigen::Vector4d. This header is the only
+/// place that converts between that order and Eigen's / ROS's (x, y, z, w) order.
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+namespace active_tensegrity::core
+{
+using Vec3 = Eigen::Vector3d;
+using Vec4 = Eigen::Vector4d;
+using Mat3 = Eigen::Matrix3d;
+using Mat4 = Eigen::Matrix4d;
+using Mat34 = Eigen::Matrix<double, 3, 4>;
+
+/// Cross-product matrix: skew(a) * b = a x b.
+Mat3 skew(const Vec3& a);
+
+/// A(Theta) = (e0^2 - e.e) I + 2 e e^T + 2 e0 skew(e); the exact quadratic form, valid for any Theta
+/// (orthonormal only when |Theta| = 1).
+Mat3 rotationMatrix(const Vec4& theta);
+
+/// L(Theta) = [-e, -skew(e) + e0 I] (3x4); body angular velocity omega_bar = 2 L(Theta) Theta_dot.
+Mat34 lMatrix(const Vec4& theta);
+
+/// B_Theta(Theta, u) = d(A(Theta) u)/dTheta (3x4), linear in Theta; B_Theta(Theta, u) Theta = 2 A(Theta) u.
+Mat34 pointJacobianTheta(const Vec4& theta, const Vec3& u);
+
+/// N(v) with L(x)^T v = N(v) x for every x (4x4).
+Mat4 lTransposeTimes(const Vec3& v);
+
+/// G(u, f) = d(B_Theta(Theta, u)^T f)/dTheta (4x4, symmetric, independent of Theta): the Hessian of
+/// f . A(Theta) u.
+Mat4 pointHessianTheta(const Vec3& u, const Vec3& f);
+
+/// Coefficients a with (conj(Theta0) (x) Theta)_z = a . Theta: the twist of Theta relative to Theta0
+/// about the body z axis is zero iff a . Theta = 0 (for swings below 180 degrees).
+Vec4 spinLockCoefficients(const Vec4& theta0);
+
+/// Unit Theta that rotates the body z axis onto the unit vector d with no twist about the shortest arc.
+Vec4 thetaFromZAxis(const Vec3& d);
+
+/// Conversions to and from Eigen's quaternion (x, y, z, w storage): the only place the orders meet.
+Eigen::Quaterniond toEigenQuaternion(const Vec4& theta);
+Vec4 fromEigenQuaternion(const Eigen::Quaterniond& q);
+
+}  // namespace active_tensegrity::core

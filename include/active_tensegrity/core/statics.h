@@ -1,0 +1,45 @@
+/// Static equilibrium (paper Sec. 5 and PHYSICS.md Sec. 6): qd = qdd = 0, Newton on [q; lambda] for
+///   -F(q) + Phi_q^T lambda = 0,  Phi(q, s) = 0,
+/// under actuation (displacement) control. The spin of every strut about its own axis has no
+/// stiffness in statics, so the solver adds one linear spin-lock row per strut,
+/// (conj(Theta0) (x) Theta)_z = 0 with Theta0 the model's initial orientation.
+#pragma once
+
+#include <functional>
+
+#include "active_tensegrity/core/state.h"
+
+namespace active_tensegrity::core
+{
+class StaticSolver
+{
+public:
+  StaticSolver(const Model& model, const SolverOptions& options);
+
+  /// Newton from state (q, lambda) to the equilibrium under actuation values u (no step cutting).
+  Summary solve(State& state, const ActuationValues& u);
+
+  /// Follows the path from state's actuation to u_end in `steps` equal increments, warm-started
+  /// (secant predictor) and halving an increment when Newton fails. Calls `on_step` after every
+  /// requested step. Stops at the first increment that fails after all cuts.
+  Summary followPath(State& state, const ActuationValues& u_end, int steps,
+                     const std::function<void(const State&, const Summary&)>& on_step);
+
+  /// Force residual of the equilibrium equations at (q, lambda), N (max norm of -F + Phi_q^T lambda).
+  double forceResidual(const State& state);
+
+  const System& system() const { return system_; }
+
+private:
+  System system_;
+  SolverOptions options_;
+  BlockSparseMatrix jac_;
+  SparseLinearSolver linear_;
+  Eigen::VectorXd F_, cforce_, phi_, r_, dx_;
+};
+
+/// Multipliers that best satisfy the force equations at a given q (least squares), for checks of
+/// equilibrium and initial actuation forces.
+Eigen::VectorXd leastSquaresMultipliers(const System& system, const Eigen::VectorXd& q);
+
+}  // namespace active_tensegrity::core

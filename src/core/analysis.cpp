@@ -1,0 +1,171 @@
+#include "active_tensegrity/core/analysis.h"
+
+#include <chrono>
+#include <cmath>
+#include <limits>
+
+#include "active_tensegrity/core/dynamics.h"
+#include "active_tensegrity/core/geometry.h"
+#include "active_tensegrity/core/statics.h"
+
+namespace active_tensegrity::core
+{
+double actuationForce(const Model& model, const State& state, int actuator)
+{
+  double force = 0.0;
+  int row = 0;
+  std::vector<int> rows(model.constraints.size());
+  for (size_t i = 0; i < model.constraints.size(); ++i)
+  {
+    rows[i] = row;
+    row += model.constraints[i].rows();
+  }
+  for (int c : model.actuators[actuator].constraints)
+    force -= state.lambda(rows[c]);
+  return force;
+}
+
+double structureHeight(const Model& model, const Eigen::VectorXd& q)
+{
+  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(model.nq);
+  double top = -std::numeric_limits<double>::infinity();
+  for (int n : model.height_nodes)
+    top = std::max(top, pointKinematics(model, model.nodes[n].point, q, zero).p.z());
+  return top - model.ground_level;
+}
+
+double minimumGap(const Model& model, const Eigen::VectorXd& q)
+{
+  double gap = std::numeric_limits<double>::infinity();
+  for (const StrutPair& p : model.checked_pairs)
+  {
+    const Body& a = model.bodies[p.body_a];
+    const Body& b = model.bodies[p.body_b];
+    const Mat3 ra = rotationMatrix(q.segment<4>(a.offset + 3));
+    const Mat3 rb = rotationMatrix(q.segment<4>(b.offset + 3));
+    const Vec3 ha = 0.5 * a.length * ra.col(2), hb = 0.5 * b.length * rb.col(2);
+    const Vec3 ca = q.segment<3>(a.offset), cb = q.segment<3>(b.offset);
+    const SegmentClosest s = closestPointsSegments(ca - ha, ca + ha, cb - hb, cb + hb);
+    gap = std::min(gap, s.distance - a.radius() - b.radius());
+  }
+  return gap;
+}
+
+std::vector<std::string> csvColumns(const Model& model)
+{
+  std::vector<std::string> cols = {"t",       "actuation",       "actuation_force",   "height",
+                                   "active_contacts", "min_gap", "max_normal_force", "max_friction_force"};
+  if (model.actuators.size() > 1)
+    for (const Actuator& a : model.actuators)
+    {
+      cols.push_back("actuation_" + a.name);
+      cols.push_back("actuation_force_" + a.name);
+    }
+  return cols;
+}
+
+std::vector<double> csvRow(const Model& model, const State& state)
+{
+  const bool any = !model.actuators.empty();
+  std::vector<double> row = {state.t,
+                             any ? state.u[0].value : 0.0,
+                             any ? actuationForce(model, state, 0) : 0.0,
+                             structureHeight(model, state.q),
+                             0.0,
+                             minimumGap(model, state.q),
+                             0.0,
+                             0.0};
+  if (model.actuators.size() > 1)
+    for (size_t i = 0; i < model.actuators.size(); ++i)
+    {
+      row.push_back(state.u[i].value);
+      row.push_back(actuationForce(model, state, static_cast<int>(i)));
+    }
+  return row;
+}
+
+RunResult runAnalysis(const Model& model, const std::function<void(const State&)>& on_output,
+                      const std::function<void(double)>& on_progress)
+{
+  const auto start = std::chrono::steady_clock::now();
+  RunResult result;
+  State state = initialState(model);
+  const AnalysisSettings& an = model.analysis;
+
+  if (an.type == AnalysisType::kStatic)
+  {
+    StaticSolver solver(model, model.solver);
+    // the initial equilibrium (prestress, no actuation)
+    Summary first = solver.solve(state, state.u);
+    result.summary.iterations += first.iterations;
+    if (!first.ok())
+    {
+      result.summary = first;
+      result.summary.message = "initial equilibrium: " + first.message;
+      result.final_state = state;
+      return result;
+    }
+    on_output(state);
+    ++result.steps;
+    ActuationValues u_end = state.u;
+    for (auto& v : u_end)
+      v.value = an.max_actuation;
+    Summary path = solver.followPath(state, u_end, an.steps, [&](const State& s, const Summary&) {
+      on_output(s);
+      ++result.steps;
+      if (on_progress)
+        on_progress(s.t);
+    });
+    path.iterations += first.iterations;
+    result.summary = path;
+    result.solver_steps = an.steps + path.step_cuts;
+  }
+  else
+  {
+    DynamicsSolver solver(model, model.solver);
+    const RampSchedule schedule = an.schedule;
+    const size_t n_act = model.actuators.size();
+    const ActuationLaw law = [schedule, n_act](double t) { return ActuationValues(n_act, schedule.evaluate(t)); };
+    result.summary = solver.initialize(state, law);
+    if (!result.summary.ok())
+    {
+      result.final_state = state;
+      return result;
+    }
+    on_output(state);
+    ++result.steps;
+    const double dt = model.solver.dt;
+    const long n_steps = std::lround(std::ceil(an.duration / dt - 1e-9));
+    const double interval = an.output_interval > 0.0 ? an.output_interval : dt;
+    double next_output = interval;
+    for (long k = 1; k <= n_steps; ++k)
+    {
+      const double t_target = std::min(an.duration, k * dt);
+      const Summary s = solver.step(state, t_target - state.t, law);
+      result.summary.iterations += s.iterations;
+      result.summary.step_cuts += s.step_cuts;
+      result.summary.residual = s.residual;
+      ++result.solver_steps;
+      if (!s.ok())
+      {
+        result.summary.status = s.status;
+        result.summary.message = s.message;
+        break;
+      }
+      state.t = t_target;  // no drift from summing steps
+      if (state.t >= next_output - 1e-9 * dt || k == n_steps)
+      {
+        on_output(state);
+        ++result.steps;
+        next_output += interval;
+      }
+      if (on_progress && k % 256 == 0)
+        on_progress(state.t / an.duration);
+    }
+  }
+  result.final_state = state;
+  result.wall_time = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return result;
+}
+
+}  // namespace active_tensegrity::core

@@ -1,0 +1,84 @@
+#include "active_tensegrity/core/block_sparse.h"
+
+#include <algorithm>
+#include <stdexcept>
+
+namespace active_tensegrity::core
+{
+void BlockSparseMatrix::init(const std::vector<int>& group_sizes, const std::vector<std::pair<int, int>>& blocks)
+{
+  sizes_ = group_sizes;
+  offsets_.assign(sizes_.size() + 1, 0);
+  for (size_t g = 0; g < sizes_.size(); ++g)
+    offsets_[g + 1] = offsets_[g] + sizes_[g];
+  const int n = offsets_.back();
+
+  std::vector<std::pair<int, int>> all = blocks;
+  for (size_t g = 0; g < sizes_.size(); ++g)
+    all.emplace_back(static_cast<int>(g), static_cast<int>(g));
+  std::sort(all.begin(), all.end());
+  all.erase(std::unique(all.begin(), all.end()), all.end());
+
+  std::vector<Eigen::Triplet<double>> triplets;
+  for (const auto& [gr, gc] : all)
+    for (int j = 0; j < sizes_[gc]; ++j)
+      for (int i = 0; i < sizes_[gr]; ++i)
+        triplets.emplace_back(offsets_[gr] + i, offsets_[gc] + j, 0.0);
+  matrix_.resize(n, n);
+  matrix_.setFromTriplets(triplets.begin(), triplets.end());
+  matrix_.makeCompressed();
+
+  block_index_.clear();
+  block_starts_.clear();
+  for (const auto& [gr, gc] : all)
+  {
+    std::vector<int> starts(sizes_[gc]);
+    for (int j = 0; j < sizes_[gc]; ++j)
+    {
+      const int col = offsets_[gc] + j;
+      const int* inner = matrix_.innerIndexPtr();
+      const int begin = matrix_.outerIndexPtr()[col];
+      const int end = matrix_.outerIndexPtr()[col + 1];
+      const int* it = std::lower_bound(inner + begin, inner + end, offsets_[gr]);
+      starts[j] = static_cast<int>(it - inner);
+    }
+    block_index_[key(gr, gc)] = static_cast<int>(block_starts_.size());
+    block_starts_.push_back(std::move(starts));
+  }
+}
+
+void BlockSparseMatrix::setZero()
+{
+  std::fill(matrix_.valuePtr(), matrix_.valuePtr() + matrix_.nonZeros(), 0.0);
+}
+
+bool BlockSparseMatrix::hasBlock(int gr, int gc) const
+{
+  return block_index_.count(key(gr, gc)) > 0;
+}
+
+void BlockSparseMatrix::add(int gr, int gc, const Eigen::Ref<const Eigen::MatrixXd>& block, double weight)
+{
+  const auto it = block_index_.find(key(gr, gc));
+  if (it == block_index_.end())
+    throw std::logic_error("BlockSparseMatrix::add: block outside the pattern");
+  const std::vector<int>& starts = block_starts_[it->second];
+  double* values = matrix_.valuePtr();
+  for (int j = 0; j < block.cols(); ++j)
+    for (int i = 0; i < block.rows(); ++i)
+      values[starts[j] + i] += weight * block(i, j);
+}
+
+void BlockSparseMatrix::addTransposed(int gr, int gc, const Eigen::Ref<const Eigen::MatrixXd>& block, double weight)
+{
+  const auto it = block_index_.find(key(gc, gr));
+  if (it == block_index_.end())
+    throw std::logic_error("BlockSparseMatrix::addTransposed: block outside the pattern");
+  const std::vector<int>& starts = block_starts_[it->second];
+  double* values = matrix_.valuePtr();
+  for (int j = 0; j < block.rows(); ++j)
+    for (int i = 0; i < block.cols(); ++i)
+      values[starts[j] + i] += weight * block(j, i);
+}
+
+}  // namespace active_tensegrity::core

@@ -1,0 +1,197 @@
+#include "active_tensegrity/core/dynamics.h"
+
+#include <cmath>
+#include <sstream>
+
+namespace active_tensegrity::core
+{
+DynamicsSolver::DynamicsSolver(const Model& model, const SolverOptions& options)
+  : system_(model), options_(options), jac_(system_.makeMatrix())
+{
+  if (options.integrator == Integrator::kNewmark)
+    coef_ = {options.newmark_gamma, options.newmark_beta, 0.0, 0.0};
+  else
+  {
+    const double rho = options.rho_infinity;
+    const double am = (2.0 * rho - 1.0) / (rho + 1.0);
+    const double af = rho / (rho + 1.0);
+    const double gamma = 0.5 + af - am;
+    coef_ = {gamma, 0.25 * (gamma + 0.5) * (gamma + 0.5), am, af};
+  }
+}
+
+void DynamicsSolver::predict(const State& s, double h, const Eigen::VectorXd& qdd_new, Eigen::VectorXd& q,
+                             Eigen::VectorXd& qd, Eigen::VectorXd& acc) const
+{
+  const auto& c = coef_;
+  // (1 - am) a_{n+1} + am a_n = (1 - af) qdd_{n+1} + af qdd_n
+  acc = ((1.0 - c.alpha_f) * qdd_new + c.alpha_f * s.qdd - c.alpha_m * s.acc) / (1.0 - c.alpha_m);
+  q = s.q + h * s.qd + h * h * ((0.5 - c.beta) * s.acc + c.beta * acc);
+  qd = s.qd + h * ((1.0 - c.gamma) * s.acc + c.gamma * acc);
+}
+
+void DynamicsSolver::residualAndJacobian(const State& s, double h, const ActuationValues& u,
+                                         const Eigen::VectorXd& qdd_new, const Eigen::VectorXd& lambda_new,
+                                         Eigen::VectorXd& r, BlockSparseMatrix* jac)
+{
+  const double da = (1.0 - coef_.alpha_f) / (1.0 - coef_.alpha_m);  // d acc_{n+1} / d qdd_{n+1}
+  const double bh2 = coef_.beta * h * h * da;                         // d q / d qdd
+  const double gh = coef_.gamma * h * da;                             // d qd / d qdd
+  predict(s, h, qdd_new, q_, qd_, acc_);
+  if (jac)
+    jac->setZero();
+  system_.inertialForce(q_, qd_, qdd_new, inertial_, jac, 1.0, bh2, gh);
+  system_.appliedForce(q_, qd_, applied_, jac, bh2, gh);
+  system_.constraintForce(q_, lambda_new, cforce_);
+  system_.constraintValue(q_, u, phi_);
+  if (jac)
+  {
+    system_.addLambdaHessian(q_, lambda_new, *jac, bh2);
+    system_.addConstraintJacobian(q_, *jac);
+  }
+  r.resize(system_.size());
+  r.head(system_.nq()) = inertial_ - applied_ + cforce_;
+  r.tail(system_.nLambda()) = phi_ / bh2;
+}
+
+Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law)
+{
+  Summary sum;
+  const ActuationValues u = law(s.t + h);
+  Eigen::VectorXd qdd = s.qdd;
+  Eigen::VectorXd lambda = s.lambda;
+  const double bh2 = coef_.beta * h * h * (1.0 - coef_.alpha_f) / (1.0 - coef_.alpha_m);
+  const int nq = system_.nq();
+  for (int it = 0; it < options_.max_iterations; ++it)
+  {
+    residualAndJacobian(s, h, u, qdd, lambda, r_, &jac_);
+    ++sum.iterations;
+    if (!r_.allFinite())
+    {
+      sum.status = SolveStatus::kNonFinite;
+      sum.message = "non-finite residual";
+      return sum;
+    }
+    if (!linear_.factorize(jac_.matrix()))
+    {
+      sum.status = SolveStatus::kSingular;
+      sum.message = "singular Newton matrix";
+      return sum;
+    }
+    linear_.solve(-r_, dx_);
+    if (!dx_.allFinite())
+    {
+      sum.status = SolveStatus::kNonFinite;
+      sum.message = "non-finite Newton increment";
+      return sum;
+    }
+    qdd += dx_.head(nq);
+    lambda += dx_.tail(system_.nLambda());
+    sum.residual = bh2 * dx_.head(nq).lpNorm<Eigen::Infinity>();
+    if (sum.residual <= options_.newton_tolerance)
+    {
+      predict(s, h, qdd, q_, qd_, acc_);
+      s.q = q_;
+      s.qd = qd_;
+      s.acc = acc_;
+      s.qdd = qdd;
+      s.lambda = lambda;
+      s.t += h;
+      s.u = u;
+      return sum;
+    }
+  }
+  sum.status = SolveStatus::kMaxIterations;
+  std::ostringstream msg;
+  msg << "Newton did not converge in " << options_.max_iterations << " iterations (last increment "
+      << sum.residual << ")";
+  sum.message = msg.str();
+  return sum;
+}
+
+Summary DynamicsSolver::advance(State& s, double h, const ActuationLaw& law, int depth)
+{
+  State trial = s;
+  Summary sum = attempt(trial, h, law);
+  if (sum.ok())
+  {
+    s = std::move(trial);
+    return sum;
+  }
+  if (depth >= options_.max_step_cuts)
+  {
+    std::ostringstream msg;
+    msg << sum.message << " at t = " << s.t << " s with the step cut to " << h << " s";
+    sum.message = msg.str();
+    return sum;
+  }
+  Summary total;
+  total.iterations = sum.iterations;
+  total.step_cuts = 1;
+  for (int half = 0; half < 2; ++half)
+  {
+    const Summary part = advance(s, 0.5 * h, law, depth + 1);
+    total.iterations += part.iterations;
+    total.step_cuts += part.step_cuts;
+    total.residual = part.residual;
+    if (!part.ok())
+    {
+      total.status = part.status;
+      total.message = part.message;
+      return total;
+    }
+  }
+  return total;
+}
+
+Summary DynamicsSolver::step(State& s, double h, const ActuationLaw& law)
+{
+  return advance(s, h, law, 0);
+}
+
+Summary DynamicsSolver::initialize(State& s, const ActuationLaw& law)
+{
+  Summary sum;
+  s.u = law(s.t);
+  const int nq = system_.nq();
+  const int nl = system_.nLambda();
+  Eigen::VectorXd rhs(system_.size()), x, tmp;
+
+  // velocities: min |qd - qd0|_M subject to Phi_q qd = -Phi_t
+  jac_.setZero();
+  system_.addMass(s.q, jac_, 1.0);
+  system_.addConstraintJacobian(s.q, jac_);
+  if (!linear_.factorize(jac_.matrix()))
+  {
+    sum.status = SolveStatus::kSingular;
+    sum.message = "singular mass/constraint matrix at the initial state";
+    return sum;
+  }
+  const Eigen::VectorXd no_velocity = Eigen::VectorXd::Zero(nq);
+  system_.inertialForce(s.q, no_velocity, s.qd, inertial_, nullptr, 0.0, 0.0, 0.0);  // M qd
+  rhs.head(nq) = inertial_;
+  system_.velocityRhs(s.u, tmp);
+  rhs.tail(nl) = tmp;
+  linear_.solve(rhs, x);
+  s.qd = x.head(nq);
+
+  // accelerations and multipliers: M qdd + Phi_q^T lambda = F - Qv,  Phi_q qdd = gamma
+  Eigen::VectorXd zero = Eigen::VectorXd::Zero(nq);
+  system_.inertialForce(s.q, s.qd, zero, inertial_, nullptr, 0.0, 0.0, 0.0);
+  system_.appliedForce(s.q, s.qd, applied_, nullptr, 0.0, 0.0);
+  rhs.head(nq) = applied_ - inertial_;
+  system_.accelerationRhs(s.q, s.qd, s.u, tmp);
+  rhs.tail(nl) = tmp;
+  linear_.solve(rhs, x);
+  s.qdd = x.head(nq);
+  s.acc = s.qdd;
+  s.lambda = x.tail(nl);
+  if (!x.allFinite())
+  {
+    sum.status = SolveStatus::kNonFinite;
+    sum.message = "non-finite initial accelerations";
+  }
+  return sum;
+}
+
+}  // namespace active_tensegrity::core

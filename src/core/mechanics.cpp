@@ -1,0 +1,492 @@
+#include "active_tensegrity/core/mechanics.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+namespace active_tensegrity::core
+{
+namespace
+{
+Vec4 thetaOf(const Eigen::VectorXd& x, const Body& b)
+{
+  return x.segment<4>(b.offset + 3);
+}
+
+Mat3 inertiaMatrix(const Body& b)
+{
+  return b.inertia.asDiagonal();
+}
+}  // namespace
+
+PointKinematics pointKinematics(const Model& model, const PointRef& point, const Eigen::VectorXd& q,
+                                const Eigen::VectorXd& qd)
+{
+  PointKinematics k;
+  k.body = point.body;
+  if (point.body < 0)
+  {
+    k.p = point.local;
+    return k;
+  }
+  const Body& b = model.bodies[point.body];
+  k.nq = b.nq;
+  k.jac.leftCols<3>().setIdentity();
+  if (b.kind == BodyKind::kPointMass)
+  {
+    k.p = q.segment<3>(b.offset) + point.local;
+    k.v = qd.segment<3>(b.offset);
+    return k;
+  }
+  const Vec4 th = thetaOf(q, b);
+  const Vec4 thd = thetaOf(qd, b);
+  const Mat34 b_theta = pointJacobianTheta(th, point.local);
+  k.p = q.segment<3>(b.offset) + rotationMatrix(th) * point.local;
+  k.v = qd.segment<3>(b.offset) + b_theta * thd;
+  k.jac.rightCols<4>() = b_theta;
+  k.dv_dq.rightCols<4>() = pointJacobianTheta(thd, point.local);
+  return k;
+}
+
+Mat4 rotationalMass(const Body& body, const Vec4& theta)
+{
+  const Mat34 l = lMatrix(theta);
+  return 4.0 * l.transpose() * inertiaMatrix(body) * l;
+}
+
+CableState evaluateCable(const Model& model, const Cable& cable, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                         bool damping, Eigen::VectorXd* F, BlockSparseMatrix* jac, double k_weight, double c_weight)
+{
+  const PointKinematics ka = pointKinematics(model, cable.a, q, qd);
+  const PointKinematics kb = pointKinematics(model, cable.b, q, qd);
+  const Vec3 d = kb.p - ka.p;
+  const Vec3 dd = kb.v - ka.v;
+  CableState s;
+  s.length = d.norm();
+  if (s.length <= 0.0)
+  {
+    s.slack = true;
+    return s;
+  }
+  const Vec3 n = d / s.length;
+  s.rate = n.dot(dd);
+  const double c = damping ? cable.damping : 0.0;
+  const double stretch = s.length - cable.rest_length;
+  double tension = cable.stiffness * stretch + c * s.rate;
+  if (cable.tension_only && (stretch <= 0.0 || tension <= 0.0))
+  {
+    s.slack = true;
+    return s;
+  }
+  s.tension = tension;
+
+  // the force on end a is f = T n, on end b it is -f
+  const Vec3 f = tension * n;
+  const Mat3 proj = Mat3::Identity() - n * n.transpose();
+  // S = df/dd, and df/d(d_dot) = c n n^T
+  const Mat3 S = cable.stiffness * n * n.transpose() + (tension / s.length) * proj +
+                 (c / s.length) * n * (proj * dd).transpose();
+  const Mat3 Cn = c * n * n.transpose();
+
+  const PointKinematics* ends[2] = {&ka, &kb};
+  const double sigma[2] = {-1.0, 1.0};  // d = p_b - p_a
+  for (int x = 0; x < 2; ++x)
+  {
+    const PointKinematics& kx = *ends[x];
+    if (kx.body < 0)
+      continue;
+    const Body& bx = model.bodies[kx.body];
+    const Vec3 fx = -sigma[x] * f;
+    if (F)
+      F->segment(bx.offset, bx.nq) += kx.jac.leftCols(bx.nq).transpose() * fx;
+    if (!jac)
+      continue;
+    for (int y = 0; y < 2; ++y)
+    {
+      const PointKinematics& ky = *ends[y];
+      if (ky.body < 0)
+        continue;
+      const Body& by = model.bodies[ky.body];
+      const double ss = sigma[x] * sigma[y];
+      Eigen::Matrix<double, 7, 7> kxy = Eigen::Matrix<double, 7, 7>::Zero();
+      kxy.topLeftCorner(bx.nq, by.nq) = ss * kx.jac.leftCols(bx.nq).transpose() *
+                                        (S * ky.jac.leftCols(by.nq) + Cn * ky.dv_dq.leftCols(by.nq));
+      if (x == y && bx.kind == BodyKind::kStrut)
+        kxy.bottomRightCorner<4, 4>() -= pointHessianTheta(x == 0 ? cable.a.local : cable.b.local, fx);
+      jac->add(kx.body, ky.body, kxy.topLeftCorner(bx.nq, by.nq), k_weight);
+      if (c != 0.0 && c_weight != 0.0)
+        jac->add(kx.body, ky.body, ss * kx.jac.leftCols(bx.nq).transpose() * Cn * ky.jac.leftCols(by.nq), c_weight);
+    }
+  }
+  return s;
+}
+
+System::System(const Model& model, std::vector<Constraint> extra_constraints) : model_(model)
+{
+  constraints_ = model.constraints;
+  for (Constraint& c : extra_constraints)
+    constraints_.push_back(std::move(c));
+  constraint_rows_.reserve(constraints_.size());
+  for (const Constraint& c : constraints_)
+  {
+    constraint_rows_.push_back(n_lambda_);
+    n_lambda_ += c.rows();
+  }
+
+  std::vector<int> sizes;
+  for (const Body& b : model.bodies)
+    sizes.push_back(b.nq);
+  for (const Constraint& c : constraints_)
+    sizes.push_back(c.rows());
+
+  std::vector<std::pair<int, int>> blocks;
+  auto couple = [&blocks](int g1, int g2) {
+    blocks.emplace_back(g1, g2);
+    blocks.emplace_back(g2, g1);
+  };
+  for (const Cable& c : model.cables)
+    if (c.a.body >= 0 && c.b.body >= 0)
+      couple(c.a.body, c.b.body);
+  for (const StrutPair& p : model.checked_pairs)
+    couple(p.body_a, p.body_b);
+  for (size_t i = 0; i < constraints_.size(); ++i)
+  {
+    const Constraint& c = constraints_[i];
+    const int g = constraintGroup(static_cast<int>(i));
+    if (c.kind == Constraint::Kind::kPoints)
+    {
+      if (c.a.body >= 0)
+        couple(g, c.a.body);
+      if (c.b.body >= 0)
+        couple(g, c.b.body);
+      if (c.a.body >= 0 && c.b.body >= 0)
+        couple(c.a.body, c.b.body);
+    }
+    else
+      couple(g, c.body);
+  }
+  pattern_.init(sizes, blocks);
+}
+
+void System::appliedForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, Eigen::VectorXd& F,
+                          BlockSparseMatrix* jac, double k_weight, double c_weight) const
+{
+  F.setZero(model_.nq);
+  if (model_.gravity_enabled)
+    for (const Body& b : model_.bodies)
+      F.segment<3>(b.offset) += b.mass * model_.gravity;
+  for (const Cable& c : model_.cables)
+    evaluateCable(model_, c, q, qd, model_.damping_enabled, &F, jac, k_weight, c_weight);
+}
+
+void System::addMass(const Eigen::VectorXd& q, BlockSparseMatrix& jac, double weight) const
+{
+  Eigen::Matrix<double, 7, 7> m = Eigen::Matrix<double, 7, 7>::Zero();
+  for (size_t i = 0; i < model_.bodies.size(); ++i)
+  {
+    const Body& b = model_.bodies[i];
+    m.setZero();
+    m.topLeftCorner<3, 3>() = b.mass * Mat3::Identity();
+    if (b.kind == BodyKind::kStrut)
+      m.bottomRightCorner<4, 4>() = rotationalMass(b, thetaOf(q, b));
+    jac.add(static_cast<int>(i), static_cast<int>(i), m.topLeftCorner(b.nq, b.nq), weight);
+  }
+}
+
+void System::inertialForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd,
+                           Eigen::VectorXd& out, BlockSparseMatrix* jac, double m_weight, double k_weight,
+                           double c_weight) const
+{
+  out.setZero(model_.nq);
+  if (jac && m_weight != 0.0)
+    addMass(q, *jac, m_weight);
+  for (size_t i = 0; i < model_.bodies.size(); ++i)
+  {
+    const Body& b = model_.bodies[i];
+    out.segment<3>(b.offset) = b.mass * qdd.segment<3>(b.offset);
+    if (b.kind != BodyKind::kStrut)
+      continue;
+    const Vec4 th = thetaOf(q, b);
+    const Vec4 thd = thetaOf(qd, b);
+    const Vec4 thdd = thetaOf(qdd, b);
+    const Mat3 J = inertiaMatrix(b);
+    const Mat34 l = lMatrix(th);
+    const Mat34 ld = lMatrix(thd);
+    const Mat34 ldd = lMatrix(thdd);
+    // M_theta thdd = 4 L^T J L thdd;  Qv = 8 L(thd)^T J L(th) thd
+    const Vec3 w = J * (l * thdd);
+    const Vec3 z = J * (l * thd);
+    out.segment<4>(b.offset + 3) = 4.0 * l.transpose() * w + 8.0 * ld.transpose() * z;
+    if (!jac)
+      continue;
+    Eigen::Matrix<double, 7, 7> blk = Eigen::Matrix<double, 7, 7>::Zero();
+    // d(M thdd)/dth = 4 N(w) - 4 L^T J L(thdd);  dQv/dth = -8 L(thd)^T J L(thd)
+    blk.bottomRightCorner<4, 4>() = k_weight * (4.0 * lTransposeTimes(w) - 4.0 * l.transpose() * J * ldd -
+                                                8.0 * ld.transpose() * J * ld);
+    // dQv/dthd = 8 (N(z) + L(thd)^T J L(th))
+    blk.bottomRightCorner<4, 4>() += c_weight * 8.0 * (lTransposeTimes(z) + ld.transpose() * J * l);
+    jac->add(static_cast<int>(i), static_cast<int>(i), blk, 1.0);
+  }
+}
+
+void System::constraintValue(const Eigen::VectorXd& q, const ActuationValues& u, Eigen::VectorXd& phi) const
+{
+  phi.setZero(n_lambda_);
+  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(model_.nq);
+  for (size_t i = 0; i < constraints_.size(); ++i)
+  {
+    const Constraint& c = constraints_[i];
+    const int r = constraint_rows_[i];
+    switch (c.kind)
+    {
+      case Constraint::Kind::kPoints:
+      {
+        const Vec3 pa = pointKinematics(model_, c.a, q, zero).p;
+        const Vec3 pb = pointKinematics(model_, c.b, q, zero).p;
+        const double s = c.actuator >= 0 ? u[c.actuator].value : 0.0;
+        for (int k = 0; k < c.rows(); ++k)
+          phi(r + k) = c.directions[k].dot(pa - pb) - c.offsets[k] - s;
+        break;
+      }
+      case Constraint::Kind::kQuatNorm:
+        phi(r) = thetaOf(q, model_.bodies[c.body]).squaredNorm() - 1.0;
+        break;
+      case Constraint::Kind::kSpinLock:
+        phi(r) = c.coefficients.dot(thetaOf(q, model_.bodies[c.body]));
+        break;
+    }
+  }
+}
+
+namespace
+{
+// d_k^T B rows of a kPoints constraint for one end
+Eigen::MatrixXd pointRows(const Constraint& c, const PointKinematics& k)
+{
+  Eigen::MatrixXd rows(c.rows(), k.nq);
+  for (int r = 0; r < c.rows(); ++r)
+    rows.row(r) = c.directions[r].transpose() * k.jac.leftCols(k.nq);
+  return rows;
+}
+}  // namespace
+
+void System::addConstraintJacobian(const Eigen::VectorXd& q, BlockSparseMatrix& jac) const
+{
+  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(model_.nq);
+  for (size_t i = 0; i < constraints_.size(); ++i)
+  {
+    const Constraint& c = constraints_[i];
+    const int g = constraintGroup(static_cast<int>(i));
+    if (c.kind == Constraint::Kind::kPoints)
+    {
+      const double sign[2] = {1.0, -1.0};
+      const PointRef* ends[2] = {&c.a, &c.b};
+      for (int e = 0; e < 2; ++e)
+      {
+        if (ends[e]->body < 0)
+          continue;
+        const Eigen::MatrixXd rows = sign[e] * pointRows(c, pointKinematics(model_, *ends[e], q, zero));
+        jac.add(g, ends[e]->body, rows);
+        jac.addTransposed(g, ends[e]->body, rows);
+      }
+      continue;
+    }
+    Eigen::Matrix<double, 1, 7> row = Eigen::Matrix<double, 1, 7>::Zero();
+    const Body& b = model_.bodies[c.body];
+    row.tail<4>() = c.kind == Constraint::Kind::kQuatNorm ? Vec4(2.0 * thetaOf(q, b)) : c.coefficients;
+    jac.add(g, c.body, row);
+    jac.addTransposed(g, c.body, row);
+  }
+}
+
+Eigen::MatrixXd System::constraintJacobianDense(const Eigen::VectorXd& q) const
+{
+  BlockSparseMatrix m = makeMatrix();
+  addConstraintJacobian(q, m);
+  return Eigen::MatrixXd(m.matrix()).bottomLeftCorner(n_lambda_, model_.nq);
+}
+
+void System::constraintForce(const Eigen::VectorXd& q, const Eigen::VectorXd& lambda, Eigen::VectorXd& out) const
+{
+  out.setZero(model_.nq);
+  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(model_.nq);
+  for (size_t i = 0; i < constraints_.size(); ++i)
+  {
+    const Constraint& c = constraints_[i];
+    const int r = constraint_rows_[i];
+    if (c.kind == Constraint::Kind::kPoints)
+    {
+      Vec3 w = Vec3::Zero();
+      for (int k = 0; k < c.rows(); ++k)
+        w += lambda(r + k) * c.directions[k];
+      const double sign[2] = {1.0, -1.0};
+      const PointRef* ends[2] = {&c.a, &c.b};
+      for (int e = 0; e < 2; ++e)
+      {
+        if (ends[e]->body < 0)
+          continue;
+        const PointKinematics k = pointKinematics(model_, *ends[e], q, zero);
+        out.segment(model_.bodies[k.body].offset, k.nq) += sign[e] * k.jac.leftCols(k.nq).transpose() * w;
+      }
+      continue;
+    }
+    const Body& b = model_.bodies[c.body];
+    const Vec4 row = c.kind == Constraint::Kind::kQuatNorm ? Vec4(2.0 * thetaOf(q, b)) : c.coefficients;
+    out.segment<4>(b.offset + 3) += lambda(r) * row;
+  }
+}
+
+void System::addLambdaHessian(const Eigen::VectorXd& /*q*/, const Eigen::VectorXd& lambda, BlockSparseMatrix& jac,
+                              double weight) const
+{
+  Eigen::Matrix<double, 7, 7> h;
+  for (size_t i = 0; i < constraints_.size(); ++i)
+  {
+    const Constraint& c = constraints_[i];
+    const int r = constraint_rows_[i];
+    if (c.kind == Constraint::Kind::kSpinLock)
+      continue;
+    if (c.kind == Constraint::Kind::kQuatNorm)
+    {
+      h.setZero();
+      h.bottomRightCorner<4, 4>() = 2.0 * lambda(r) * Mat4::Identity();
+      jac.add(c.body, c.body, h, weight);
+      continue;
+    }
+    Vec3 w = Vec3::Zero();
+    for (int k = 0; k < c.rows(); ++k)
+      w += lambda(r + k) * c.directions[k];
+    const double sign[2] = {1.0, -1.0};
+    const PointRef* ends[2] = {&c.a, &c.b};
+    for (int e = 0; e < 2; ++e)
+    {
+      const int body = ends[e]->body;
+      if (body < 0 || model_.bodies[body].kind != BodyKind::kStrut)
+        continue;
+      h.setZero();
+      h.bottomRightCorner<4, 4>() = sign[e] * pointHessianTheta(ends[e]->local, w);
+      jac.add(body, body, h, weight);
+    }
+  }
+}
+
+void System::velocityRhs(const ActuationValues& u, Eigen::VectorXd& rhs) const
+{
+  rhs.setZero(n_lambda_);
+  for (size_t i = 0; i < constraints_.size(); ++i)
+  {
+    const Constraint& c = constraints_[i];
+    if (c.kind == Constraint::Kind::kPoints && c.actuator >= 0)
+      rhs.segment(constraint_rows_[i], c.rows()).setConstant(u[c.actuator].rate);
+  }
+}
+
+void System::accelerationRhs(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const ActuationValues& u,
+                             Eigen::VectorXd& rhs) const
+{
+  rhs.setZero(n_lambda_);
+  for (size_t i = 0; i < constraints_.size(); ++i)
+  {
+    const Constraint& c = constraints_[i];
+    const int r = constraint_rows_[i];
+    switch (c.kind)
+    {
+      case Constraint::Kind::kPoints:
+      {
+        // d^2 p / dt^2 = B qdd + B_Theta(thd) thd
+        Vec3 quad = Vec3::Zero();
+        const double sign[2] = {1.0, -1.0};
+        const PointRef* ends[2] = {&c.a, &c.b};
+        for (int e = 0; e < 2; ++e)
+        {
+          if (ends[e]->body < 0)
+            continue;
+          const PointKinematics k = pointKinematics(model_, *ends[e], q, qd);
+          quad += sign[e] * k.dv_dq.leftCols(k.nq) * qd.segment(model_.bodies[k.body].offset, k.nq);
+        }
+        const double sdd = c.actuator >= 0 ? u[c.actuator].accel : 0.0;
+        for (int k = 0; k < c.rows(); ++k)
+          rhs(r + k) = -c.directions[k].dot(quad) + sdd;
+        break;
+      }
+      case Constraint::Kind::kQuatNorm:
+        rhs(r) = -2.0 * thetaOf(qd, model_.bodies[c.body]).squaredNorm();
+        break;
+      case Constraint::Kind::kSpinLock:
+        break;
+    }
+  }
+}
+
+double System::kineticEnergy(const Eigen::VectorXd& q, const Eigen::VectorXd& qd) const
+{
+  double e = 0.0;
+  for (const Body& b : model_.bodies)
+  {
+    e += 0.5 * b.mass * qd.segment<3>(b.offset).squaredNorm();
+    if (b.kind == BodyKind::kStrut)
+    {
+      const Vec4 thd = thetaOf(qd, b);
+      e += 0.5 * thd.dot(rotationalMass(b, thetaOf(q, b)) * thd);
+    }
+  }
+  return e;
+}
+
+double System::potentialEnergy(const Eigen::VectorXd& q) const
+{
+  double e = 0.0;
+  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(model_.nq);
+  if (model_.gravity_enabled)
+    for (const Body& b : model_.bodies)
+      e -= b.mass * model_.gravity.dot(q.segment<3>(b.offset));
+  for (const Cable& c : model_.cables)
+  {
+    const double l = (pointKinematics(model_, c.b, q, zero).p - pointKinematics(model_, c.a, q, zero).p).norm();
+    const double stretch = l - c.rest_length;
+    if (stretch > 0.0 || !c.tension_only)
+      e += 0.5 * c.stiffness * stretch * stretch;
+  }
+  return e;
+}
+
+int Model::findNode(const std::string& n) const
+{
+  for (size_t i = 0; i < nodes.size(); ++i)
+    if (nodes[i].name == n)
+      return static_cast<int>(i);
+  return -1;
+}
+
+int Model::findBody(const std::string& n) const
+{
+  for (size_t i = 0; i < bodies.size(); ++i)
+    if (bodies[i].name == n)
+      return static_cast<int>(i);
+  return -1;
+}
+
+int Model::findActuator(const std::string& n) const
+{
+  for (size_t i = 0; i < actuators.size(); ++i)
+    if (actuators[i].name == n)
+      return static_cast<int>(i);
+  return -1;
+}
+
+void finalizeModel(Model& model)
+{
+  int offset = 0;
+  for (Body& b : model.bodies)
+  {
+    b.nq = b.kind == BodyKind::kStrut ? 7 : 3;
+    b.offset = offset;
+    offset += b.nq;
+  }
+  model.nq = offset;
+  model.n_lambda = 0;
+  for (const Constraint& c : model.constraints)
+    model.n_lambda += c.rows();
+}
+
+}  // namespace active_tensegrity::core

@@ -1,0 +1,190 @@
+#include "active_tensegrity/core/statics.h"
+
+#include <cmath>
+#include <sstream>
+
+#include <Eigen/Dense>
+
+namespace active_tensegrity::core
+{
+namespace
+{
+std::vector<Constraint> spinLocks(const Model& model)
+{
+  std::vector<Constraint> locks;
+  for (size_t i = 0; i < model.bodies.size(); ++i)
+  {
+    const Body& b = model.bodies[i];
+    if (b.kind != BodyKind::kStrut)
+      continue;
+    Constraint c;
+    c.kind = Constraint::Kind::kSpinLock;
+    c.name = b.name + ".spin_lock";
+    c.body = static_cast<int>(i);
+    c.coefficients = spinLockCoefficients(model.q0.segment<4>(b.offset + 3));
+    locks.push_back(c);
+  }
+  return locks;
+}
+
+ActuationValues blend(const ActuationValues& a, const ActuationValues& b, double w)
+{
+  ActuationValues u = a;
+  for (size_t i = 0; i < u.size(); ++i)
+    u[i].value = (1.0 - w) * a[i].value + w * b[i].value;
+  return u;
+}
+}  // namespace
+
+StaticSolver::StaticSolver(const Model& model, const SolverOptions& options)
+  : system_(model, spinLocks(model)), options_(options), jac_(system_.makeMatrix())
+{
+}
+
+Summary StaticSolver::solve(State& s, const ActuationValues& u)
+{
+  Summary sum;
+  const int nq = system_.nq();
+  const int nl = system_.nLambda();
+  if (s.lambda.size() != nl)
+    s.lambda.conservativeResizeLike(Eigen::VectorXd::Zero(nl));
+  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(nq);
+  Eigen::VectorXd q = s.q, lambda = s.lambda;
+  for (int it = 0; it < options_.max_iterations; ++it)
+  {
+    jac_.setZero();
+    system_.appliedForce(q, zero, F_, &jac_, 1.0, 0.0);
+    system_.constraintForce(q, lambda, cforce_);
+    system_.constraintValue(q, u, phi_);
+    system_.addLambdaHessian(q, lambda, jac_, 1.0);
+    system_.addConstraintJacobian(q, jac_);
+    r_.resize(nq + nl);
+    r_.head(nq) = cforce_ - F_;
+    r_.tail(nl) = phi_;
+    ++sum.iterations;
+    if (!r_.allFinite())
+    {
+      sum.status = SolveStatus::kNonFinite;
+      sum.message = "non-finite static residual";
+      return sum;
+    }
+    if (!linear_.factorize(jac_.matrix()))
+    {
+      sum.status = SolveStatus::kSingular;
+      sum.message = "singular static Jacobian: the scene has a mechanism (a motion no force element or "
+                    "constraint resists, e.g. a node held only by slack cables) or a degenerate configuration";
+      return sum;
+    }
+    linear_.solve(-r_, dx_);
+    if (!dx_.allFinite())
+    {
+      sum.status = SolveStatus::kNonFinite;
+      sum.message = "non-finite static Newton increment";
+      return sum;
+    }
+    q += dx_.head(nq);
+    lambda += dx_.tail(nl);
+    sum.residual = dx_.head(nq).lpNorm<Eigen::Infinity>();
+    if (sum.residual <= options_.newton_tolerance)
+    {
+      s.q = q;
+      s.lambda = lambda;
+      s.u = u;
+      s.qd.setZero(nq);
+      s.qdd.setZero(nq);
+      s.acc.setZero(nq);
+      return sum;
+    }
+  }
+  sum.status = SolveStatus::kMaxIterations;
+  std::ostringstream msg;
+  msg << "static Newton did not converge in " << options_.max_iterations << " iterations (last increment "
+      << sum.residual << ")";
+  sum.message = msg.str();
+  return sum;
+}
+
+Summary StaticSolver::followPath(State& s, const ActuationValues& u_end, int steps,
+                                 const std::function<void(const State&, const Summary&)>& on_step)
+{
+  Summary total;
+  const ActuationValues u_start = s.u;
+  s.t = 0.0;  // t carries the path parameter
+  State previous = s;
+  bool have_previous = false;
+  double w = 0.0;  // path parameter reached
+  for (int k = 1; k <= steps; ++k)
+  {
+    const double w_target = static_cast<double>(k) / steps;
+    int cuts = 0;
+    while (w < w_target)
+    {
+      double dw = (w_target - w) / std::pow(2.0, cuts);
+      const double w_next = w + dw;
+      const ActuationValues u = blend(u_start, u_end, w_next);
+      // secant predictor from the last two equilibria, then a plain warm start
+      State trial = s;
+      Summary attempt;
+      attempt.status = SolveStatus::kMaxIterations;
+      if (have_previous && previous.t < s.t)
+      {
+        const double ratio = (w_next - s.t) / (s.t - previous.t);
+        trial.q = s.q + ratio * (s.q - previous.q);
+        trial.lambda = s.lambda + ratio * (s.lambda - previous.lambda);
+        attempt = solve(trial, u);
+        total.iterations += attempt.iterations;
+      }
+      if (!attempt.ok())
+      {
+        trial = s;
+        attempt = solve(trial, u);
+        total.iterations += attempt.iterations;
+      }
+      if (attempt.ok())
+      {
+        previous = s;
+        have_previous = true;
+        trial.t = w_next;
+        s = trial;
+        w = w_next;
+        total.residual = attempt.residual;
+        continue;
+      }
+      if (++cuts > options_.max_step_cuts)
+      {
+        total.status = attempt.status;
+        std::ostringstream msg;
+        msg << attempt.message << "; load step " << k << " of " << steps << " failed at path parameter " << w_next
+            << " after " << options_.max_step_cuts << " increment cuts";
+        total.message = msg.str();
+        return total;
+      }
+      ++total.step_cuts;
+    }
+    if (on_step)
+      on_step(s, total);
+  }
+  return total;
+}
+
+double StaticSolver::forceResidual(const State& s)
+{
+  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(system_.nq());
+  system_.appliedForce(s.q, zero, F_, nullptr, 0.0, 0.0);
+  Eigen::VectorXd lambda = s.lambda;
+  if (lambda.size() != system_.nLambda())
+    lambda.conservativeResizeLike(Eigen::VectorXd::Zero(system_.nLambda()));
+  system_.constraintForce(s.q, lambda, cforce_);
+  return (cforce_ - F_).lpNorm<Eigen::Infinity>();
+}
+
+Eigen::VectorXd leastSquaresMultipliers(const System& system, const Eigen::VectorXd& q)
+{
+  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(system.nq());
+  Eigen::VectorXd F;
+  system.appliedForce(q, zero, F, nullptr, 0.0, 0.0);
+  const Eigen::MatrixXd jt = system.constraintJacobianDense(q).transpose();
+  return jt.colPivHouseholderQr().solve(F);
+}
+
+}  // namespace active_tensegrity::core
