@@ -53,8 +53,8 @@ double minimumGap(const Model& model, const Eigen::VectorXd& q)
 
 std::vector<std::string> csvColumns(const Model& model)
 {
-  std::vector<std::string> cols = {"t",       "actuation",       "actuation_force",   "height",
-                                   "active_contacts", "min_gap", "max_normal_force", "max_friction_force"};
+  std::vector<std::string> cols = { "t",       "actuation",        "actuation_force",   "height", "active_contacts",
+                                    "min_gap", "max_normal_force", "max_friction_force" };
   if (model.actuators.size() > 1)
     for (const Actuator& a : model.actuators)
     {
@@ -67,14 +67,14 @@ std::vector<std::string> csvColumns(const Model& model)
 std::vector<double> csvRow(const Model& model, const State& state)
 {
   const bool any = !model.actuators.empty();
-  std::vector<double> row = {state.t,
-                             any ? state.u[0].value : 0.0,
-                             any ? actuationForce(model, state, 0) : 0.0,
-                             structureHeight(model, state.q),
-                             0.0,
-                             minimumGap(model, state.q),
-                             0.0,
-                             0.0};
+  std::vector<double> row = { state.t,
+                              any ? state.u[0].value : 0.0,
+                              any ? actuationForce(model, state, 0) : 0.0,
+                              structureHeight(model, state.q),
+                              0.0,
+                              minimumGap(model, state.q),
+                              0.0,
+                              0.0 };
   if (model.actuators.size() > 1)
     for (size_t i = 0; i < model.actuators.size(); ++i)
     {
@@ -110,12 +110,14 @@ RunResult runAnalysis(const Model& model, const std::function<void(const State&)
     ActuationValues u_end = state.u;
     for (auto& v : u_end)
       v.value = an.max_actuation;
-    Summary path = solver.followPath(state, u_end, an.steps, [&](const State& s, const Summary&) {
-      on_output(s);
-      ++result.steps;
-      if (on_progress)
-        on_progress(s.t);
-    });
+    Summary path = solver.followPath(state, u_end, an.steps,
+                                     [&](const State& s, const Summary&)
+                                     {
+                                       on_output(s);
+                                       ++result.steps;
+                                       if (on_progress)
+                                         on_progress(s.t);
+                                     });
     path.iterations += first.iterations;
     result.summary = path;
     result.solver_steps = an.steps + path.step_cuts;

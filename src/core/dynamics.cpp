@@ -9,14 +9,14 @@ DynamicsSolver::DynamicsSolver(const Model& model, const SolverOptions& options)
   : system_(model), options_(options), jac_(system_.makeMatrix())
 {
   if (options.integrator == Integrator::kNewmark)
-    coef_ = {options.newmark_gamma, options.newmark_beta, 0.0, 0.0};
+    coef_ = { options.newmark_gamma, options.newmark_beta, 0.0, 0.0 };
   else
   {
     const double rho = options.rho_infinity;
     const double am = (2.0 * rho - 1.0) / (rho + 1.0);
     const double af = rho / (rho + 1.0);
     const double gamma = 0.5 + af - am;
-    coef_ = {gamma, 0.25 * (gamma + 0.5) * (gamma + 0.5), am, af};
+    coef_ = { gamma, 0.25 * (gamma + 0.5) * (gamma + 0.5), am, af };
   }
 }
 
@@ -35,8 +35,8 @@ void DynamicsSolver::residualAndJacobian(const State& s, double h, const Actuati
                                          Eigen::VectorXd& r, BlockSparseMatrix* jac)
 {
   const double da = (1.0 - coef_.alpha_f) / (1.0 - coef_.alpha_m);  // d acc_{n+1} / d qdd_{n+1}
-  const double bh2 = coef_.beta * h * h * da;                         // d q / d qdd
-  const double gh = coef_.gamma * h * da;                             // d qd / d qdd
+  const double bh2 = coef_.beta * h * h * da;                       // d q / d qdd
+  const double gh = coef_.gamma * h * da;                           // d qd / d qdd
   predict(s, h, qdd_new, q_, qd_, acc_);
   if (jac)
     jac->setZero();
@@ -103,8 +103,8 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law)
   }
   sum.status = SolveStatus::kMaxIterations;
   std::ostringstream msg;
-  msg << "Newton did not converge in " << options_.max_iterations << " iterations (last increment "
-      << sum.residual << ")";
+  msg << "Newton did not converge in " << options_.max_iterations << " iterations (last increment " << sum.residual
+      << ")";
   sum.message = msg.str();
   return sum;
 }

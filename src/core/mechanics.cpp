@@ -84,12 +84,12 @@ CableState evaluateCable(const Model& model, const Cable& cable, const Eigen::Ve
   const Vec3 f = tension * n;
   const Mat3 proj = Mat3::Identity() - n * n.transpose();
   // S = df/dd, and df/d(d_dot) = c n n^T
-  const Mat3 S = cable.stiffness * n * n.transpose() + (tension / s.length) * proj +
-                 (c / s.length) * n * (proj * dd).transpose();
+  const Mat3 S =
+      cable.stiffness * n * n.transpose() + (tension / s.length) * proj + (c / s.length) * n * (proj * dd).transpose();
   const Mat3 Cn = c * n * n.transpose();
 
-  const PointKinematics* ends[2] = {&ka, &kb};
-  const double sigma[2] = {-1.0, 1.0};  // d = p_b - p_a
+  const PointKinematics* ends[2] = { &ka, &kb };
+  const double sigma[2] = { -1.0, 1.0 };  // d = p_b - p_a
   for (int x = 0; x < 2; ++x)
   {
     const PointKinematics& kx = *ends[x];
@@ -109,8 +109,8 @@ CableState evaluateCable(const Model& model, const Cable& cable, const Eigen::Ve
       const Body& by = model.bodies[ky.body];
       const double ss = sigma[x] * sigma[y];
       Eigen::Matrix<double, 7, 7> kxy = Eigen::Matrix<double, 7, 7>::Zero();
-      kxy.topLeftCorner(bx.nq, by.nq) = ss * kx.jac.leftCols(bx.nq).transpose() *
-                                        (S * ky.jac.leftCols(by.nq) + Cn * ky.dv_dq.leftCols(by.nq));
+      kxy.topLeftCorner(bx.nq, by.nq) =
+          ss * kx.jac.leftCols(bx.nq).transpose() * (S * ky.jac.leftCols(by.nq) + Cn * ky.dv_dq.leftCols(by.nq));
       if (x == y && bx.kind == BodyKind::kStrut)
         kxy.bottomRightCorner<4, 4>() -= pointHessianTheta(x == 0 ? cable.a.local : cable.b.local, fx);
       jac->add(kx.body, ky.body, kxy.topLeftCorner(bx.nq, by.nq), k_weight);
@@ -140,7 +140,8 @@ System::System(const Model& model, std::vector<Constraint> extra_constraints) : 
     sizes.push_back(c.rows());
 
   std::vector<std::pair<int, int>> blocks;
-  auto couple = [&blocks](int g1, int g2) {
+  auto couple = [&blocks](int g1, int g2)
+  {
     blocks.emplace_back(g1, g2);
     blocks.emplace_back(g2, g1);
   };
@@ -221,8 +222,8 @@ void System::inertialForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, 
       continue;
     Eigen::Matrix<double, 7, 7> blk = Eigen::Matrix<double, 7, 7>::Zero();
     // d(M thdd)/dth = 4 N(w) - 4 L^T J L(thdd);  dQv/dth = -8 L(thd)^T J L(thd)
-    blk.bottomRightCorner<4, 4>() = k_weight * (4.0 * lTransposeTimes(w) - 4.0 * l.transpose() * J * ldd -
-                                                8.0 * ld.transpose() * J * ld);
+    blk.bottomRightCorner<4, 4>() =
+        k_weight * (4.0 * lTransposeTimes(w) - 4.0 * l.transpose() * J * ldd - 8.0 * ld.transpose() * J * ld);
     // dQv/dthd = 8 (N(z) + L(thd)^T J L(th))
     blk.bottomRightCorner<4, 4>() += c_weight * 8.0 * (lTransposeTimes(z) + ld.transpose() * J * l);
     jac->add(static_cast<int>(i), static_cast<int>(i), blk, 1.0);
@@ -279,8 +280,8 @@ void System::addConstraintJacobian(const Eigen::VectorXd& q, BlockSparseMatrix& 
     const int g = constraintGroup(static_cast<int>(i));
     if (c.kind == Constraint::Kind::kPoints)
     {
-      const double sign[2] = {1.0, -1.0};
-      const PointRef* ends[2] = {&c.a, &c.b};
+      const double sign[2] = { 1.0, -1.0 };
+      const PointRef* ends[2] = { &c.a, &c.b };
       for (int e = 0; e < 2; ++e)
       {
         if (ends[e]->body < 0)
@@ -319,8 +320,8 @@ void System::constraintForce(const Eigen::VectorXd& q, const Eigen::VectorXd& la
       Vec3 w = Vec3::Zero();
       for (int k = 0; k < c.rows(); ++k)
         w += lambda(r + k) * c.directions[k];
-      const double sign[2] = {1.0, -1.0};
-      const PointRef* ends[2] = {&c.a, &c.b};
+      const double sign[2] = { 1.0, -1.0 };
+      const PointRef* ends[2] = { &c.a, &c.b };
       for (int e = 0; e < 2; ++e)
       {
         if (ends[e]->body < 0)
@@ -356,8 +357,8 @@ void System::addLambdaHessian(const Eigen::VectorXd& /*q*/, const Eigen::VectorX
     Vec3 w = Vec3::Zero();
     for (int k = 0; k < c.rows(); ++k)
       w += lambda(r + k) * c.directions[k];
-    const double sign[2] = {1.0, -1.0};
-    const PointRef* ends[2] = {&c.a, &c.b};
+    const double sign[2] = { 1.0, -1.0 };
+    const PointRef* ends[2] = { &c.a, &c.b };
     for (int e = 0; e < 2; ++e)
     {
       const int body = ends[e]->body;
@@ -395,8 +396,8 @@ void System::accelerationRhs(const Eigen::VectorXd& q, const Eigen::VectorXd& qd
       {
         // d^2 p / dt^2 = B qdd + B_Theta(thd) thd
         Vec3 quad = Vec3::Zero();
-        const double sign[2] = {1.0, -1.0};
-        const PointRef* ends[2] = {&c.a, &c.b};
+        const double sign[2] = { 1.0, -1.0 };
+        const PointRef* ends[2] = { &c.a, &c.b };
         for (int e = 0; e < 2; ++e)
         {
           if (ends[e]->body < 0)

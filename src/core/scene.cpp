@@ -38,14 +38,32 @@ public:
       fail(path_, "expected a map, got " + show(node_));
   }
 
-  [[noreturn]] void fail(const std::string& key, const std::string& what) const { throw SceneError(file_, key, what); }
-  std::string key(const std::string& k) const { return path_.empty() ? k : path_ + "." + k; }
-  const std::string& file() const { return file_; }
-  const std::string& path() const { return path_; }
+  [[noreturn]] void fail(const std::string& key, const std::string& what) const
+  {
+    throw SceneError(file_, key, what);
+  }
+  std::string key(const std::string& k) const
+  {
+    return path_.empty() ? k : path_ + "." + k;
+  }
+  const std::string& file() const
+  {
+    return file_;
+  }
+  const std::string& path() const
+  {
+    return path_;
+  }
 
-  bool has(const std::string& k) const { return node_[k].IsDefined() && !node_[k].IsNull(); }
+  bool has(const std::string& k) const
+  {
+    return node_[k].IsDefined() && !node_[k].IsNull();
+  }
   /// Marks an optional key as known (so an explicit null there is accepted).
-  void optional(const std::string& k) { used_.insert(k); }
+  void optional(const std::string& k)
+  {
+    used_.insert(k);
+  }
 
   YAML::Node raw(const std::string& k)
   {
@@ -56,7 +74,10 @@ public:
     return n;
   }
 
-  double number(const std::string& k) { return toNumber(raw(k), key(k)); }
+  double number(const std::string& k)
+  {
+    return toNumber(raw(k), key(k));
+  }
   double number(const std::string& k, double fallback)
   {
     used_.insert(k);
@@ -69,7 +90,10 @@ public:
       fail(key(k), "must be positive, got " + show(node_[k]));
     return v;
   }
-  double positive(const std::string& k, double fallback) { return has(k) ? positive(k) : (used_.insert(k), fallback); }
+  double positive(const std::string& k, double fallback)
+  {
+    return has(k) ? positive(k) : (used_.insert(k), fallback);
+  }
   double nonNegative(const std::string& k, double fallback)
   {
     used_.insert(k);
@@ -130,8 +154,14 @@ public:
     used_.insert(k);
     return has(k) ? string(k) : fallback;
   }
-  Vec3 vec3(const std::string& k) { return toVec3(raw(k), key(k)); }
-  Vec3 vec3(const std::string& k, const Vec3& fallback) { return has(k) ? vec3(k) : (used_.insert(k), fallback); }
+  Vec3 vec3(const std::string& k)
+  {
+    return toVec3(raw(k), key(k));
+  }
+  Vec3 vec3(const std::string& k, const Vec3& fallback)
+  {
+    return has(k) ? vec3(k) : (used_.insert(k), fallback);
+  }
   std::vector<std::string> names(const std::string& k)
   {
     const YAML::Node n = raw(k);
@@ -146,7 +176,10 @@ public:
     }
     return out;
   }
-  Reader map(const std::string& k) { return Reader(raw(k), key(k), file_); }
+  Reader map(const std::string& k)
+  {
+    return Reader(raw(k), key(k), file_);
+  }
 
   /// Keys of this map in file order.
   std::vector<std::string> keys() const
@@ -290,7 +323,8 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
     if (nodes.empty())
       rn.fail("nodes", "a scene needs at least one node");
   }
-  auto nodeRef = [&](const Reader& r, const std::string& key, const std::string& name) -> NodeInfo& {
+  auto nodeRef = [&](const Reader& r, const std::string& key, const std::string& name) -> NodeInfo&
+  {
     const auto it = nodes.find(name);
     if (it == nodes.end())
       r.fail(key, "unknown node '" + name + "'");
@@ -342,7 +376,8 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
       for (const StrutLayer& l : b.layers)
       {
         const double r2 = l.outer_radius * l.outer_radius + l.inner_radius * l.inner_radius;
-        const double m = l.density * M_PI * (l.outer_radius * l.outer_radius - l.inner_radius * l.inner_radius) * length;
+        const double m =
+            l.density * M_PI * (l.outer_radius * l.outer_radius - l.inner_radius * l.inner_radius) * length;
         mass += m;
         jt += m * (3.0 * r2 + length * length) / 12.0;
         ja += m * r2 / 2.0;
@@ -353,8 +388,8 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
       b.inertia = Vec3(jt, jt, ja);
       const int index = static_cast<int>(model.bodies.size());
       model.bodies.push_back(b);
-      n1.attachments.push_back(PointRef{index, Vec3(0.0, 0.0, -0.5 * length)});
-      n2.attachments.push_back(PointRef{index, Vec3(0.0, 0.0, 0.5 * length)});
+      n1.attachments.push_back(PointRef{ index, Vec3(0.0, 0.0, -0.5 * length) });
+      n2.attachments.push_back(PointRef{ index, Vec3(0.0, 0.0, 0.5 * length) });
     }
     members.finish();
     rs.finish();
@@ -372,7 +407,7 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
       b.mass = n.mass;
       const int index = static_cast<int>(model.bodies.size());
       model.bodies.push_back(b);
-      n.attachments.insert(n.attachments.begin(), PointRef{index, Vec3::Zero()});
+      n.attachments.insert(n.attachments.begin(), PointRef{ index, Vec3::Zero() });
     }
   }
   finalizeModel(model);
@@ -415,8 +450,9 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
     if (n.attachments.empty())
     {
       if (!n.fixed)
-        root.fail("nodes." + name, "the node is attached to nothing: make it fixed, give it a mass, or end a strut there");
-      node.point = PointRef{-1, n.position};
+        root.fail("nodes." + name,
+                  "the node is attached to nothing: make it fixed, give it a mass, or end a strut there");
+      node.point = PointRef{ -1, n.position };
     }
     else
       node.point = n.attachments.front();
@@ -431,9 +467,9 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
       Constraint c;
       c.name = name + ".pin";
       c.a = n.attachments.front();
-      c.b = PointRef{-1, n.position};
-      c.directions = {Vec3::UnitX(), Vec3::UnitY(), Vec3::UnitZ()};
-      c.offsets = {0.0, 0.0, 0.0};
+      c.b = PointRef{ -1, n.position };
+      c.directions = { Vec3::UnitX(), Vec3::UnitY(), Vec3::UnitZ() };
+      c.offsets = { 0.0, 0.0, 0.0 };
       model.constraints.push_back(c);
     }
     for (size_t k = 1; k < n.attachments.size(); ++k)
@@ -442,8 +478,8 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
       c.name = name + ".joint" + std::to_string(k);
       c.a = n.attachments.front();
       c.b = n.attachments[k];
-      c.directions = {Vec3::UnitX(), Vec3::UnitY(), Vec3::UnitZ()};
-      c.offsets = {0.0, 0.0, 0.0};
+      c.directions = { Vec3::UnitX(), Vec3::UnitY(), Vec3::UnitZ() };
+      c.offsets = { 0.0, 0.0, 0.0 };
       model.constraints.push_back(c);
     }
   }
@@ -461,7 +497,8 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
     }
 
   // cables and springs, by family
-  auto readTensionFamilies = [&](const std::string& section, bool springs) {
+  auto readTensionFamilies = [&](const std::string& section, bool springs)
+  {
     if (!root.has(section))
     {
       root.optional(section);
@@ -563,9 +600,9 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
         Constraint c;
         c.name = name + "." + nn;
         c.a = model.nodes[model.findNode(nn)].point;
-        c.b = PointRef{-1, Vec3::Zero()};
-        c.directions = {dir.normalized()};
-        c.offsets = {dir.normalized().dot(info.position)};
+        c.b = PointRef{ -1, Vec3::Zero() };
+        c.directions = { dir.normalized() };
+        c.offsets = { dir.normalized().dot(info.position) };
         c.actuator = index;
         act.constraints.push_back(static_cast<int>(model.constraints.size()));
         model.constraints.push_back(c);
@@ -650,7 +687,7 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
       std::set<std::pair<int, int>> jointed;
       for (const Constraint& c : model.constraints)
         if (c.kind == Constraint::Kind::kPoints && c.a.body >= 0 && c.b.body >= 0)
-          jointed.insert({std::min(c.a.body, c.b.body), std::max(c.a.body, c.b.body)});
+          jointed.insert({ std::min(c.a.body, c.b.body), std::max(c.a.body, c.b.body) });
       std::vector<std::pair<int, int>> kept;
       for (const auto& p : pairs)
         if (!jointed.count(p))
@@ -660,7 +697,7 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
     std::sort(pairs.begin(), pairs.end());
     pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
     for (const auto& [a, b] : pairs)
-      model.checked_pairs.push_back(StrutPair{a, b});
+      model.checked_pairs.push_back(StrutPair{ a, b });
   }
 
   // solver
@@ -683,8 +720,8 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
       o.newmark_beta = n.number("beta", o.newmark_beta);
       n.finish();
       if (o.newmark_gamma < 0.5)
-        s.fail(s.key("newmark.gamma"), "must be at least 0.5 (Newmark is unstable below), got " +
-                                           std::to_string(o.newmark_gamma));
+        s.fail(s.key("newmark.gamma"),
+               "must be at least 0.5 (Newmark is unstable below), got " + std::to_string(o.newmark_gamma));
       const double beta_min = 0.25 * (o.newmark_gamma + 0.5) * (o.newmark_gamma + 0.5);
       if (o.newmark_beta < beta_min - 1e-12)
         s.fail(s.key("newmark.beta"), "must be at least (gamma + 1/2)^2 / 4 = " + std::to_string(beta_min) +
@@ -818,7 +855,7 @@ Override parseOverride(const std::string& text)
   const size_t eq = text.find('=');
   if (eq == std::string::npos || eq == 0)
     throw SceneError("--set", text, "expected key=value");
-  return Override{text.substr(0, eq), text.substr(eq + 1)};
+  return Override{ text.substr(0, eq), text.substr(eq + 1) };
 }
 
 Model loadScene(const std::string& path, const std::vector<Override>& overrides)

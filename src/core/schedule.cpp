@@ -12,8 +12,8 @@ namespace
 ActuationValue blendIn(double speed, double tb, double t)
 {
   const double w = M_PI / tb;
-  return {speed * (0.5 * t - std::sin(w * t) / (2.0 * w)), 0.5 * speed * (1.0 - std::cos(w * t)),
-          0.5 * speed * w * std::sin(w * t)};
+  return { speed * (0.5 * t - std::sin(w * t) / (2.0 * w)), 0.5 * speed * (1.0 - std::cos(w * t)),
+           0.5 * speed * w * std::sin(w * t) };
 }
 }  // namespace
 
@@ -34,17 +34,17 @@ ActuationValue RampSchedule::evaluate(double t) const
   const double tau = t - start_time;
   const double t_end = endTime() - start_time;
   if (tau >= t_end)
-    return {final_value, 0.0, 0.0};
+    return { final_value, 0.0, 0.0 };
   if (tb <= 0.0)
-    return {speed * tau, speed, 0.0};
+    return { speed * tau, speed, 0.0 };
   if (tau < tb)
     return blendIn(speed, tb, tau);
   const double cruise_end = t_end - tb;
   if (tau <= cruise_end)
-    return {0.5 * speed * tb + speed * (tau - tb), speed, 0.0};
+    return { 0.5 * speed * tb + speed * (tau - tb), speed, 0.0 };
   // smooth stop: mirror image of the smooth start
   const ActuationValue m = blendIn(speed, tb, t_end - tau);
-  return {final_value - m.value, m.rate, -m.accel};
+  return { final_value - m.value, m.rate, -m.accel };
 }
 
 }  // namespace active_tensegrity::core

@@ -16,11 +16,10 @@ namespace at = active_tensegrity::core;
 
 namespace
 {
-const char* kUsage =
-    "usage: tensegrity_run SCENE.yaml [--set key=value]... [--out FILE.csv] [--summary FILE.yaml]\n"
-    "  Runs the scene's analysis (static path or dynamic run) and writes one CSV row per output step\n"
-    "  (stdout when --out is not given) and a YAML summary. Any scene key can be overridden with\n"
-    "  --set, e.g. --set struts.radius=0.06 --set analysis.max_actuation=1.0\n";
+const char* kUsage = "usage: tensegrity_run SCENE.yaml [--set key=value]... [--out FILE.csv] [--summary FILE.yaml]\n"
+                     "  Runs the scene's analysis (static path or dynamic run) and writes one CSV row per output step\n"
+                     "  (stdout when --out is not given) and a YAML summary. Any scene key can be overridden with\n"
+                     "  --set, e.g. --set struts.radius=0.06 --set analysis.max_actuation=1.0\n";
 
 std::string csvNumber(double v)
 {
@@ -41,7 +40,8 @@ int main(int argc, char** argv)
     for (int i = 1; i < argc; ++i)
     {
       const std::string arg = argv[i];
-      auto value = [&](const char* name) -> std::string {
+      auto value = [&](const char* name) -> std::string
+      {
         if (i + 1 >= argc)
           throw std::invalid_argument(std::string(name) + " needs a value");
         return argv[++i];
@@ -106,13 +106,15 @@ int main(int argc, char** argv)
   bool reported = false;
   const at::RunResult result = at::runAnalysis(
       model,
-      [&](const at::State& s) {
+      [&](const at::State& s)
+      {
         const std::vector<double> row = at::csvRow(model, s);
         for (size_t i = 0; i < row.size(); ++i)
           csv << (i ? "," : "") << csvNumber(row[i]);
         csv << "\n";
       },
-      [&](double fraction) {
+      [&](double fraction)
+      {
         const auto now = std::chrono::steady_clock::now();
         if (std::chrono::duration<double>(now - last_report).count() < 2.0)
           return;

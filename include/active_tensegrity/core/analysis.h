@@ -31,8 +31,8 @@ std::vector<double> csvRow(const Model& model, const State& state);
 struct RunResult
 {
   Summary summary;
-  int steps = 0;         // output steps written
-  int solver_steps = 0;  // time steps or load increments taken
+  int steps = 0;           // output steps written
+  int solver_steps = 0;    // time steps or load increments taken
   double wall_time = 0.0;  // s
   State final_state;
 };

@@ -26,13 +26,28 @@ public:
   void addTransposed(int gr, int gc, const Eigen::Ref<const Eigen::MatrixXd>& block, double weight = 1.0);
   bool hasBlock(int gr, int gc) const;
 
-  const Eigen::SparseMatrix<double>& matrix() const { return matrix_; }
-  int groupOffset(int g) const { return offsets_[g]; }
-  int groupSize(int g) const { return sizes_[g]; }
-  int rows() const { return static_cast<int>(matrix_.rows()); }
+  const Eigen::SparseMatrix<double>& matrix() const
+  {
+    return matrix_;
+  }
+  int groupOffset(int g) const
+  {
+    return offsets_[g];
+  }
+  int groupSize(int g) const
+  {
+    return sizes_[g];
+  }
+  int rows() const
+  {
+    return static_cast<int>(matrix_.rows());
+  }
 
 private:
-  static std::uint64_t key(int gr, int gc) { return (static_cast<std::uint64_t>(gr) << 32) | static_cast<std::uint32_t>(gc); }
+  static std::uint64_t key(int gr, int gc)
+  {
+    return (static_cast<std::uint64_t>(gr) << 32) | static_cast<std::uint32_t>(gc);
+  }
   std::vector<int> sizes_, offsets_;
   Eigen::SparseMatrix<double> matrix_;
   // for each block, the index in valuePtr() of its first row in each of its columns (contiguous rows)

@@ -24,14 +24,20 @@ public:
   /// Advances by h (halving it on failure); on failure `state` is left at the last good instant.
   Summary step(State& state, double h, const ActuationLaw& law);
 
-  const System& system() const { return system_; }
+  const System& system() const
+  {
+    return system_;
+  }
 
   /// Effective Newmark coefficients and the generalized-alpha weights.
   struct Coefficients
   {
     double gamma, beta, alpha_m, alpha_f;
   };
-  Coefficients coefficients() const { return coef_; }
+  Coefficients coefficients() const
+  {
+    return coef_;
+  }
 
   /// The Newton residual and Jacobian of one step at the unknowns (qdd_new, lambda_new); exposed for
   /// the finite-difference test of the full Jacobian.
@@ -41,8 +47,8 @@ public:
 private:
   Summary attempt(State& state, double h, const ActuationLaw& law);
   Summary advance(State& state, double h, const ActuationLaw& law, int depth);
-  void predict(const State& start, double h, const Eigen::VectorXd& qdd_new, Eigen::VectorXd& q,
-               Eigen::VectorXd& qd, Eigen::VectorXd& acc) const;
+  void predict(const State& start, double h, const Eigen::VectorXd& qdd_new, Eigen::VectorXd& q, Eigen::VectorXd& qd,
+               Eigen::VectorXd& acc) const;
 
   System system_;
   SolverOptions options_;

@@ -22,9 +22,9 @@ using Mat37 = Eigen::Matrix<double, 3, 7>;
 /// matrices are meaningful (7 for a strut, 3 for a point mass, 0 for the ground).
 struct PointKinematics
 {
-  Vec3 p = Vec3::Zero();     // world position, m
-  Vec3 v = Vec3::Zero();     // world velocity, m/s
-  Mat37 jac = Mat37::Zero();  // B_P = dp/dq = dv/dqd
+  Vec3 p = Vec3::Zero();        // world position, m
+  Vec3 v = Vec3::Zero();        // world velocity, m/s
+  Mat37 jac = Mat37::Zero();    // B_P = dp/dq = dv/dqd
   Mat37 dv_dq = Mat37::Zero();  // dv/dq = [0, B_Theta(Theta_dot, u)]
   int body = -1;
   int nq = 0;
@@ -58,12 +58,30 @@ class System
 public:
   explicit System(const Model& model, std::vector<Constraint> extra_constraints = {});
 
-  const Model& model() const { return model_; }
-  const std::vector<Constraint>& constraints() const { return constraints_; }
-  int nq() const { return model_.nq; }
-  int nLambda() const { return n_lambda_; }
-  int size() const { return model_.nq + n_lambda_; }
-  int constraintRow(int c) const { return constraint_rows_[c]; }
+  const Model& model() const
+  {
+    return model_;
+  }
+  const std::vector<Constraint>& constraints() const
+  {
+    return constraints_;
+  }
+  int nq() const
+  {
+    return model_.nq;
+  }
+  int nLambda() const
+  {
+    return n_lambda_;
+  }
+  int size() const
+  {
+    return model_.nq + n_lambda_;
+  }
+  int constraintRow(int c) const
+  {
+    return constraint_rows_[c];
+  }
 
   /// F(q, qd): cables, springs, gravity. Adds k_weight K + c_weight C into jac when not null.
   void appliedForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, Eigen::VectorXd& F, BlockSparseMatrix* jac,
@@ -96,11 +114,20 @@ public:
   double potentialEnergy(const Eigen::VectorXd& q) const;
 
   /// A fresh matrix with this system's pattern (zero values).
-  BlockSparseMatrix makeMatrix() const { return pattern_; }
+  BlockSparseMatrix makeMatrix() const
+  {
+    return pattern_;
+  }
 
 private:
-  int bodyGroup(int body) const { return body; }
-  int constraintGroup(int c) const { return static_cast<int>(model_.bodies.size()) + c; }
+  int bodyGroup(int body) const
+  {
+    return body;
+  }
+  int constraintGroup(int c) const
+  {
+    return static_cast<int>(model_.bodies.size()) + c;
+  }
 
   const Model& model_;
   std::vector<Constraint> constraints_;

@@ -25,9 +25,9 @@ enum class BodyKind
 struct StrutLayer
 {
   std::string material;
-  double inner_radius = 0.0;  // m
-  double outer_radius = 0.0;  // m
-  double density = 0.0;       // kg/m^3
+  double inner_radius = 0.0;    // m
+  double outer_radius = 0.0;    // m
+  double density = 0.0;         // kg/m^3
   double youngs_modulus = 0.0;  // Pa
   double poisson_ratio = 0.0;
 };
@@ -36,14 +36,17 @@ struct Body
 {
   std::string name;
   BodyKind kind = BodyKind::kStrut;
-  int nq = 7;      // coordinates of this body
-  int offset = 0;  // first coordinate in the global q
-  double mass = 0.0;  // kg
-  Vec3 inertia = Vec3::Zero();  // principal moments about the centre of mass in the body frame, kg m^2
-  double length = 0.0;  // m (struts)
+  int nq = 7;                      // coordinates of this body
+  int offset = 0;                  // first coordinate in the global q
+  double mass = 0.0;               // kg
+  Vec3 inertia = Vec3::Zero();     // principal moments about the centre of mass in the body frame, kg m^2
+  double length = 0.0;             // m (struts)
   std::vector<StrutLayer> layers;  // innermost first (struts)
 
-  double radius() const { return layers.empty() ? 0.0 : layers.back().outer_radius; }
+  double radius() const
+  {
+    return layers.empty() ? 0.0 : layers.back().outer_radius;
+  }
 };
 
 /// A material point: body -1 is the ground, and then `local` is the world position.
@@ -66,11 +69,11 @@ struct Cable
 {
   std::string name;
   PointRef a, b;
-  double stiffness = 0.0;     // k, N/m
-  double rest_length = 0.0;   // l0, m
-  double damping = 0.0;       // c, N s/m
+  double stiffness = 0.0;    // k, N/m
+  double rest_length = 0.0;  // l0, m
+  double damping = 0.0;      // c, N s/m
   bool tension_only = true;
-  double area = 0.0;          // m^2, for stresses (0 when not a material cable)
+  double area = 0.0;  // m^2, for stresses (0 when not a material cable)
 };
 
 /// A constraint block. kPoints: rows d_k . (p_a - p_b) - offset_k - (actuator >= 0 ? s(t) : 0) = 0,
@@ -87,13 +90,16 @@ struct Constraint
   Kind kind = Kind::kPoints;
   std::string name;
   PointRef a, b;
-  std::vector<Vec3> directions;   // one per row (kPoints)
-  std::vector<double> offsets;    // one per row (kPoints)
-  int actuator = -1;              // index into Model::actuators, or -1
-  int body = -1;                  // kQuatNorm, kSpinLock
+  std::vector<Vec3> directions;      // one per row (kPoints)
+  std::vector<double> offsets;       // one per row (kPoints)
+  int actuator = -1;                 // index into Model::actuators, or -1
+  int body = -1;                     // kQuatNorm, kSpinLock
   Vec4 coefficients = Vec4::Zero();  // kSpinLock
 
-  int rows() const { return kind == Kind::kPoints ? static_cast<int>(directions.size()) : 1; }
+  int rows() const
+  {
+    return kind == Kind::kPoints ? static_cast<int>(directions.size()) : 1;
+  }
 };
 
 /// A group of node motions driven by one value s (m): each target point moves by s along its
@@ -102,8 +108,8 @@ struct Constraint
 struct Actuator
 {
   std::string name;
-  double min_value = 0.0;  // m
-  double max_value = 0.0;  // m
+  double min_value = 0.0;        // m
+  double max_value = 0.0;        // m
   std::vector<int> constraints;  // indices into Model::constraints
 };
 
@@ -126,10 +132,10 @@ struct SolverOptions
   Integrator integrator = Integrator::kNewmark;
   double newmark_gamma = 0.6;
   double newmark_beta = 0.3025;
-  double rho_infinity = 0.8;    // generalized-alpha spectral radius at infinite frequency
+  double rho_infinity = 0.8;       // generalized-alpha spectral radius at infinite frequency
   double newton_tolerance = 1e-6;  // on the position increment (m, or quaternion units)
   int max_iterations = 25;
-  int max_step_cuts = 10;          // halvings of a step (or load increment) before failure
+  int max_step_cuts = 10;  // halvings of a step (or load increment) before failure
 };
 
 enum class AnalysisType
@@ -141,11 +147,11 @@ enum class AnalysisType
 struct AnalysisSettings
 {
   AnalysisType type = AnalysisType::kStatic;
-  double max_actuation = 0.0;  // m (static path end)
-  int steps = 100;             // static load steps
-  double duration = 0.0;       // s (dynamic)
+  double max_actuation = 0.0;    // m (static path end)
+  int steps = 100;               // static load steps
+  double duration = 0.0;         // s (dynamic)
   double output_interval = 0.0;  // s (dynamic, 0 = every step)
-  RampSchedule schedule;       // dynamic actuation law for every actuator
+  RampSchedule schedule;         // dynamic actuation law for every actuator
 };
 
 struct Model

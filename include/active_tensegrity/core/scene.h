@@ -19,7 +19,10 @@ public:
     : std::runtime_error(file + ": " + (key.empty() ? std::string() : key + ": ") + what), key_(key)
   {
   }
-  const std::string& key() const { return key_; }
+  const std::string& key() const
+  {
+    return key_;
+  }
 
 private:
   std::string key_;

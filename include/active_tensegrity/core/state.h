@@ -39,11 +39,14 @@ const char* toString(SolveStatus s);
 struct Summary
 {
   SolveStatus status = SolveStatus::kConverged;
-  int iterations = 0;   // Newton iterations, all attempts included
-  int step_cuts = 0;    // times a step or load increment was halved
+  int iterations = 0;     // Newton iterations, all attempts included
+  int step_cuts = 0;      // times a step or load increment was halved
   double residual = 0.0;  // last increment norm (dynamics) or force residual (statics)
   std::string message;
-  bool ok() const { return status == SolveStatus::kConverged; }
+  bool ok() const
+  {
+    return status == SolveStatus::kConverged;
+  }
 };
 
 /// Sparse LU with the symbolic analysis done once (the matrix pattern never changes).
@@ -51,7 +54,10 @@ class SparseLinearSolver
 {
 public:
   bool factorize(const Eigen::SparseMatrix<double>& a);
-  void solve(const Eigen::VectorXd& b, Eigen::VectorXd& x) const { x = lu_.solve(b); }
+  void solve(const Eigen::VectorXd& b, Eigen::VectorXd& x) const
+  {
+    x = lu_.solve(b);
+  }
 
 private:
   Eigen::SparseLU<Eigen::SparseMatrix<double>, Eigen::COLAMDOrdering<int>> lu_;

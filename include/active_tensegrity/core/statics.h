@@ -28,7 +28,10 @@ public:
   /// Force residual of the equilibrium equations at (q, lambda), N (max norm of -F + Phi_q^T lambda).
   double forceResidual(const State& state);
 
-  const System& system() const { return system_; }
+  const System& system() const
+  {
+    return system_;
+  }
 
 private:
   System system_;

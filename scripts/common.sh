@@ -1,0 +1,71 @@
+# shellcheck shell=bash
+# Shared by scripts/test and scripts/demo: environment and the catkin workspace in build/ws.
+#
+# The workspace is <repo>/build/ws with src/active_tensegrity a symlink to the repo root (build/ is
+# git-ignored). The symlink makes a loop (repo/build/ws/src/active_tensegrity -> repo): never walk the
+# package root recursively (no GLOB_RECURSE, no find over the repo); catkin stops at package.xml.
+
+AT_ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd -P)"
+AT_BUILD="$AT_ROOT/build"
+AT_WS="$AT_BUILD/ws"
+AT_DEVEL="$AT_WS/devel"
+AT_CATKIN_BUILD="$AT_WS/build"
+AT_PYTHON=/usr/bin/python3
+# the same cmake arguments on every catkin_make call, else catkin_make re-runs cmake each time
+AT_CMAKE_ARGS=(-DCMAKE_BUILD_TYPE=Release "-DPYTHON_EXECUTABLE=$AT_PYTHON")
+AT_JOBS="${AT_JOBS:-2}"
+
+# Debian's ROS lives in /usr: its python3 has catkin_pkg and rospy, a pyenv/venv python3 does not
+export PATH="/usr/bin:/bin:/usr/sbin:/sbin:$PATH"
+export ROS_HOSTNAME=localhost
+unset ROS_IP
+export ROS_HOME="$AT_BUILD/ros_home"
+export ROS_LOG_DIR="$ROS_HOME/log"
+export PYTHONDONTWRITEBYTECODE=1
+
+at_log() { echo "== $*"; }
+
+# Create build/ws with the package symlinked in, and drop a stale build tree (moved repo, other python).
+at_workspace() {
+  mkdir -p "$AT_WS/src" "$ROS_LOG_DIR"
+  local link="$AT_WS/src/active_tensegrity"
+  if [[ -e "$link" && ! -L "$link" ]]; then
+    echo "error: $link exists and is not a symlink; remove $AT_WS" >&2
+    return 1
+  fi
+  if [[ "$(readlink "$link" 2>/dev/null || true)" != "$AT_ROOT" ]]; then
+    ln -sfn "$AT_ROOT" "$link"
+  fi
+  local cache="$AT_CATKIN_BUILD/CMakeCache.txt"
+  if [[ -f "$cache" ]]; then
+    local home python
+    home="$(sed -n 's/^CMAKE_HOME_DIRECTORY:INTERNAL=//p' "$cache")"
+    python="$(sed -n 's/^PYTHON_EXECUTABLE:[A-Z]*=//p' "$cache")"
+    if [[ "$home" != "$AT_WS/src" || "$python" != "$AT_PYTHON" ]]; then
+      at_log "stale catkin build (source '$home', python '$python'): removing build/ws/build and build/ws/devel"
+      rm -rf "$AT_CATKIN_BUILD" "$AT_DEVEL"
+    fi
+  fi
+}
+
+# catkin_make in build/ws; extra arguments are make targets, e.g. run_tests. Incremental when re-run.
+at_catkin_make() {
+  catkin_make -C "$AT_WS" "-j$AT_JOBS" "${AT_CMAKE_ARGS[@]}" "$@"
+}
+
+# at_build [make targets...]
+at_build() {
+  at_workspace
+  at_catkin_make "$@"
+}
+
+# devel/setup.bash is not set -u clean (toolchain gotcha 7): source it with nounset off.
+at_source_devel() {
+  local had_u=0
+  [[ $- == *u* ]] && had_u=1
+  set +u
+  # shellcheck disable=SC1091
+  source "$AT_DEVEL/setup.bash"
+  ((had_u)) && set -u
+  return 0
+}

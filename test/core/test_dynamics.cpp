@@ -1,0 +1,347 @@
+// Time integration: the full Newton Jacobian of one step against finite differences, and physics
+// invariants (energy, angular momentum, quaternion norm), a closed-form pendulum period, the
+// measured order of accuracy of each integrator, and a clean failure status.
+#include <cmath>
+#include <random>
+
+#include <gtest/gtest.h>
+
+#include "active_tensegrity/core/dynamics.h"
+#include "active_tensegrity/core/scene.h"
+#include "fd_check.h"
+#include "test_models.h"
+
+using namespace active_tensegrity::test;
+
+namespace
+{
+SolverOptions options(Integrator integrator, double dt, double gamma = 0.5, double beta = 0.25, double rho = 1.0)
+{
+  SolverOptions o;
+  o.integrator = integrator;
+  o.dt = dt;
+  o.newmark_gamma = gamma;
+  o.newmark_beta = beta;
+  o.rho_infinity = rho;
+  o.newton_tolerance = 1e-12;
+  o.max_iterations = 30;
+  return o;
+}
+
+ActuationLaw constantLaw(size_t n, double value = 0.0)
+{
+  return [n, value](double) { return ActuationValues(n, ActuationValue{ value, 0.0, 0.0 }); };
+}
+
+/// One free strut, no forces: only its quaternion norm constraint.
+Model freeStrut()
+{
+  Model m;
+  m.bodies.push_back(makeStrut("S", 1.2, 0.04, 7800.0));
+  Constraint c;
+  c.kind = Constraint::Kind::kQuatNorm;
+  c.body = 0;
+  m.constraints.push_back(c);
+  finalizeModel(m);
+  m.q0.setZero(7);
+  m.q0.segment<4>(3) = thetaFromZAxis(Vec3(0.2, -0.5, 1.0));
+  return m;
+}
+
+Vec3 angularMomentum(const Model& m, const State& s)
+{
+  Vec3 h = Vec3::Zero();
+  for (const Body& b : m.bodies)
+  {
+    const Vec4 th = s.q.segment<4>(b.offset + 3);
+    const Vec3 w_body = 2.0 * lMatrix(th) * s.qd.segment<4>(b.offset + 3);
+    const Vec3 r = s.q.segment<3>(b.offset);
+    h += rotationMatrix(th) * (b.inertia.asDiagonal() * w_body) + r.cross(b.mass * s.qd.segment<3>(b.offset));
+  }
+  return h;
+}
+
+/// The quadruplex of PHYSICS.md Sec. 7 vibrating freely about its prestressed equilibrium
+/// (actuation held at 0), started with a velocity field.
+struct Quadruplex
+{
+  Model model = loadScene(std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) + "/config/scenes/quadruplex.yaml");
+  State start(double speed, unsigned seed) const
+  {
+    State s = initialState(model);
+    std::mt19937 rng(seed);
+    s.qd = randomVector(model.nq, speed, rng);
+    return s;
+  }
+};
+}  // namespace
+
+class NewtonJacobian : public ::testing::TestWithParam<Integrator>
+{
+};
+
+TEST_P(NewtonJacobian, FullStepJacobianMatchesFiniteDifferences)
+{
+  const Model model = mixedModel();
+  std::mt19937 rng(7);
+  DynamicsSolver solver(model, options(GetParam(), 1e-3, 0.6, 0.3025, 0.7));
+  State s = initialState(model);
+  s.q = perturbed(model.q0, 0.05, rng);
+  s.qd = randomVector(model.nq, 0.5, rng);
+  s.qdd = randomVector(model.nq, 2.0, rng);
+  s.acc = randomVector(model.nq, 2.0, rng);
+  const double h = 2e-3;
+  const ActuationValues u = { ActuationValue{ 0.05, 0.1, 0.0 } };
+  const Eigen::VectorXd qdd = randomVector(model.nq, 5.0, rng);
+  const Eigen::VectorXd lambda = randomVector(solver.system().nLambda(), 100.0, rng);
+  Eigen::VectorXd x(model.nq + lambda.size());
+  x << qdd, lambda;
+
+  BlockSparseMatrix jac = solver.system().makeMatrix();
+  Eigen::VectorXd r;
+  solver.residualAndJacobian(s, h, u, qdd, lambda, r, &jac);
+  const Eigen::MatrixXd analytic(jac.matrix());
+  const Eigen::MatrixXd numeric = fdJacobian(
+      [&](const Eigen::VectorXd& y) -> Eigen::VectorXd
+      {
+        Eigen::VectorXd out;
+        solver.residualAndJacobian(s, h, u, y.head(model.nq), y.tail(lambda.size()), out, nullptr);
+        return out;
+      },
+      x, 1e-3);  // a large step in qdd: q moves by only beta h^2 times it
+  const auto c = compareJacobians(analytic, numeric, 1e-6, 1.0);
+  EXPECT_TRUE(c.ok) << c.message;
+}
+
+INSTANTIATE_TEST_SUITE_P(Integrators, NewtonJacobian,
+                         ::testing::Values(Integrator::kNewmark, Integrator::kGeneralizedAlpha));
+
+TEST(Dynamics, TorqueFreeSpinningStrutKeepsEnergyMomentumAndNorm)
+{
+  // generalized-alpha with a little high-frequency damping: the undamped schemes (gamma = 1/2,
+  // rho_inf = 1) are only marginally stable on index-3 DAEs and drift on this fast spin (docs/numerics.md)
+  const Model model = freeStrut();
+  DynamicsSolver solver(model, options(Integrator::kGeneralizedAlpha, 1e-3, 0.5, 0.25, 0.9));
+  State s = initialState(model);
+  // body angular velocity (1, 0.5, 30) rad/s: a strut spinning fast about its axis and tumbling
+  const Vec4 th = s.q.segment<4>(3);
+  const Vec3 w_body(1.0, 0.5, 30.0);
+  s.qd.segment<4>(3) = 0.5 * lMatrix(th).transpose() * w_body;  // Theta_dot = 1/2 L^T w
+  s.qd.segment<3>(0) = Vec3(0.1, 0.0, -0.2);
+  ASSERT_TRUE(solver.initialize(s, constantLaw(0)).ok());
+  const System& sys = solver.system();
+  const double e0 = sys.kineticEnergy(s.q, s.qd);
+  const Vec3 h0 = angularMomentum(model, s);
+  double max_de = 0.0, max_dh = 0.0, max_norm = 0.0;
+  for (int k = 0; k < 2000; ++k)
+  {
+    ASSERT_TRUE(solver.step(s, 1e-3, constantLaw(0)).ok());
+    max_de = std::max(max_de, std::abs(sys.kineticEnergy(s.q, s.qd) - e0) / e0);
+    max_dh = std::max(max_dh, (angularMomentum(model, s) - h0).norm() / h0.norm());
+    max_norm = std::max(max_norm, std::abs(s.q.segment<4>(3).norm() - 1.0));
+  }
+  EXPECT_LT(max_de, 1e-4);
+  EXPECT_LT(max_dh, 1e-4);
+  EXPECT_LT(max_norm, 1e-10);
+  // the body did tumble: its axis moved
+  EXPECT_GT((rotationMatrix(s.q.segment<4>(3)).col(2) - rotationMatrix(model.q0.segment<4>(3)).col(2)).norm(), 0.1);
+}
+
+TEST(Dynamics, PinnedStrutSwingsWithThePendulumPeriod)
+{
+  // a strut hanging from a ground pin at its upper end: T = 2 pi sqrt(J_pivot / (m g L / 2))
+  Model m;
+  m.bodies.push_back(makeStrut("S", 1.0, 0.02, 7800.0));
+  Constraint norm;
+  norm.kind = Constraint::Kind::kQuatNorm;
+  norm.body = 0;
+  m.constraints.push_back(pointConstraint("pin", PointRef{ 0, Vec3(0, 0, 0.5) }, PointRef{ -1, Vec3::Zero() }));
+  m.constraints.push_back(norm);
+  m.gravity_enabled = true;
+  finalizeModel(m);
+  const double tilt = 0.02;
+  const Vec3 axis(std::sin(tilt), 0.0, std::cos(tilt));  // body z points up towards the pin
+  m.q0.setZero(7);
+  m.q0.segment<3>(0) = -0.5 * axis;
+  m.q0.segment<4>(3) = thetaFromZAxis(axis);
+  const Body& b = m.bodies[0];
+  const double j_pivot = b.inertia.x() + b.mass * 0.25;
+  const double period = 2.0 * M_PI * std::sqrt(j_pivot / (b.mass * 9.81 * 0.5));
+
+  DynamicsSolver solver(m, options(Integrator::kNewmark, 1e-3));
+  State s = initialState(m);
+  ASSERT_TRUE(solver.initialize(s, constantLaw(0)).ok());
+  std::vector<double> crossings;
+  double x_prev = s.q(0);
+  for (int k = 0; k < 5000; ++k)
+  {
+    const double t_prev = s.t;
+    ASSERT_TRUE(solver.step(s, 1e-3, constantLaw(0)).ok());
+    if (x_prev < 0.0 && s.q(0) >= 0.0)
+      crossings.push_back(t_prev + (s.t - t_prev) * (-x_prev) / (s.q(0) - x_prev));
+    x_prev = s.q(0);
+  }
+  ASSERT_GE(crossings.size(), 3u);
+  const double measured = (crossings.back() - crossings.front()) / (crossings.size() - 1);
+  EXPECT_NEAR(measured / period, 1.0, 1e-3) << "measured " << measured << " s, closed form " << period << " s";
+}
+
+class EnergyConservation : public ::testing::TestWithParam<Integrator>
+{
+};
+
+TEST_P(EnergyConservation, UndampedCableStructureKeepsEnergyBoundedOver10000Steps)
+{
+  Quadruplex quad;
+  DynamicsSolver solver(quad.model, options(GetParam(), 1e-3, 0.5, 0.25, 1.0));
+  State s = quad.start(0.3, 11);
+  const ActuationLaw law = constantLaw(1);
+  ASSERT_TRUE(solver.initialize(s, law).ok());
+  const System& sys = solver.system();
+  const double e0 = sys.kineticEnergy(s.q, s.qd) + sys.potentialEnergy(s.q);
+  const double k0 = sys.kineticEnergy(s.q, s.qd);
+  ASSERT_GT(k0, 0.1);
+  double max_dev = 0.0, late_dev = 0.0;
+  for (int k = 0; k < 10000; ++k)
+  {
+    const Summary r = solver.step(s, 1e-3, law);
+    ASSERT_TRUE(r.ok()) << r.message;
+    const double dev = std::abs(sys.kineticEnergy(s.q, s.qd) + sys.potentialEnergy(s.q) - e0) / k0;
+    max_dev = std::max(max_dev, dev);
+    if (k >= 9000)
+      late_dev = std::max(late_dev, dev);
+  }
+  // bounded, and no secular drift: the last tenth is no worse than the bound over the whole run
+  EXPECT_LT(max_dev, 2e-3) << "energy deviation relative to the initial kinetic energy";
+  EXPECT_LE(late_dev, max_dev);
+  EXPECT_TRUE(s.q.allFinite());
+}
+
+INSTANTIATE_TEST_SUITE_P(Integrators, EnergyConservation,
+                         ::testing::Values(Integrator::kNewmark, Integrator::kGeneralizedAlpha));
+
+TEST(Dynamics, PaperNewmarkDissipatesEnergy)
+{
+  Quadruplex quad;
+  DynamicsSolver solver(quad.model, options(Integrator::kNewmark, 1e-3, 0.6, 0.3025));
+  State s = quad.start(0.3, 11);
+  const ActuationLaw law = constantLaw(1);
+  ASSERT_TRUE(solver.initialize(s, law).ok());
+  const System& sys = solver.system();
+  double e_prev = sys.kineticEnergy(s.q, s.qd) + sys.potentialEnergy(s.q);
+  const double e0 = e_prev;
+  for (int k = 0; k < 2000; ++k)
+  {
+    ASSERT_TRUE(solver.step(s, 1e-3, law).ok());
+    const double e = sys.kineticEnergy(s.q, s.qd) + sys.potentialEnergy(s.q);
+    EXPECT_LE(e, e_prev + 1e-9 * e0) << "step " << k;  // gamma > 1/2 never adds energy
+    e_prev = e;
+  }
+  EXPECT_LT(e_prev, e0);
+}
+
+namespace
+{
+// position error at T against a fine reference, for step h
+double positionError(const Quadruplex& quad, const SolverOptions& o, double h, double T, const Eigen::VectorXd& ref)
+{
+  SolverOptions oo = o;
+  oo.dt = h;
+  DynamicsSolver solver(quad.model, oo);
+  State s = quad.start(0.5, 5);
+  const ActuationLaw law = constantLaw(1);
+  EXPECT_TRUE(solver.initialize(s, law).ok());
+  const int n = static_cast<int>(std::lround(T / h));
+  for (int k = 0; k < n; ++k)
+    EXPECT_TRUE(solver.step(s, h, law).ok());
+  if (ref.size() == 0)
+    return 0.0;
+  double err = 0.0;
+  for (const Body& b : quad.model.bodies)
+    err = std::max(err, (s.q.segment<3>(b.offset) - ref.segment<3>(b.offset)).norm());
+  return err;
+}
+
+Eigen::VectorXd reference(const Quadruplex& quad, double T)
+{
+  SolverOptions o = options(Integrator::kGeneralizedAlpha, 2.5e-5, 0.5, 0.25, 0.9);
+  DynamicsSolver solver(quad.model, o);
+  State s = quad.start(0.5, 5);
+  const ActuationLaw law = constantLaw(1);
+  EXPECT_TRUE(solver.initialize(s, law).ok());
+  const int n = static_cast<int>(std::lround(T / o.dt));
+  for (int k = 0; k < n; ++k)
+    EXPECT_TRUE(solver.step(s, o.dt, law).ok());
+  return s.q;
+}
+
+// least-squares slope of log(error) against log(h)
+double slope(const std::vector<double>& h, const std::vector<double>& e)
+{
+  double sx = 0, sy = 0, sxx = 0, sxy = 0;
+  const double n = static_cast<double>(h.size());
+  for (size_t i = 0; i < h.size(); ++i)
+  {
+    const double x = std::log(h[i]), y = std::log(e[i]);
+    sx += x;
+    sy += y;
+    sxx += x * x;
+    sxy += x * y;
+  }
+  return (n * sxy - sx * sy) / (n * sxx - sx * sx);
+}
+}  // namespace
+
+TEST(Dynamics, MeasuredOrderOfAccuracy)
+{
+  Quadruplex quad;
+  const double T = 0.4;
+  const Eigen::VectorXd ref = reference(quad, T);
+  const std::vector<double> steps = { 4e-3, 2e-3, 1e-3, 5e-4 };
+  std::vector<double> e_newmark, e_alpha;
+  for (double h : steps)
+  {
+    e_newmark.push_back(positionError(quad, options(Integrator::kNewmark, h, 0.6, 0.3025), h, T, ref));
+    e_alpha.push_back(positionError(quad, options(Integrator::kGeneralizedAlpha, h, 0.5, 0.25, 0.9), h, T, ref));
+  }
+  const double p_newmark = slope(steps, e_newmark);
+  const double p_alpha = slope(steps, e_alpha);
+  std::printf("order: Newmark(0.6, 0.3025) %.3f, generalized-alpha(0.9) %.3f\n", p_newmark, p_alpha);
+  for (size_t i = 0; i < steps.size(); ++i)
+    std::printf("  h = %.1e  error Newmark %.3e  generalized-alpha %.3e\n", steps[i], e_newmark[i], e_alpha[i]);
+  EXPECT_NEAR(p_newmark, 1.0, 0.2);
+  EXPECT_NEAR(p_alpha, 2.0, 0.25);
+}
+
+TEST(Dynamics, FailedStepReportsStatusAndKeepsTheLastGoodState)
+{
+  Quadruplex quad;
+  SolverOptions o = options(Integrator::kNewmark, 1e-2);
+  o.max_iterations = 1;  // Newton cannot converge to 1e-12 in one iteration
+  o.max_step_cuts = 2;
+  DynamicsSolver solver(quad.model, o);
+  State s = quad.start(0.5, 3);
+  const ActuationLaw law = constantLaw(1);
+  ASSERT_TRUE(solver.initialize(s, law).ok());
+  const State before = s;
+  const Summary r = solver.step(s, 1e-2, law);
+  EXPECT_EQ(r.status, SolveStatus::kMaxIterations);
+  EXPECT_EQ(r.step_cuts, 2);  // h -> h/2 -> h/4, then max_step_cuts is reached
+  EXPECT_FALSE(r.message.empty());
+  EXPECT_EQ(s.t, before.t);
+  EXPECT_TRUE(s.q.isApprox(before.q));
+  EXPECT_TRUE(s.q.allFinite());
+}
+
+TEST(Dynamics, InitializationProjectsVelocitiesOntoTheConstraints)
+{
+  Quadruplex quad;
+  DynamicsSolver solver(quad.model, options(Integrator::kNewmark, 1e-3));
+  State s = quad.start(1.0, 9);
+  const ActuationValue rate{ 0.0, 0.2, 0.0 };
+  const ActuationLaw law = [rate](double) { return ActuationValues{ rate }; };
+  ASSERT_TRUE(solver.initialize(s, law).ok());
+  Eigen::VectorXd rhs;
+  solver.system().velocityRhs({ rate }, rhs);
+  EXPECT_LT((solver.system().constraintJacobianDense(s.q) * s.qd - rhs).lpNorm<Eigen::Infinity>(), 1e-10);
+}

@@ -1,0 +1,139 @@
+// Small models built in code for the core tests.
+#pragma once
+
+#include <random>
+
+#include "active_tensegrity/core/mechanics.h"
+#include "active_tensegrity/core/model.h"
+
+namespace active_tensegrity::test
+{
+using namespace active_tensegrity::core;
+
+inline Body makeStrut(const std::string& name, double length, double radius, double density)
+{
+  Body b;
+  b.name = name;
+  b.kind = BodyKind::kStrut;
+  b.length = length;
+  StrutLayer layer;
+  layer.material = "steel";
+  layer.outer_radius = radius;
+  layer.density = density;
+  layer.youngs_modulus = 210e9;
+  layer.poisson_ratio = 0.3;
+  b.layers.push_back(layer);
+  b.mass = density * M_PI * radius * radius * length;
+  const double jt = b.mass * (3.0 * radius * radius + length * length) / 12.0;
+  b.inertia = Vec3(jt, jt, 0.5 * b.mass * radius * radius);
+  return b;
+}
+
+inline Body makePointMass(const std::string& name, double mass)
+{
+  Body b;
+  b.name = name;
+  b.kind = BodyKind::kPointMass;
+  b.mass = mass;
+  return b;
+}
+
+inline Cable makeCable(const std::string& name, PointRef a, PointRef b, double k, double l0, double c)
+{
+  Cable cable;
+  cable.name = name;
+  cable.a = a;
+  cable.b = b;
+  cable.stiffness = k;
+  cable.rest_length = l0;
+  cable.damping = c;
+  return cable;
+}
+
+inline Constraint pointConstraint(const std::string& name, PointRef a, PointRef b, int actuator = -1,
+                                  const Vec3& direction = Vec3::UnitZ(), double offset = 0.0)
+{
+  Constraint c;
+  c.name = name;
+  c.a = a;
+  c.b = b;
+  if (actuator >= 0)
+  {
+    c.directions = { direction };
+    c.offsets = { offset };
+    c.actuator = actuator;
+  }
+  else
+  {
+    c.directions = { Vec3::UnitX(), Vec3::UnitY(), Vec3::UnitZ() };
+    c.offsets = { 0.0, 0.0, 0.0 };
+  }
+  return c;
+}
+
+/// Two struts, one point mass: cables strut-strut, strut-ground, strut-point mass (damped), a
+/// ball joint between the struts, one end pinned, a quaternion norm per strut, one actuated
+/// coordinate of the point mass and one of a strut end. Every kind of element and constraint.
+inline Model mixedModel()
+{
+  Model m;
+  m.name = "mixed";
+  m.bodies.push_back(makeStrut("A", 1.2, 0.03, 7800.0));
+  m.bodies.push_back(makeStrut("B", 1.0, 0.025, 7800.0));
+  m.bodies.push_back(makePointMass("M", 0.7));
+  finalizeModel(m);
+  const Vec3 up(0.0, 0.0, 0.6), dn(0.0, 0.0, -0.6), up_b(0.0, 0.0, 0.5), dn_b(0.0, 0.0, -0.5);
+  m.cables.push_back(makeCable("ab", PointRef{ 0, up }, PointRef{ 1, dn_b }, 3000.0, 0.3, 15.0));
+  m.cables.push_back(makeCable("ag", PointRef{ 0, dn }, PointRef{ -1, Vec3(1.0, 0.5, -0.2) }, 2000.0, 0.5, 0.0));
+  m.cables.push_back(makeCable("bm", PointRef{ 1, up_b }, PointRef{ 2, Vec3::Zero() }, 1500.0, 0.2, 8.0));
+  m.cables.push_back(
+      makeCable("am", PointRef{ 0, Vec3(0.01, 0.02, 0.3) }, PointRef{ 2, Vec3::Zero() }, 900.0, 0.1, 3.0));
+  m.actuators.push_back(Actuator{ "lift", -1.0, 1.0, {} });
+  m.constraints.push_back(pointConstraint("joint", PointRef{ 0, up }, PointRef{ 1, up_b }));
+  m.constraints.push_back(pointConstraint("pin", PointRef{ 1, dn_b }, PointRef{ -1, Vec3(0.1, 0.2, 0.0) }));
+  m.constraints.push_back(
+      pointConstraint("act_m", PointRef{ 2, Vec3::Zero() }, PointRef{ -1, Vec3::Zero() }, 0, Vec3(0.0, 0.6, 0.8), 0.3));
+  m.constraints.push_back(
+      pointConstraint("act_a", PointRef{ 0, dn }, PointRef{ -1, Vec3::Zero() }, 0, Vec3(1.0, 0.0, 0.0), -0.1));
+  m.actuators[0].constraints = { 2, 3 };
+  for (int i = 0; i < 2; ++i)
+  {
+    Constraint c;
+    c.kind = Constraint::Kind::kQuatNorm;
+    c.body = i;
+    c.name = m.bodies[i].name + ".norm";
+    m.constraints.push_back(c);
+  }
+  m.gravity_enabled = true;
+  finalizeModel(m);
+  m.q0.setZero(m.nq);
+  m.q0.segment<3>(0) = Vec3(0.1, 0.0, 0.7);
+  m.q0.segment<4>(3) = thetaFromZAxis(Vec3(0.3, 0.2, 1.0));
+  m.q0.segment<3>(7) = Vec3(-0.2, 0.3, 0.5);
+  m.q0.segment<4>(10) = thetaFromZAxis(Vec3(-0.4, 0.1, 1.0));
+  m.q0.segment<3>(14) = Vec3(0.9, 0.8, 1.6);
+  return m;
+}
+
+/// A random vector near x (Theta off the unit sphere too: the formulas hold for any Theta).
+inline Eigen::VectorXd perturbed(const Eigen::VectorXd& x, double amplitude, std::mt19937& rng)
+{
+  std::uniform_real_distribution<double> u(-amplitude, amplitude);
+  Eigen::VectorXd y = x;
+  for (int i = 0; i < y.size(); ++i)
+    y(i) += u(rng);
+  return y;
+}
+
+inline Eigen::VectorXd randomVector(int n, double amplitude, std::mt19937& rng)
+{
+  return perturbed(Eigen::VectorXd::Zero(n), amplitude, rng);
+}
+
+/// The dense top-left n x n block of a block-sparse matrix.
+inline Eigen::MatrixXd denseBlock(const BlockSparseMatrix& m, int rows, int cols, int r0 = 0, int c0 = 0)
+{
+  return Eigen::MatrixXd(m.matrix()).block(r0, c0, rows, cols);
+}
+
+}  // namespace active_tensegrity::test

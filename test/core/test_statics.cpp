@@ -1,0 +1,176 @@
+// Statics: the quadruplex of PHYSICS.md Sec. 7 (paper Sec. 6.1) without contact.
+#include <cmath>
+
+#include <gtest/gtest.h>
+
+#include "active_tensegrity/core/analysis.h"
+#include "active_tensegrity/core/scene.h"
+#include "active_tensegrity/core/statics.h"
+#include "test_models.h"
+
+using namespace active_tensegrity::test;
+
+namespace
+{
+Model quadruplex(const std::vector<Override>& overrides = {})
+{
+  return loadScene(std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) + "/config/scenes/quadruplex.yaml", overrides);
+}
+
+struct PathPoint
+{
+  double v, force, height;
+  Eigen::VectorXd q;
+};
+
+std::vector<PathPoint> runPath(const Model& model)
+{
+  std::vector<PathPoint> path;
+  const RunResult r =
+      runAnalysis(model,
+                  [&](const State& s) {
+                    path.push_back({ s.u[0].value, actuationForce(model, s, 0), structureHeight(model, s.q), s.q });
+                  });
+  EXPECT_TRUE(r.summary.ok()) << r.summary.message;
+  return path;
+}
+}  // namespace
+
+TEST(Quadruplex, PrestressedGeometryIsInEquilibrium)
+{
+  const Model model = quadruplex();
+  const System sys(model);
+  const Eigen::VectorXd lambda = leastSquaresMultipliers(sys, model.q0);
+  Eigen::VectorXd F, cf;
+  sys.appliedForce(model.q0, Eigen::VectorXd::Zero(model.nq), F, nullptr, 0, 0);
+  sys.constraintForce(model.q0, lambda, cf);
+  EXPECT_LT((cf - F).lpNorm<Eigen::Infinity>() / 200.0, 1e-8);  // relative to the smallest prestress
+
+  // the actuators carry nothing at v = 0
+  State s = initialState(model);
+  s.lambda = lambda;
+  EXPECT_NEAR(actuationForce(model, s, 0), 0.0, 1e-8);
+
+  // the cables meeting at a top node balance a strut force of 489.89 N along the strut (Table 1)
+  const int p5 = model.findNode("P5");
+  const int strut = model.nodes[p5].point.body;
+  Vec3 pull = Vec3::Zero();
+  for (const Cable& c : model.cables)
+  {
+    const bool at_a = c.a.body == strut && c.a.local == model.nodes[p5].point.local;
+    const bool at_b = c.b.body == strut && c.b.local == model.nodes[p5].point.local;
+    if (!at_a && !at_b)
+      continue;
+    const CableState cs =
+        evaluateCable(model, c, model.q0, Eigen::VectorXd::Zero(model.nq), false, nullptr, nullptr, 0, 0);
+    const Vec3 pa = pointKinematics(model, c.a, model.q0, Eigen::VectorXd::Zero(model.nq)).p;
+    const Vec3 pb = pointKinematics(model, c.b, model.q0, Eigen::VectorXd::Zero(model.nq)).p;
+    pull += cs.tension * (at_a ? (pb - pa) : (pa - pb)).normalized();
+  }
+  const Vec3 axis = rotationMatrix(model.q0.segment<4>(model.bodies[strut].offset + 3)).col(2);
+  EXPECT_NEAR(pull.norm(), 489.89, 0.01);
+  EXPECT_NEAR(std::abs(pull.normalized().dot(axis)), 1.0, 1e-9);
+
+  // Newton starts converged
+  StaticSolver solver(model, model.solver);
+  State s0 = initialState(model);
+  const Summary r = solver.solve(s0, s0.u);
+  EXPECT_TRUE(r.ok()) << r.message;
+  EXPECT_LT((s0.q - model.q0).lpNorm<Eigen::Infinity>(), 1e-9);
+}
+
+TEST(Quadruplex, PathWithoutContactRisesSoftensStiffensAndReachesTheUltimateConfiguration)
+{
+  const Model model = quadruplex();
+  const std::vector<PathPoint> path = runPath(model);
+  ASSERT_EQ(path.size(), 173u);  // v = 0, 0.01, ..., 1.72
+  EXPECT_NEAR(path.back().v, 1.72, 1e-12);
+
+  // rises from zero
+  EXPECT_NEAR(path.front().force, 0.0, 1e-6);
+  EXPECT_GT(path[5].force, path[1].force);
+  EXPECT_GT(path[1].force, 0.0);
+  // softens: a peak, then the force falls (snap-through region, where displacement control holds it)
+  size_t peak = 0;
+  for (size_t i = 0; i < 60; ++i)
+    if (path[i].force > path[peak].force)
+      peak = i;
+  EXPECT_GT(peak, 5u);
+  EXPECT_LT(peak, 40u);
+  EXPECT_LT(path[50].force, 0.5 * path[peak].force);
+  // stiffens again and diverges at the ultimate configuration: struts vertical at v = 0.5 + sqrt(1.5)
+  EXPECT_GT(path.back().force, 100.0 * path[peak].force);
+  const double slope_late = path[172].force - path[171].force;
+  const double slope_earlier = path[160].force - path[159].force;
+  EXPECT_GT(slope_late, 10.0 * slope_earlier);
+  for (const Body& b : model.bodies)
+    EXPECT_GT(std::abs(rotationMatrix(path.back().q.segment<4>(b.offset + 3))(2, 2)), 0.99) << b.name;
+  EXPECT_NEAR(path.back().height, 0.5 - 1.72, 1e-9);
+}
+
+TEST(Quadruplex, PathIsAntisymmetricAboutTheFlatConfiguration)
+{
+  // the configuration at top height -h mirrors the one at +h through the ground plane, so the
+  // vertical actuation force flips sign: F(0.5 + x) = -F(0.5 - x)
+  const std::vector<PathPoint> path = runPath(quadruplex());
+  for (int i = 0; i <= 50; i += 5)
+    EXPECT_NEAR(path[50 + i].force, -path[50 - i].force, 1e-6 * (1.0 + std::abs(path[50 - i].force)))
+        << "x = " << 0.01 * i;
+}
+
+TEST(Quadruplex, StrutsMeetBeforeTheStructureIsFlat)
+{
+  // paper: without contact the struts pass through each other before v = 0.5 m
+  const Model model = quadruplex();
+  const std::vector<PathPoint> path = runPath(model);
+  EXPECT_GT(minimumGap(model, path.front().q), 0.0);
+  bool overlap = false;
+  for (const PathPoint& p : path)
+    if (p.v < 0.5 && minimumGap(model, p.q) < 0.0)
+      overlap = true;
+  EXPECT_TRUE(overlap);
+  // a thicker strut meets earlier
+  auto first_contact = [](const Model& m)
+  {
+    for (const PathPoint& p : runPath(m))
+      if (minimumGap(m, p.q) < 0.0)
+        return p.v;
+    return 99.0;
+  };
+  EXPECT_LT(first_contact(quadruplex({ { "struts.radius", "0.08" } })),
+            first_contact(quadruplex({ { "struts.radius", "0.04" } })));
+}
+
+TEST(Statics, LargeIncrementIsCutAndReachesTheSameEquilibrium)
+{
+  const Model model = quadruplex();
+  SolverOptions few = model.solver;
+  few.max_iterations = 6;  // one increment of 0.9 m needs more: it has to be cut
+  StaticSolver solver(model, few);
+  State coarse = initialState(model);
+  ASSERT_TRUE(solver.solve(coarse, coarse.u).ok());
+  const Summary r = solver.followPath(coarse, { ActuationValue{ 0.9, 0, 0 } }, 1, {});
+  ASSERT_TRUE(r.ok()) << r.message;
+  EXPECT_GT(r.step_cuts, 0);
+
+  State fine = initialState(model);
+  ASSERT_TRUE(solver.solve(fine, fine.u).ok());
+  ASSERT_TRUE(solver.followPath(fine, { ActuationValue{ 0.9, 0, 0 } }, 90, {}).ok());
+  EXPECT_LT((coarse.q - fine.q).lpNorm<Eigen::Infinity>(), 1e-8);
+  EXPECT_NEAR(actuationForce(model, coarse, 0), actuationForce(model, fine, 0), 1e-6);
+  EXPECT_LT(solver.forceResidual(fine), 1e-6);
+}
+
+TEST(Statics, MechanismIsReportedNotHidden)
+{
+  // every cable slack: nothing holds the top nodes sideways
+  Model model = quadruplex();
+  for (Cable& c : model.cables)
+    c.rest_length *= 2.0;
+  StaticSolver solver(model, model.solver);
+  State s = initialState(model);
+  const Summary r = solver.solve(s, s.u);
+  EXPECT_EQ(r.status, SolveStatus::kSingular);
+  EXPECT_NE(r.message.find("mechanism"), std::string::npos) << r.message;
+  EXPECT_TRUE(s.q.allFinite());
+}
