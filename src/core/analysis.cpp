@@ -51,10 +51,20 @@ double minimumGap(const Model& model, const Eigen::VectorXd& q)
   return gap;
 }
 
+int slackCables(const Model& model, const State& state)
+{
+  int n = 0;
+  for (const Cable& c : model.cables)
+    n += evaluateCable(model, c, state.q, state.qd, model.damping_enabled, nullptr, nullptr, 0.0, 0.0).slack ? 1 : 0;
+  return n;
+}
+
 std::vector<std::string> csvColumns(const Model& model)
 {
-  std::vector<std::string> cols = { "t",       "actuation",        "actuation_force",   "height", "active_contacts",
-                                    "min_gap", "max_normal_force", "max_friction_force" };
+  std::vector<std::string> cols = {
+    "t",       "actuation",        "actuation_force",    "height",      "active_contacts",
+    "min_gap", "max_normal_force", "max_friction_force", "slack_cables"
+  };
   if (model.actuators.size() > 1)
     for (const Actuator& a : model.actuators)
     {
@@ -74,7 +84,8 @@ std::vector<double> csvRow(const Model& model, const State& state)
                               0.0,
                               minimumGap(model, state.q),
                               0.0,
-                              0.0 };
+                              0.0,
+                              static_cast<double>(slackCables(model, state)) };
   if (model.actuators.size() > 1)
     for (size_t i = 0; i < model.actuators.size(); ++i)
     {

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <set>
 #include <sstream>
@@ -483,9 +484,11 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
       model.constraints.push_back(c);
     }
   }
-  if (ground_count == 0)
-    root.fail("nodes", "no node is fixed: the structure would float freely (fix at least one node)");
-  model.ground_level = ground_sum / ground_count;
+  // a free-floating scene is fine for dynamics; the ground level is then its lowest node
+  double lowest = std::numeric_limits<double>::infinity();
+  for (const std::string& name : node_order)
+    lowest = std::min(lowest, nodes[name].position.z());
+  model.ground_level = ground_count > 0 ? ground_sum / ground_count : lowest;
   for (size_t i = 0; i < model.bodies.size(); ++i)
     if (model.bodies[i].kind == BodyKind::kStrut)
     {
@@ -553,7 +556,9 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
         c.area = area;
         if (springs)
         {
-          c.rest_length = has_rest ? rest : l / (1.0 + prestress / (k_spring * l));
+          c.rest_length = has_rest ? rest : l - prestress / k_spring;  // T = k (l - l0)
+          if (!(c.rest_length > 0.0))
+            f.fail(f.key("prestress"), "member '" + name + "': the prestress would need a rest length <= 0");
           c.stiffness = k_spring;
         }
         else
@@ -770,6 +775,8 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
       if (an.type == AnalysisType::kDynamic)
         a.fail(a.key("actuation"), "a dynamic analysis needs actuation.speed (m/s)");
     }
+    if (an.type == AnalysisType::kStatic && ground_count == 0)
+      a.fail(a.key("type"), "a static analysis needs at least one fixed node (this structure floats freely)");
     for (const Actuator& act : model.actuators)
       if (an.max_actuation > act.max_value + 1e-12)
         a.fail(a.key("max_actuation"), "exceeds the range of actuator '" + act.name + "' (max " +
@@ -800,6 +807,7 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
         model.height_nodes.push_back(static_cast<int>(i));
 
   root.finish();
+  finalizeModel(model);  // sizes again, now that every constraint is in
   return model;
 }
 
@@ -813,8 +821,9 @@ void setPath(YAML::Node node, const std::vector<std::string>& parts, size_t i, c
     node[parts[i]] = value;
     return;
   }
-  if (!node[parts[i]].IsDefined())
-    throw SceneError(file, key, "override: the scene has no key '" + parts[i] + "' here");
+  // a missing intermediate map is created: the schema check refuses it later if it is not a valid key
+  if (!node[parts[i]].IsDefined() || node[parts[i]].IsNull())
+    node[parts[i]] = YAML::Node(YAML::NodeType::Map);
   setPath(node[parts[i]], parts, i + 1, value, file, key);
 }
 

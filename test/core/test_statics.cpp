@@ -39,7 +39,10 @@ std::vector<PathPoint> runPath(const Model& model)
 TEST(Quadruplex, PrestressedGeometryIsInEquilibrium)
 {
   const Model model = quadruplex();
+  EXPECT_EQ(model.n_lambda, 4 * 3 + 4 + 4);  // ground pins, quaternion norms, actuated top nodes
+  EXPECT_EQ(initialState(model).lambda.size(), model.n_lambda);
   const System sys(model);
+  EXPECT_EQ(sys.nLambda(), model.n_lambda);
   const Eigen::VectorXd lambda = leastSquaresMultipliers(sys, model.q0);
   Eigen::VectorXd F, cf;
   sys.appliedForce(model.q0, Eigen::VectorXd::Zero(model.nq), F, nullptr, 0, 0);

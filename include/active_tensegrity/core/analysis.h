@@ -22,9 +22,12 @@ double structureHeight(const Model& model, const Eigen::VectorXd& q);
 /// the scene checks no pair.
 double minimumGap(const Model& model, const Eigen::VectorXd& q);
 
+/// Number of slack cables (tension-only elements carrying no tension) in a state.
+int slackCables(const Model& model, const State& state);
+
 /// Column names of the CSV: t, actuation, actuation_force, height, active_contacts, min_gap,
-/// max_normal_force, max_friction_force, then actuation_<name> and actuation_force_<name> per
-/// actuator when there are several.
+/// max_normal_force, max_friction_force, slack_cables, then actuation_<name> and
+/// actuation_force_<name> per actuator when there are several.
 std::vector<std::string> csvColumns(const Model& model);
 std::vector<double> csvRow(const Model& model, const State& state);
 
