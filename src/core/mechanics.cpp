@@ -178,6 +178,21 @@ void System::appliedForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, E
       F.segment<3>(b.offset) += b.mass * model_.gravity;
   for (const Cable& c : model_.cables)
     evaluateCable(model_, c, q, qd, model_.damping_enabled, &F, jac, k_weight, c_weight);
+  for (const PointLoad& load : model_.loads)
+  {
+    if (load.point.body < 0)
+      continue;
+    const PointKinematics k = pointKinematics(model_, load.point, q, qd);
+    const Body& b = model_.bodies[k.body];
+    F.segment(b.offset, b.nq) += k.jac.leftCols(b.nq).transpose() * load.force;
+    if (jac && b.kind == BodyKind::kStrut)
+    {
+      // K = -d(B^T f)/dq: only the orientation block, -G(u, f)
+      Eigen::Matrix<double, 7, 7> kb = Eigen::Matrix<double, 7, 7>::Zero();
+      kb.bottomRightCorner<4, 4>() = -pointHessianTheta(load.point.local, load.force);
+      jac->add(k.body, k.body, kb, k_weight);
+    }
+  }
 }
 
 void System::addMass(const Eigen::VectorXd& q, BlockSparseMatrix& jac, double weight) const
@@ -441,6 +456,8 @@ double System::potentialEnergy(const Eigen::VectorXd& q) const
   if (model_.gravity_enabled)
     for (const Body& b : model_.bodies)
       e -= b.mass * model_.gravity.dot(q.segment<3>(b.offset));
+  for (const PointLoad& load : model_.loads)
+    e -= load.force.dot(pointKinematics(model_, load.point, q, zero).p);
   for (const Cable& c : model_.cables)
   {
     const double l = (pointKinematics(model_, c.b, q, zero).p - pointKinematics(model_, c.a, q, zero).p).norm();

@@ -575,6 +575,29 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
   readTensionFamilies("cables", false);
   readTensionFamilies("springs", true);
 
+  // constant point loads
+  if (root.has("loads"))
+  {
+    Reader loads = root.map("loads");
+    for (const std::string& name : loads.keys())
+    {
+      Reader l = loads.map(name);
+      checkName(loads, loads.key(name), name, member_names, "member");
+      PointLoad load;
+      load.name = name;
+      const std::string node = l.string("node");
+      const NodeInfo& info = nodeRef(l, l.key("node"), node);
+      if (info.fixed)
+        l.fail(l.key("node"), "node '" + node + "' is fixed: a load there does nothing");
+      load.point = model.nodes[model.findNode(node)].point;
+      load.force = l.vec3("force");
+      l.finish();
+      model.loads.push_back(load);
+    }
+  }
+  else
+    root.optional("loads");
+
   // actuators
   if (root.has("actuators"))
   {

@@ -73,6 +73,7 @@ TEST(Cable, SlackCableHasNoForceNoTangent)
   Fixture f;
   for (Cable& c : f.model.cables)
     c.rest_length = 10.0;  // longer than any cable here
+  f.model.loads.clear();
   const System sys(f.model);
   f.model.gravity_enabled = false;
   Eigen::VectorXd F;
@@ -105,6 +106,7 @@ TEST(Cable, ForceIsEqualAndOppositeAlongTheCable)
 {
   Model m = mixedModel();
   m.gravity_enabled = false;
+  m.loads.clear();
   m.cables = { makeCable("c", PointRef{ 2, Vec3::Zero() }, PointRef{ -1, Vec3(0.0, 0.0, 0.0) }, 1000.0, 1.0, 0.0) };
   m.q0.segment<3>(14) = Vec3(0.0, 0.0, 1.5);
   const System sys(m);
@@ -274,4 +276,35 @@ TEST(BlockSparse, AddsBlocksInPlaceAndRefusesBlocksOutsideThePattern)
   m.setZero();
   EXPECT_EQ(Eigen::MatrixXd(m.matrix()).norm(), 0.0);
   EXPECT_EQ(m.matrix().nonZeros(), 2 * 2 + 3 * 3 + 1 + 2 * 6);
+}
+
+TEST(Energy, PotentialEnergyGradientIsMinusTheConservativeForces)
+{
+  // cables, springs, gravity and constant loads are conservative: F = -dV/dq when damping is off
+  Fixture f;
+  f.model.damping_enabled = false;
+  const System sys(f.model);
+  Eigen::VectorXd F;
+  sys.appliedForce(f.q, f.qd, F, nullptr, 0, 0);
+  const Eigen::MatrixXd grad = fdJacobian([&](const Eigen::VectorXd& x) -> Eigen::VectorXd
+                                          { return Eigen::VectorXd::Constant(1, sys.potentialEnergy(x)); },
+                                          f.q);
+  const auto c = compareJacobians(-F.transpose(), grad, kTol, 1.0);
+  EXPECT_TRUE(c.ok) << c.message;
+}
+
+TEST(Loads, ConstantLoadAddsItsForceAndAGeometricStiffness)
+{
+  Fixture f;
+  Model m = f.model;
+  m.cables.clear();
+  m.gravity_enabled = false;
+  const System sys(m);
+  Eigen::VectorXd F;
+  BlockSparseMatrix k = sys.makeMatrix();
+  sys.appliedForce(f.q, f.qd, F, &k, 1, 0);
+  // translational parts carry the loads themselves
+  EXPECT_TRUE(F.segment<3>(0).isApprox(m.loads[0].force));
+  EXPECT_TRUE(F.segment<3>(14).isApprox(m.loads[1].force));
+  EXPECT_GT(denseBlock(k, sys.nq(), sys.nq()).norm(), 1.0);  // the load on the strut turns with it
 }

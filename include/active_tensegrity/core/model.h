@@ -76,6 +76,15 @@ struct Cable
   double area = 0.0;  // m^2, for stresses (0 when not a material cable)
 };
 
+/// A constant force at a material point, fixed in the world frame (N). Its generalized force is
+/// B_P^T f, which depends on the orientation of a strut, hence a (geometric) tangent stiffness.
+struct PointLoad
+{
+  std::string name;
+  PointRef point;
+  Vec3 force = Vec3::Zero();  // N, world frame
+};
+
 /// A constraint block. kPoints: rows d_k . (p_a - p_b) - offset_k - (actuator >= 0 ? s(t) : 0) = 0,
 /// p_b the ground when b.body < 0 (covers ball joints, ground pins, and rheonomic actuation);
 /// kQuatNorm: Theta.Theta - 1 = 0; kSpinLock: a . Theta = 0 (statics only, spin about a strut axis).
@@ -161,6 +170,7 @@ struct Model
   std::vector<Body> bodies;
   std::vector<Node> nodes;
   std::vector<Cable> cables;
+  std::vector<PointLoad> loads;
   std::vector<Constraint> constraints;
   std::vector<Actuator> actuators;
   std::vector<StrutPair> checked_pairs;
