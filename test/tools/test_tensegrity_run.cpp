@@ -1,0 +1,121 @@
+// The batch command as a user runs it: exit codes, CSV shape, messages on bad input.
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+namespace
+{
+struct Result
+{
+  int code = -1;
+  std::string output;  // stdout and stderr together
+};
+
+Result run(const std::string& args)
+{
+  const std::string cmd = std::string(TENSEGRITY_RUN_PATH) + " " + args + " 2>&1";
+  Result r;
+  FILE* pipe = popen(cmd.c_str(), "r");
+  if (!pipe)
+    return r;
+  char buffer[4096];
+  while (fgets(buffer, sizeof buffer, pipe))
+    r.output += buffer;
+  const int status = pclose(pipe);
+  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return r;
+}
+
+std::string scene(const std::string& name)
+{
+  return std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) + "/config/scenes/" + name;
+}
+
+std::vector<std::string> lines(const std::string& path)
+{
+  std::ifstream in(path);
+  std::vector<std::string> out;
+  for (std::string l; std::getline(in, l);)
+    out.push_back(l);
+  return out;
+}
+
+std::string tmp(const std::string& name)
+{
+  return ::testing::TempDir() + "tensegrity_run_" + name;
+}
+}  // namespace
+
+TEST(TensegrityRun, QuadruplexWritesCsvAndSummary)
+{
+  const std::string csv = tmp("q.csv"), summary = tmp("q.yaml");
+  const Result r = run(scene("quadruplex.yaml") + " --set analysis.steps=20 --set analysis.max_actuation=0.4 --out " +
+                       csv + " --summary " + summary);
+  ASSERT_EQ(r.code, 0) << r.output;
+  const std::vector<std::string> rows = lines(csv);
+  ASSERT_EQ(rows.size(), 1u + 21u);  // header, v = 0 and 20 load steps
+  EXPECT_EQ(rows[0].rfind("t,actuation,actuation_force,height,active_contacts,min_gap,max_normal_force,"
+                          "max_friction_force",
+                          0),
+            0u)
+      << rows[0];
+  EXPECT_EQ(rows.back().rfind("1,0.4,", 0), 0u) << rows.back();
+  const std::vector<std::string> s = lines(summary);
+  std::ostringstream all;
+  for (const auto& l : s)
+    all << l << "\n";
+  EXPECT_NE(all.str().find("status: converged"), std::string::npos) << all.str();
+  EXPECT_NE(all.str().find("output_steps: 21"), std::string::npos) << all.str();
+}
+
+TEST(TensegrityRun, RefusesABadOverrideNamingTheKey)
+{
+  const Result r = run(scene("quadruplex.yaml") + " --set struts.radius=-1 --out " + tmp("bad.csv"));
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.output.find("struts.radius"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("-1"), std::string::npos) << r.output;
+}
+
+TEST(TensegrityRun, RefusesAMisspeltKey)
+{
+  const Result r = run(scene("quadruplex.yaml") + " --set analysis.stepz=3");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.output.find("analysis.stepz"), std::string::npos) << r.output;
+}
+
+TEST(TensegrityRun, BadArgumentsGiveUsage)
+{
+  EXPECT_EQ(run("").code, 2);
+  EXPECT_EQ(run(scene("quadruplex.yaml") + " --frobnicate").code, 2);
+  EXPECT_EQ(run(scene("quadruplex.yaml") + " --set").code, 2);
+  const Result missing = run("/nonexistent/scene.yaml");
+  EXPECT_EQ(missing.code, 1);
+  EXPECT_NE(missing.output.find("/nonexistent/scene.yaml"), std::string::npos) << missing.output;
+}
+
+TEST(TensegrityRun, SolverFailureStopsWithStatusAndNoNaN)
+{
+  // one Newton iteration cannot meet a 1e-14 tolerance: the run stops with status 3
+  const std::string csv = tmp("fail.csv");
+  const Result r = run(scene("quadruplex.yaml") +
+                       " --set solver.max_iterations=1 --set solver.max_step_cuts=1 --set solver.newton_tolerance=1e-14"
+                       " --out " +
+                       csv);
+  EXPECT_EQ(r.code, 3) << r.output;
+  EXPECT_NE(r.output.find("max_iterations"), std::string::npos) << r.output;
+  for (const std::string& row : lines(csv))
+    EXPECT_EQ(row.find("nan"), std::string::npos) << row;
+}
+
+TEST(TensegrityRun, DynamicPrismRuns)
+{
+  const std::string csv = tmp("prism.csv");
+  const Result r = run(scene("prism.yaml") + " --set analysis.duration=0.05 --out " + csv);
+  ASSERT_EQ(r.code, 0) << r.output;
+  const std::vector<std::string> rows = lines(csv);
+  EXPECT_EQ(rows.size(), 1u + 1u + 10u);  // header, t = 0, every 5 ms
+}
