@@ -284,6 +284,25 @@ Eigen::MatrixXd pointRows(const Constraint& c, const PointKinematics& k)
     rows.row(r) = c.directions[r].transpose() * k.jac.leftCols(k.nq);
   return rows;
 }
+
+// sum_k lambda_k d_k: the world force a kPoints constraint applies to end a (and minus it to end b)
+Vec3 combinedDirection(const Constraint& c, const Eigen::VectorXd& lambda, int first_row)
+{
+  Vec3 w = Vec3::Zero();
+  for (int k = 0; k < c.rows(); ++k)
+    w += lambda(first_row + k) * c.directions[k];
+  return w;
+}
+
+// calls f(end, sign) for each end of a kPoints constraint that lies on a body: +1 for a, -1 for b
+template <class F>
+void forEachBodyEnd(const Constraint& c, F&& f)
+{
+  if (c.a.body >= 0)
+    f(c.a, 1.0);
+  if (c.b.body >= 0)
+    f(c.b, -1.0);
+}
 }  // namespace
 
 void System::addConstraintJacobian(const Eigen::VectorXd& q, BlockSparseMatrix& jac) const
@@ -295,16 +314,13 @@ void System::addConstraintJacobian(const Eigen::VectorXd& q, BlockSparseMatrix& 
     const int g = constraintGroup(static_cast<int>(i));
     if (c.kind == Constraint::Kind::kPoints)
     {
-      const double sign[2] = { 1.0, -1.0 };
-      const PointRef* ends[2] = { &c.a, &c.b };
-      for (int e = 0; e < 2; ++e)
-      {
-        if (ends[e]->body < 0)
-          continue;
-        const Eigen::MatrixXd rows = sign[e] * pointRows(c, pointKinematics(model_, *ends[e], q, zero));
-        jac.add(g, ends[e]->body, rows);
-        jac.addTransposed(g, ends[e]->body, rows);
-      }
+      forEachBodyEnd(c,
+                     [&](const PointRef& end, double sign)
+                     {
+                       const Eigen::MatrixXd rows = sign * pointRows(c, pointKinematics(model_, end, q, zero));
+                       jac.add(g, end.body, rows);
+                       jac.addTransposed(g, end.body, rows);
+                     });
       continue;
     }
     Eigen::Matrix<double, 1, 7> row = Eigen::Matrix<double, 1, 7>::Zero();
@@ -332,18 +348,13 @@ void System::constraintForce(const Eigen::VectorXd& q, const Eigen::VectorXd& la
     const int r = constraint_rows_[i];
     if (c.kind == Constraint::Kind::kPoints)
     {
-      Vec3 w = Vec3::Zero();
-      for (int k = 0; k < c.rows(); ++k)
-        w += lambda(r + k) * c.directions[k];
-      const double sign[2] = { 1.0, -1.0 };
-      const PointRef* ends[2] = { &c.a, &c.b };
-      for (int e = 0; e < 2; ++e)
-      {
-        if (ends[e]->body < 0)
-          continue;
-        const PointKinematics k = pointKinematics(model_, *ends[e], q, zero);
-        out.segment(model_.bodies[k.body].offset, k.nq) += sign[e] * k.jac.leftCols(k.nq).transpose() * w;
-      }
+      const Vec3 w = combinedDirection(c, lambda, r);
+      forEachBodyEnd(c,
+                     [&](const PointRef& end, double sign)
+                     {
+                       const PointKinematics k = pointKinematics(model_, end, q, zero);
+                       out.segment(model_.bodies[k.body].offset, k.nq) += sign * k.jac.leftCols(k.nq).transpose() * w;
+                     });
       continue;
     }
     const Body& b = model_.bodies[c.body];
@@ -355,6 +366,7 @@ void System::constraintForce(const Eigen::VectorXd& q, const Eigen::VectorXd& la
 void System::addLambdaHessian(const Eigen::VectorXd& /*q*/, const Eigen::VectorXd& lambda, BlockSparseMatrix& jac,
                               double weight) const
 {
+  // every constraint is at most quadratic in Theta, so this does not depend on q
   Eigen::Matrix<double, 7, 7> h;
   for (size_t i = 0; i < constraints_.size(); ++i)
   {
@@ -369,20 +381,16 @@ void System::addLambdaHessian(const Eigen::VectorXd& /*q*/, const Eigen::VectorX
       jac.add(c.body, c.body, h, weight);
       continue;
     }
-    Vec3 w = Vec3::Zero();
-    for (int k = 0; k < c.rows(); ++k)
-      w += lambda(r + k) * c.directions[k];
-    const double sign[2] = { 1.0, -1.0 };
-    const PointRef* ends[2] = { &c.a, &c.b };
-    for (int e = 0; e < 2; ++e)
-    {
-      const int body = ends[e]->body;
-      if (body < 0 || model_.bodies[body].kind != BodyKind::kStrut)
-        continue;
-      h.setZero();
-      h.bottomRightCorner<4, 4>() = sign[e] * pointHessianTheta(ends[e]->local, w);
-      jac.add(body, body, h, weight);
-    }
+    const Vec3 w = combinedDirection(c, lambda, r);
+    forEachBodyEnd(c,
+                   [&](const PointRef& end, double sign)
+                   {
+                     if (model_.bodies[end.body].kind != BodyKind::kStrut)
+                       return;
+                     h.setZero();
+                     h.bottomRightCorner<4, 4>() = sign * pointHessianTheta(end.local, w);
+                     jac.add(end.body, end.body, h, weight);
+                   });
   }
 }
 
@@ -411,15 +419,12 @@ void System::accelerationRhs(const Eigen::VectorXd& q, const Eigen::VectorXd& qd
       {
         // d^2 p / dt^2 = B qdd + B_Theta(thd) thd
         Vec3 quad = Vec3::Zero();
-        const double sign[2] = { 1.0, -1.0 };
-        const PointRef* ends[2] = { &c.a, &c.b };
-        for (int e = 0; e < 2; ++e)
-        {
-          if (ends[e]->body < 0)
-            continue;
-          const PointKinematics k = pointKinematics(model_, *ends[e], q, qd);
-          quad += sign[e] * k.dv_dq.leftCols(k.nq) * qd.segment(model_.bodies[k.body].offset, k.nq);
-        }
+        forEachBodyEnd(c,
+                       [&](const PointRef& end, double sign)
+                       {
+                         const PointKinematics k = pointKinematics(model_, end, q, qd);
+                         quad += sign * k.dv_dq.leftCols(k.nq) * qd.segment(model_.bodies[k.body].offset, k.nq);
+                       });
         const double sdd = c.actuator >= 0 ? u[c.actuator].accel : 0.0;
         for (int k = 0; k < c.rows(); ++k)
           rhs(r + k) = -c.directions[k].dot(quad) + sdd;
