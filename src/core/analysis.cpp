@@ -5,7 +5,8 @@
 #include <limits>
 
 #include "active_tensegrity/core/dynamics.h"
-#include "active_tensegrity/core/geometry.h"
+#include "active_tensegrity/core/broad_phase.h"
+#include "active_tensegrity/core/contact.h"
 #include "active_tensegrity/core/statics.h"
 
 namespace active_tensegrity::core
@@ -37,18 +38,28 @@ double structureHeight(const Model& model, const Eigen::VectorXd& q)
 double minimumGap(const Model& model, const Eigen::VectorXd& q)
 {
   double gap = std::numeric_limits<double>::infinity();
-  for (const StrutPair& p : model.checked_pairs)
-  {
-    const Body& a = model.bodies[p.body_a];
-    const Body& b = model.bodies[p.body_b];
-    const Mat3 ra = rotationMatrix(q.segment<4>(a.offset + 3));
-    const Mat3 rb = rotationMatrix(q.segment<4>(b.offset + 3));
-    const Vec3 ha = 0.5 * a.length * ra.col(2), hb = 0.5 * b.length * rb.col(2);
-    const Vec3 ca = q.segment<3>(a.offset), cb = q.segment<3>(b.offset);
-    const SegmentClosest s = closestPointsSegments(ca - ha, ca + ha, cb - hb, cb + hb);
-    gap = std::min(gap, s.distance - a.radius() - b.radius());
-  }
+  for (size_t i = 0; i < model.checked_pairs.size(); ++i)
+    gap = std::min(gap, contactGeometry(model, static_cast<int>(i), q).gap);
   return gap;
+}
+
+std::vector<ContactPairState> activeContacts(const Model& model, const State& state)
+{
+  std::vector<ContactPairState> out;
+  if (!model.contact.enabled)
+    return out;
+  const ContactMode mode = model.analysis.type == AnalysisType::kStatic ? ContactMode::kStatic : ContactMode::kDynamic;
+  const BroadPhase broad(model);
+  std::vector<int> candidates;
+  broad.candidates(state.q, 0.0, candidates);
+  for (int i : candidates)
+  {
+    const double v0 = i < static_cast<int>(state.contact_speed.size()) ? state.contact_speed[i] : 0.0;
+    const ContactPairState st = evaluateContact(model, i, state.q, state.qd, v0, mode, nullptr);
+    if (st.active)
+      out.push_back(st);
+  }
+  return out;
 }
 
 int slackCables(const Model& model, const State& state)
@@ -77,14 +88,21 @@ std::vector<std::string> csvColumns(const Model& model)
 std::vector<double> csvRow(const Model& model, const State& state)
 {
   const bool any = !model.actuators.empty();
+  double max_normal = 0.0, max_friction = 0.0;
+  const std::vector<ContactPairState> contacts = activeContacts(model, state);
+  for (const ContactPairState& c : contacts)
+  {
+    max_normal = std::max(max_normal, c.normal_force);
+    max_friction = std::max(max_friction, c.friction_force);
+  }
   std::vector<double> row = { state.t,
                               any ? state.u[0].value : 0.0,
                               any ? actuationForce(model, state, 0) : 0.0,
                               structureHeight(model, state.q),
-                              0.0,
+                              static_cast<double>(contacts.size()),
                               minimumGap(model, state.q),
-                              0.0,
-                              0.0,
+                              max_normal,
+                              max_friction,
                               static_cast<double>(slackCables(model, state)) };
   if (model.actuators.size() > 1)
     for (size_t i = 0; i < model.actuators.size(); ++i)

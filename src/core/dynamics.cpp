@@ -1,5 +1,6 @@
 #include "active_tensegrity/core/dynamics.h"
 
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 
@@ -34,6 +35,51 @@ void DynamicsSolver::residualAndJacobian(const State& s, double h, const Actuati
                                          const Eigen::VectorXd& qdd_new, const Eigen::VectorXd& lambda_new,
                                          Eigen::VectorXd& r, BlockSparseMatrix* jac)
 {
+  prepareContact(s, h);
+  residual(s, h, u, qdd_new, lambda_new, r, jac);
+}
+
+const std::vector<double>& DynamicsSolver::prepareContact(const State& s, double h)
+{
+  const Model& model = system_.model();
+  step_speeds_.assign(model.checked_pairs.size(), model.contact.min_impact_speed);
+  if (!model.contact.enabled)
+    return step_speeds_;
+  // how far any strut point can move in this step, from the speeds at its start (doubled: a margin)
+  double reach = 0.0;
+  for (const Body& b : model.bodies)
+    if (b.kind == BodyKind::kStrut)
+      reach = std::max(reach, s.qd.segment<3>(b.offset).norm() + b.length * s.qd.segment<4>(b.offset + 3).norm());
+  system_.contactCandidates(s.q, 2.0 * reach * h, candidates_);
+  for (int i : candidates_)
+  {
+    const double memory = i < static_cast<int>(s.contact_speed.size()) ? s.contact_speed[i] : 0.0;
+    if (memory > 0.0)
+      step_speeds_[i] = memory;
+    else
+    {
+      const ContactPairState st = evaluateContact(model, i, s.q, s.qd, 0.0, ContactMode::kDynamic, nullptr);
+      step_speeds_[i] = std::max(st.penetration_rate, model.contact.min_impact_speed);
+    }
+  }
+  return step_speeds_;
+}
+
+void DynamicsSolver::updateContactMemory(State& s)
+{
+  const Model& model = system_.model();
+  s.contact_speed.assign(model.checked_pairs.size(), 0.0);
+  if (!model.contact.enabled)
+    return;
+  system_.contactCandidates(s.q, 0.0, candidates_);
+  for (int i : candidates_)
+    if (contactGeometry(model, i, s.q).active)
+      s.contact_speed[i] = step_speeds_[i];
+}
+
+void DynamicsSolver::residual(const State& s, double h, const ActuationValues& u, const Eigen::VectorXd& qdd_new,
+                              const Eigen::VectorXd& lambda_new, Eigen::VectorXd& r, BlockSparseMatrix* jac)
+{
   const double da = (1.0 - coef_.alpha_f) / (1.0 - coef_.alpha_m);  // d acc_{n+1} / d qdd_{n+1}
   const double bh2 = coef_.beta * h * h * da;                       // d q / d qdd
   const double gh = coef_.gamma * h * da;                           // d qd / d qdd
@@ -42,6 +88,7 @@ void DynamicsSolver::residualAndJacobian(const State& s, double h, const Actuati
     jac->setZero();
   system_.inertialForce(q_, qd_, qdd_new, inertial_, jac, 1.0, bh2, gh);
   system_.appliedForce(q_, qd_, applied_, jac, bh2, gh);
+  system_.contactForce(q_, qd_, step_speeds_, ContactMode::kDynamic, applied_, jac, bh2, gh, nullptr);
   system_.constraintForce(q_, lambda_new, cforce_);
   system_.constraintValue(q_, u, phi_);
   if (jac)
@@ -62,9 +109,10 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law)
   Eigen::VectorXd lambda = s.lambda;
   const double bh2 = coef_.beta * h * h * (1.0 - coef_.alpha_f) / (1.0 - coef_.alpha_m);
   const int nq = system_.nq();
+  prepareContact(s, h);
   for (int it = 0; it < options_.max_iterations; ++it)
   {
-    residualAndJacobian(s, h, u, qdd, lambda, r_, &jac_);
+    residual(s, h, u, qdd, lambda, r_, &jac_);
     ++sum.iterations;
     if (!r_.allFinite())
     {
@@ -98,6 +146,7 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law)
       s.lambda = lambda;
       s.t += h;
       s.u = u;
+      updateContactMemory(s);
       return sum;
     }
   }
@@ -179,6 +228,9 @@ Summary DynamicsSolver::initialize(State& s, const ActuationLaw& law)
   Eigen::VectorXd zero = Eigen::VectorXd::Zero(nq);
   system_.inertialForce(s.q, s.qd, zero, inertial_, nullptr, 0.0, 0.0, 0.0);
   system_.appliedForce(s.q, s.qd, applied_, nullptr, 0.0, 0.0);
+  if (s.contact_speed.size() != system_.model().checked_pairs.size())
+    s.contact_speed.assign(system_.model().checked_pairs.size(), 0.0);
+  system_.contactForce(s.q, s.qd, s.contact_speed, ContactMode::kDynamic, applied_, nullptr, 0.0, 0.0, nullptr);
   rhs.head(nq) = applied_ - inertial_;
   system_.accelerationRhs(s.q, s.qd, s.u, tmp);
   rhs.tail(nl) = tmp;

@@ -121,7 +121,7 @@ CableState evaluateCable(const Model& model, const Cable& cable, const Eigen::Ve
   return s;
 }
 
-System::System(const Model& model, std::vector<Constraint> extra_constraints) : model_(model)
+System::System(const Model& model, std::vector<Constraint> extra_constraints) : model_(model), broad_phase_(model)
 {
   constraints_ = model.constraints;
   for (Constraint& c : extra_constraints)
@@ -192,6 +192,41 @@ void System::appliedForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, E
       kb.bottomRightCorner<4, 4>() = -pointHessianTheta(load.point.local, load.force);
       jac->add(k.body, k.body, kb, k_weight);
     }
+  }
+}
+
+void System::contactForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const std::vector<double>& impact_speeds,
+                          ContactMode mode, Eigen::VectorXd& F, BlockSparseMatrix* jac, double k_weight,
+                          double c_weight, std::vector<ContactPairState>* active) const
+{
+  if (!model_.contact.enabled)
+    return;
+  broad_phase_.candidates(q, 0.0, candidates_);
+  for (int i : candidates_)
+  {
+    const double v0 = impact_speeds.empty() ? 0.0 : impact_speeds[i];
+    const ContactPairState st = evaluateContact(model_, i, q, qd, v0, mode, &contribution_);
+    if (!st.active)
+      continue;
+    if (active)
+      active->push_back(st);
+    if (st.normal_force <= 0.0)
+      continue;
+    const StrutPair& p = model_.checked_pairs[i];
+    const Body& a = model_.bodies[p.body_a];
+    const Body& b = model_.bodies[p.body_b];
+    F.segment<7>(a.offset) += contribution_.force.head<7>();
+    F.segment<7>(b.offset) += contribution_.force.tail<7>();
+    if (!jac)
+      continue;
+    const int g[2] = { p.body_a, p.body_b };
+    for (int x = 0; x < 2; ++x)
+      for (int y = 0; y < 2; ++y)
+      {
+        jac->add(g[x], g[y], contribution_.stiffness.block<7, 7>(7 * x, 7 * y), k_weight);
+        if (c_weight != 0.0 && mode == ContactMode::kDynamic)
+          jac->add(g[x], g[y], contribution_.damping.block<7, 7>(7 * x, 7 * y), c_weight);
+      }
   }
 }
 
@@ -463,6 +498,14 @@ double System::potentialEnergy(const Eigen::VectorXd& q) const
       e -= b.mass * model_.gravity.dot(q.segment<3>(b.offset));
   for (const PointLoad& load : model_.loads)
     e -= load.force.dot(pointKinematics(model_, load.point, q, zero).p);
+  if (model_.contact.enabled)
+    for (size_t i = 0; i < model_.checked_pairs.size(); ++i)
+    {
+      const ContactPairState st =
+          evaluateContact(model_, static_cast<int>(i), q, zero, 0.0, ContactMode::kStatic, nullptr);
+      if (st.active)
+        e += 0.4 * st.stiffness * std::pow(st.penetration, 2.5);
+    }
   for (const Cable& c : model_.cables)
   {
     const double l = (pointKinematics(model_, c.b, q, zero).p - pointKinematics(model_, c.a, q, zero).p).norm();

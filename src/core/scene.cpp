@@ -1,5 +1,7 @@
 #include "active_tensegrity/core/scene.h"
 
+#include "active_tensegrity/core/contact.h"
+
 #include <algorithm>
 #include <cmath>
 #include <fstream>
@@ -669,7 +671,22 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
     if (root.has("contact"))
     {
       Reader c = root.map("contact");
-      model.contact_enabled = c.boolean("enabled", false);
+      ContactSettings& cs = model.contact;
+      cs.enabled = c.boolean("enabled", false);
+      cs.restitution = c.nonNegative("restitution", cs.restitution);
+      if (cs.restitution > 1.0)
+        c.fail(c.key("restitution"), "must be in [0, 1], got " + show(c.raw("restitution")));
+      cs.friction = c.nonNegative("friction", cs.friction);
+      cs.stick_velocity = c.positive("stick_velocity", cs.stick_velocity);
+      cs.slip_velocity = c.positive("slip_velocity", cs.slip_velocity);
+      if (cs.slip_velocity <= cs.stick_velocity)
+        c.fail(c.key("slip_velocity"), "must exceed stick_velocity (" + std::to_string(cs.stick_velocity) +
+                                           " m/s), got " + show(c.raw("slip_velocity")));
+      const double min_angle_deg = c.positive("min_crossing_angle", cs.min_crossing_angle * 180.0 / M_PI);
+      if (min_angle_deg >= 90.0)
+        c.fail(c.key("min_crossing_angle"), "must be below 90 degrees, got " + show(c.raw("min_crossing_angle")));
+      cs.min_crossing_angle = min_angle_deg * M_PI / 180.0;
+      cs.min_impact_speed = c.positive("min_impact_speed", cs.min_impact_speed);
       if (c.has("pairs"))
       {
         const YAML::Node p = c.raw("pairs");
@@ -699,9 +716,6 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
       else
         c.optional("pairs");
       c.finish();
-      if (model.contact_enabled)
-        c.fail(c.key("enabled"),
-               "strut contact forces are not implemented in this version (gaps are measured; set enabled: false)");
     }
     else
       root.optional("contact");
@@ -725,7 +739,7 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
     std::sort(pairs.begin(), pairs.end());
     pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
     for (const auto& [a, b] : pairs)
-      model.checked_pairs.push_back(StrutPair{ a, b });
+      model.checked_pairs.push_back(makeStrutPair(model, a, b));
   }
 
   // solver

@@ -22,6 +22,10 @@ double structureHeight(const Model& model, const Eigen::VectorXd& q);
 /// the scene checks no pair.
 double minimumGap(const Model& model, const Eigen::VectorXd& q);
 
+/// The pairs in contact in a state (empty when contact is off), evaluated as the analysis does
+/// (Hertz in statics; Lankarani-Nikravesh and friction with the state's impact speeds in dynamics).
+std::vector<ContactPairState> activeContacts(const Model& model, const State& state);
+
 /// Number of slack cables (tension-only elements carrying no tension) in a state.
 int slackCables(const Model& model, const State& state);
 

@@ -44,7 +44,16 @@ public:
   void residualAndJacobian(const State& start, double h, const ActuationValues& u, const Eigen::VectorXd& qdd_new,
                            const Eigen::VectorXd& lambda_new, Eigen::VectorXd& r, BlockSparseMatrix* jac);
 
+  /// Impact speeds v_0 the next step from `start` uses per checked pair: the remembered one of a live
+  /// contact, else the approach rate at `start` (floored at min_impact_speed) for pairs close enough
+  /// to touch within h.
+  const std::vector<double>& prepareContact(const State& start, double h);
+
 private:
+  void residual(const State& start, double h, const ActuationValues& u, const Eigen::VectorXd& qdd_new,
+                const Eigen::VectorXd& lambda_new, Eigen::VectorXd& r, BlockSparseMatrix* jac);
+  /// After a converged step: remember v_0 of pairs in contact at `end`, forget separated ones.
+  void updateContactMemory(State& end);
   Summary attempt(State& state, double h, const ActuationLaw& law);
   Summary advance(State& state, double h, const ActuationLaw& law, int depth);
   void predict(const State& start, double h, const Eigen::VectorXd& qdd_new, Eigen::VectorXd& q, Eigen::VectorXd& qd,
@@ -56,6 +65,8 @@ private:
   BlockSparseMatrix jac_;
   SparseLinearSolver linear_;
   Eigen::VectorXd q_, qd_, acc_, inertial_, applied_, cforce_, phi_, r_, dx_;
+  std::vector<double> step_speeds_;  // v_0 per checked pair for the step being solved
+  std::vector<int> candidates_;
 };
 
 }  // namespace active_tensegrity::core

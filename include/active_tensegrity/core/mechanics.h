@@ -12,6 +12,8 @@
 #include <Eigen/Core>
 
 #include "active_tensegrity/core/block_sparse.h"
+#include "active_tensegrity/core/broad_phase.h"
+#include "active_tensegrity/core/contact.h"
 #include "active_tensegrity/core/model.h"
 
 namespace active_tensegrity::core
@@ -86,6 +88,18 @@ public:
   /// F(q, qd): cables, springs, gravity. Adds k_weight K + c_weight C into jac when not null.
   void appliedForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, Eigen::VectorXd& F, BlockSparseMatrix* jac,
                     double k_weight, double c_weight) const;
+  /// Strut contact (contact.h) at (q, qd), when the model's contact is enabled: adds the generalized
+  /// contact forces into F (not cleared) and k_weight K + c_weight C into jac (when not null). Only the
+  /// broad phase's candidates reach the narrow phase. impact_speeds: v_0 per checked pair (dynamics;
+  /// may be empty in statics). Active pairs are appended to `active` when it is not null.
+  void contactForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const std::vector<double>& impact_speeds,
+                    ContactMode mode, Eigen::VectorXd& F, BlockSparseMatrix* jac, double k_weight, double c_weight,
+                    std::vector<ContactPairState>* active) const;
+  /// Checked pairs that can touch at q with boxes grown by margin (m).
+  void contactCandidates(const Eigen::VectorXd& q, double margin, std::vector<int>& out) const
+  {
+    broad_phase_.candidates(q, margin, out);
+  }
   /// M(q) qdd + Qv(q, qd). Adds m_weight M + k_weight d(M qdd + Qv)/dq + c_weight dQv/dqd into jac.
   void inertialForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd,
                      Eigen::VectorXd& out, BlockSparseMatrix* jac, double m_weight, double k_weight,
@@ -109,7 +123,8 @@ public:
   /// Phi_q as a dense matrix (tests and small checks only).
   Eigen::MatrixXd constraintJacobianDense(const Eigen::VectorXd& q) const;
 
-  /// Kinetic and potential energy (J).
+  /// Kinetic and potential energy (J). The potential includes Hertz's (2/5) K zeta^(5/2) of every
+  /// contact when contact is enabled (exact while the crossing angle, hence K, stays put).
   double kineticEnergy(const Eigen::VectorXd& q, const Eigen::VectorXd& qd) const;
   double potentialEnergy(const Eigen::VectorXd& q) const;
 
@@ -134,6 +149,9 @@ private:
   std::vector<int> constraint_rows_;
   int n_lambda_ = 0;
   BlockSparseMatrix pattern_;
+  BroadPhase broad_phase_;
+  mutable std::vector<int> candidates_;  // scratch of contactForce
+  mutable ContactContribution contribution_;
 };
 
 /// Generalized inertia of one strut: the 4x4 rotational mass 4 L^T J L.

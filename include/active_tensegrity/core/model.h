@@ -122,11 +122,25 @@ struct Actuator
   std::vector<int> constraints;  // indices into Model::constraints
 };
 
-/// A pair of struts whose surface gap is measured (and, once contact is on, whose contact is computed).
+/// A pair of struts whose surface gap is measured and, when contact is on, whose contact is computed.
+/// Built by makeStrutPair() (contact.h), which fills the constants.
 struct StrutPair
 {
   int body_a = -1;
   int body_b = -1;
+  double stiffness90 = 0.0;  // K at a right crossing, (4/3) E* (r_a r_b)^(1/4), N/m^1.5
+};
+
+/// Contact law parameters (PHYSICS.md Sec. 4, docs/physics.md).
+struct ContactSettings
+{
+  bool enabled = false;
+  double restitution = 1.0;               // c_e in [0, 1]; 1 = elastic (no hysteresis damping)
+  double friction = 0.0;                  // mu; 0 skips all friction work
+  double stick_velocity = 1e-3;           // v0 of the modified Coulomb law, m/s
+  double slip_velocity = 5e-2;            // v1, m/s
+  double min_crossing_angle = 0.1745329;  // rad (10 deg): |sin theta| is floored there (near-parallel cap)
+  double min_impact_speed = 1e-3;         // m/s: floor of the impact speed v_0 in D = 3(1 - c_e^2)/(4 v_0)
 };
 
 enum class Integrator
@@ -179,7 +193,7 @@ struct Model
   bool gravity_enabled = false;
   Vec3 gravity = Vec3(0.0, 0.0, -9.81);
   bool damping_enabled = true;
-  bool contact_enabled = false;
+  ContactSettings contact;
   SolverOptions solver;
   AnalysisSettings analysis;
   Eigen::VectorXd q0;  // initial configuration

@@ -1,0 +1,93 @@
+/// Strut-strut contact (Kan et al. 2019, Sec. 3-4 and Appendix A; PHYSICS.md Sec. 4), in stages:
+/// broad phase (broad_phase.h) -> narrow phase (closest points of the two axis segments,
+/// geometry.h) -> force law (this file) -> assembly (System::contactForce).
+///
+/// For struts 1 and 2 with axes P_i(s_i) = R_i + s_i A(Theta_i) z, s_i in [-L_i/2, L_i/2], and the
+/// closest points P1, P2 (h = |P1 - P2|, n = (P1 - P2)/h):
+///   penetration   zeta = r1 + r2 - h  (contact when zeta > 0),
+///   rate          zeta_dot = -n . (v_P1 - v_P2)  (material points at fixed s_i),
+///   normal force  F_N = K zeta^(3/2) (1 + D zeta_dot),  D = 3 (1 - c_e^2) / (4 v_0)   (dynamics)
+///                 F_N = K zeta^(3/2)                                                  (statics)
+///                 with F_N >= 0 (no adhesion), v_0 the penetration rate at contact onset;
+///   stiffness     K = (4/3) E* sqrt(Re), Re = sqrt(r1 r2) / |sin theta| (Johnson, Eq. 30-35 closed),
+///                 theta the crossing angle, |sin theta| floored at sin(min_crossing_angle);
+///   friction      F_T = mu c_d(|v_T|) F_N against the slip v_T = (I - n n^T)(v_PA - v_PB) of the
+///                 contact points PA = P1 - r1 n, PB = P2 + r2 n (material points of each strut),
+///                 c_d = 0 below v0, linear to 1 at v1, 1 above (Ambrosio's modified Coulomb law);
+///   generalized   Q_1 = F_N B_P1^T n - F_T B_PA^T t,  Q_2 = -F_N B_P2^T n + F_T B_PB^T t,  t = v_T/|v_T|.
+/// The tangents K = -dQ/dq and C = -dQ/dqd are exact: they include the motion of the closest points
+/// along the axes (ds/dq from the stationarity conditions), the turning of n, the change of K with
+/// the crossing angle and every term of the friction force that the paper drops (docs/physics.md).
+#pragma once
+
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "active_tensegrity/core/geometry.h"
+#include "active_tensegrity/core/model.h"
+
+namespace active_tensegrity::core
+{
+class BlockSparseMatrix;
+
+/// How the normal force is evaluated: with Lankarani-Nikravesh damping and friction (dynamics), or
+/// Hertz's law alone (statics: no velocities, no friction).
+enum class ContactMode
+{
+  kDynamic,
+  kStatic
+};
+
+/// E* = [(1 - nu1^2)/E1 + (1 - nu2^2)/E2]^-1 (Pa) of the outer layers of two struts.
+double effectiveModulus(const Body& a, const Body& b);
+
+/// A checked pair with its constants: K at a right crossing, (4/3) E* (r1 r2)^(1/4) (N/m^1.5).
+StrutPair makeStrutPair(const Model& model, int body_a, int body_b);
+
+/// Contact stiffness K (N/m^1.5) for a squared cosine c2 of the crossing angle, and dK/dc2.
+struct StiffnessValue
+{
+  double k = 0.0;
+  double dk_dc2 = 0.0;
+};
+StiffnessValue contactStiffness(double k90, double cos2, double min_crossing_angle);
+
+/// Everything known about one checked pair after evaluation (world frame, SI units).
+struct ContactPairState
+{
+  int pair = -1;                      // index into Model::checked_pairs
+  bool active = false;                // zeta > 0
+  double gap = 0.0;                   // surface gap h - r1 - r2 (m), negative when overlapping
+  double penetration = 0.0;           // zeta (m)
+  double penetration_rate = 0.0;      // zeta_dot (m/s)
+  double stiffness = 0.0;             // K (N/m^1.5)
+  double normal_force = 0.0;          // F_N (N)
+  double slip_speed = 0.0;            // |v_T| (m/s)
+  double friction_force = 0.0;        // F_T (N)
+  Vec3 normal = Vec3::Zero();         // n, from strut b towards strut a
+  Vec3 point_a = Vec3::Zero();        // PA, contact point on strut a's surface
+  Vec3 point_b = Vec3::Zero();        // PB, contact point on strut b's surface
+  Vec3 force_on_a = Vec3::Zero();     // F_N n - F_T t: total contact force on strut a (b gets minus it)
+  Vec3 friction_on_a = Vec3::Zero();  // -F_T t
+  ClosestRegion region = ClosestRegion::kInterior;
+};
+
+/// Local contributions of one pair: Q (14: body a's 7 then body b's 7) and its tangents
+/// K = -dQ/dq, C = -dQ/dqd over [q_a; q_b].
+struct ContactContribution
+{
+  Eigen::Matrix<double, 14, 1> force = Eigen::Matrix<double, 14, 1>::Zero();
+  Eigen::Matrix<double, 14, 14> stiffness = Eigen::Matrix<double, 14, 14>::Zero();
+  Eigen::Matrix<double, 14, 14> damping = Eigen::Matrix<double, 14, 14>::Zero();
+};
+
+/// Geometry of a pair at q alone (narrow phase, no forces): gap, closest points, normal.
+ContactPairState contactGeometry(const Model& model, int pair, const Eigen::VectorXd& q);
+
+/// Evaluates pair `pair` at (q, qd) with impact speed v_0 (m/s, used in dynamics only). Fills `out`
+/// (when not null) with its force and exact tangents; returns the pair's state.
+ContactPairState evaluateContact(const Model& model, int pair, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                                 double impact_speed, ContactMode mode, ContactContribution* out);
+
+}  // namespace active_tensegrity::core

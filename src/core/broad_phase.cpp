@@ -1,0 +1,115 @@
+#include "active_tensegrity/core/broad_phase.h"
+
+#include <algorithm>
+#include <limits>
+
+#include "active_tensegrity/core/rotation.h"
+
+namespace active_tensegrity::core
+{
+namespace
+{
+std::uint64_t pairKey(int a, int b)
+{
+  if (a > b)
+    std::swap(a, b);
+  return (static_cast<std::uint64_t>(a) << 32) | static_cast<std::uint32_t>(b);
+}
+}  // namespace
+
+BroadPhase::BroadPhase(const Model& model) : model_(model)
+{
+  slot_.assign(model.bodies.size(), -1);
+  for (size_t i = 0; i < model.checked_pairs.size(); ++i)
+  {
+    const StrutPair& p = model.checked_pairs[i];
+    for (int b : { p.body_a, p.body_b })
+      if (slot_[b] < 0)
+      {
+        slot_[b] = static_cast<int>(struts_.size());
+        struts_.push_back(b);
+      }
+    pair_index_[pairKey(p.body_a, p.body_b)] = static_cast<int>(i);
+  }
+  // sorting n boxes costs about n log n comparisons; comparing every listed pair costs one each
+  const double n = static_cast<double>(struts_.size());
+  use_sweep_ = static_cast<double>(model.checked_pairs.size()) > 4.0 * n;
+  boxes_.resize(struts_.size());
+  order_.resize(struts_.size());
+}
+
+void BroadPhase::boxes(const Eigen::VectorXd& q, double margin) const
+{
+  for (size_t k = 0; k < struts_.size(); ++k)
+  {
+    const Body& b = model_.bodies[struts_[k]];
+    const Vec3 c = q.segment<3>(b.offset);
+    const Vec3 half = 0.5 * b.length * (rotationMatrix(q.segment<4>(b.offset + 3)) * Vec3::UnitZ());
+    const Vec3 grow = Vec3::Constant(b.radius() + margin) + half.cwiseAbs();
+    boxes_[k].lo = c - grow;
+    boxes_[k].hi = c + grow;
+  }
+}
+
+void BroadPhase::direct(const Eigen::VectorXd& q, double margin, std::vector<int>& out) const
+{
+  out.clear();
+  boxes(q, margin);
+  for (size_t i = 0; i < model_.checked_pairs.size(); ++i)
+  {
+    const StrutPair& p = model_.checked_pairs[i];
+    const Box& a = boxes_[slot_[p.body_a]];
+    const Box& b = boxes_[slot_[p.body_b]];
+    if ((a.lo.array() <= b.hi.array()).all() && (b.lo.array() <= a.hi.array()).all())
+      out.push_back(static_cast<int>(i));
+  }
+}
+
+void BroadPhase::sweep(const Eigen::VectorXd& q, double margin, std::vector<int>& out) const
+{
+  out.clear();
+  boxes(q, margin);
+  const int n = static_cast<int>(struts_.size());
+  if (n < 2)
+    return;
+  // sweep along the axis where the box centres spread most (fewest overlaps on it)
+  Vec3 lo = Vec3::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+  for (const Box& b : boxes_)
+  {
+    const Vec3 c = 0.5 * (b.lo + b.hi);
+    lo = lo.cwiseMin(c);
+    hi = hi.cwiseMax(c);
+  }
+  int axis = 0;
+  (hi - lo).maxCoeff(&axis);
+  for (int k = 0; k < n; ++k)
+    order_[k] = k;
+  std::sort(order_.begin(), order_.end(),
+            [this, axis](int x, int y) { return boxes_[x].lo(axis) < boxes_[y].lo(axis); });
+  for (int i = 0; i < n; ++i)
+  {
+    const Box& a = boxes_[order_[i]];
+    for (int j = i + 1; j < n; ++j)
+    {
+      const Box& b = boxes_[order_[j]];
+      if (b.lo(axis) > a.hi(axis))
+        break;
+      if (!((a.lo.array() <= b.hi.array()).all() && (b.lo.array() <= a.hi.array()).all()))
+        continue;
+      const auto it = pair_index_.find(pairKey(struts_[order_[i]], struts_[order_[j]]));
+      if (it != pair_index_.end())
+        out.push_back(it->second);
+    }
+  }
+  std::sort(out.begin(), out.end());
+}
+
+void BroadPhase::candidates(const Eigen::VectorXd& q, double margin, std::vector<int>& out) const
+{
+  if (use_sweep_)
+    sweep(q, margin, out);
+  else
+    direct(q, margin, out);
+}
+
+}  // namespace active_tensegrity::core

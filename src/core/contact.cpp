@@ -1,0 +1,382 @@
+#include "active_tensegrity/core/contact.h"
+
+#include <cmath>
+#include <limits>
+
+namespace active_tensegrity::core
+{
+namespace
+{
+using Row14 = Eigen::Matrix<double, 1, 14>;
+using Mat3x14 = Eigen::Matrix<double, 3, 14>;
+using Mat4x14 = Eigen::Matrix<double, 4, 14>;
+using Mat14 = Eigen::Matrix<double, 14, 14>;
+using Vec14 = Eigen::Matrix<double, 14, 1>;
+
+const Vec3 kAxis = Vec3::UnitZ();
+const Vec4 kConjugate(1.0, -1.0, -1.0, -1.0);
+
+// one strut seen by the contact code: centre, Euler parameters, axis a = A(Theta) z and its Jacobian
+struct StrutAxis
+{
+  Vec3 centre, centre_rate;
+  Vec4 theta, theta_rate;
+  Vec3 axis;       // A(Theta) z (unit on the unit sphere)
+  Mat34 axis_jac;  // B_Theta(Theta, z) = d axis / d Theta
+  double half_length = 0.0;
+  double radius = 0.0;
+};
+
+StrutAxis strutAxis(const Body& b, const Eigen::VectorXd& q, const Eigen::VectorXd* qd)
+{
+  StrutAxis s;
+  s.centre = q.segment<3>(b.offset);
+  s.theta = q.segment<4>(b.offset + 3);
+  s.axis = rotationMatrix(s.theta) * kAxis;
+  s.axis_jac = pointJacobianTheta(s.theta, kAxis);
+  s.half_length = 0.5 * b.length;
+  s.radius = b.radius();
+  if (qd)
+  {
+    s.centre_rate = qd->segment<3>(b.offset);
+    s.theta_rate = qd->segment<4>(b.offset + 3);
+  }
+  else
+  {
+    s.centre_rate.setZero();
+    s.theta_rate.setZero();
+  }
+  return s;
+}
+
+// the narrow phase of one pair: closest points on the axes, s in metres from each centre
+struct Closest
+{
+  double s1 = 0.0, s2 = 0.0;
+  bool free1 = true, free2 = true;  // closest point strictly inside its segment (s moves with q)
+  Vec3 p1, p2, d;                   // d = p1 - p2
+  double h = 0.0;
+  Vec3 n;  // d / h
+  ClosestRegion region = ClosestRegion::kInterior;
+};
+
+Closest closest(const StrutAxis& a, const StrutAxis& b)
+{
+  const Vec3 ha = a.half_length * a.axis, hb = b.half_length * b.axis;
+  const SegmentClosest c = closestPointsSegments(a.centre - ha, a.centre + ha, b.centre - hb, b.centre + hb);
+  Closest out;
+  out.s1 = (2.0 * c.s1 - 1.0) * a.half_length;
+  out.s2 = (2.0 * c.s2 - 1.0) * b.half_length;
+  out.free1 = c.region != ClosestRegion::kParallel && c.s1 > 0.0 && c.s1 < 1.0;
+  out.free2 = c.region != ClosestRegion::kParallel && c.s2 > 0.0 && c.s2 < 1.0;
+  out.region = c.region;
+  out.p1 = c.p1;
+  out.p2 = c.p2;
+  out.d = c.p1 - c.p2;
+  out.h = out.d.norm();
+  const double scale = a.half_length + b.half_length;
+  if (out.h > 1e-12 * scale)
+    out.n = out.d / out.h;
+  else
+  {
+    // the axes intersect: no direction from the points; take the common normal of the axes,
+    // pointing from b's centre towards a's (a deep, unphysical overlap: the tangent is not exact here)
+    Vec3 n = a.axis.cross(b.axis);
+    if (n.squaredNorm() < 1e-24)
+      n = a.axis.unitOrthogonal();
+    n.normalize();
+    if (n.dot(a.centre - b.centre) < 0.0)
+      n = -n;
+    out.n = n;
+  }
+  return out;
+}
+
+// N_f(Theta) with N_f u = B_Theta(Theta, u)^T f for every u (4x3)
+Eigen::Matrix<double, 4, 3> transposedPointJacobianTimes(const Vec4& theta, const Vec3& f)
+{
+  Eigen::Matrix<double, 4, 3> m;
+  for (int j = 0; j < 3; ++j)
+    m.col(j) = pointJacobianTheta(theta, Vec3::Unit(j)).transpose() * f;
+  return m;
+}
+
+// dA/dt for Theta moving at Theta_dot: column j is B_Theta(Theta, e_j) Theta_dot
+Mat3 rotationRate(const Vec4& theta, const Vec4& theta_rate)
+{
+  Mat3 m;
+  for (int j = 0; j < 3; ++j)
+    m.col(j) = pointJacobianTheta(theta, Vec3::Unit(j)) * theta_rate;
+  return m;
+}
+
+ContactPairState baseState(int pair, const Closest& c, const StrutAxis& a, const StrutAxis& b)
+{
+  ContactPairState st;
+  st.pair = pair;
+  st.region = c.region;
+  st.normal = c.n;
+  st.gap = c.h - a.radius - b.radius;
+  st.penetration = -st.gap;
+  st.active = st.penetration > 0.0;
+  st.point_a = c.p1 - a.radius * c.n;
+  st.point_b = c.p2 + b.radius * c.n;
+  return st;
+}
+}  // namespace
+
+double effectiveModulus(const Body& a, const Body& b)
+{
+  const StrutLayer& la = a.layers.back();
+  const StrutLayer& lb = b.layers.back();
+  return 1.0 / ((1.0 - la.poisson_ratio * la.poisson_ratio) / la.youngs_modulus +
+                (1.0 - lb.poisson_ratio * lb.poisson_ratio) / lb.youngs_modulus);
+}
+
+StrutPair makeStrutPair(const Model& model, int body_a, int body_b)
+{
+  StrutPair p;
+  p.body_a = body_a;
+  p.body_b = body_b;
+  const Body& a = model.bodies[body_a];
+  const Body& b = model.bodies[body_b];
+  p.stiffness90 = 4.0 / 3.0 * effectiveModulus(a, b) * std::pow(a.radius() * b.radius(), 0.25);
+  return p;
+}
+
+StiffnessValue contactStiffness(double k90, double cos2, double min_crossing_angle)
+{
+  // Re = sqrt(r1 r2) / |sin theta|, so K = k90 (sin^2 theta)^(-1/4)
+  StiffnessValue v;
+  const double floor_sin = std::sin(min_crossing_angle);
+  const double sin2 = 1.0 - cos2;
+  if (sin2 > floor_sin * floor_sin)
+  {
+    v.k = k90 * std::pow(sin2, -0.25);
+    v.dk_dc2 = 0.25 * v.k / sin2;
+  }
+  else
+    v.k = k90 / std::sqrt(floor_sin);
+  return v;
+}
+
+ContactPairState contactGeometry(const Model& model, int pair, const Eigen::VectorXd& q)
+{
+  const StrutPair& p = model.checked_pairs[pair];
+  const StrutAxis a = strutAxis(model.bodies[p.body_a], q, nullptr);
+  const StrutAxis b = strutAxis(model.bodies[p.body_b], q, nullptr);
+  return baseState(pair, closest(a, b), a, b);
+}
+
+ContactPairState evaluateContact(const Model& model, int pair, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                                 double impact_speed, ContactMode mode, ContactContribution* out)
+{
+  const StrutPair& p = model.checked_pairs[pair];
+  const ContactSettings& set = model.contact;
+  const bool dynamic = mode == ContactMode::kDynamic;
+  const StrutAxis a = strutAxis(model.bodies[p.body_a], q, &qd);
+  const StrutAxis b = strutAxis(model.bodies[p.body_b], q, &qd);
+  const Closest c = closest(a, b);
+  ContactPairState st = baseState(pair, c, a, b);
+
+  // velocities of the axis points at fixed s, and the penetration rate (also outside contact: the
+  // dynamics solver takes the impact speed from it)
+  const Vec3 axis_rate1 = a.axis_jac * a.theta_rate, axis_rate2 = b.axis_jac * b.theta_rate;
+  const Vec3 v1 = a.centre_rate + c.s1 * axis_rate1;
+  const Vec3 v2 = b.centre_rate + c.s2 * axis_rate2;
+  st.penetration_rate = -c.n.dot(v1 - v2);
+  if (out)
+  {
+    out->force.setZero();
+    out->stiffness.setZero();
+    out->damping.setZero();
+  }
+  if (!st.active)
+    return st;
+
+  // Jacobians over x = [q_a; q_b] (14 columns): axis points at fixed s, axes
+  Mat3x14 jp1 = Mat3x14::Zero(), jp2 = Mat3x14::Zero(), ja1 = Mat3x14::Zero(), ja2 = Mat3x14::Zero();
+  jp1.block<3, 3>(0, 0).setIdentity();
+  jp1.block<3, 4>(0, 3) = c.s1 * a.axis_jac;
+  jp2.block<3, 3>(0, 7).setIdentity();
+  jp2.block<3, 4>(0, 10) = c.s2 * b.axis_jac;
+  ja1.block<3, 4>(0, 3) = a.axis_jac;
+  ja2.block<3, 4>(0, 10) = b.axis_jac;
+
+  // closest points move along the axes: stationarity a_i . d = 0 for each free s_i
+  Row14 ds1 = Row14::Zero(), ds2 = Row14::Zero();
+  {
+    const Mat3x14 jd_fixed = jp1 - jp2;
+    const Row14 g1 = c.d.transpose() * ja1 + a.axis.transpose() * jd_fixed;
+    const Row14 g2 = c.d.transpose() * ja2 + b.axis.transpose() * jd_fixed;
+    const double h11 = a.axis.squaredNorm(), h12 = -a.axis.dot(b.axis), h22 = -b.axis.squaredNorm();
+    if (c.free1 && c.free2)
+    {
+      const double det = h11 * h22 - h12 * (-h12);  // H = [h11 h12; -h12 h22]
+      ds1 = -(h22 * g1 - h12 * g2) / det;
+      ds2 = -(h11 * g2 + h12 * g1) / det;
+    }
+    else if (c.free1)
+      ds1 = -g1 / h11;
+    else if (c.free2)
+      ds2 = -g2 / h22;
+  }
+  const Mat3x14 jd = jp1 - jp2 + a.axis * ds1 - b.axis * ds2;
+  const Mat3 proj = Mat3::Identity() - c.n * c.n.transpose();
+  const double h_safe = std::max(c.h, 1e-12);
+  const Mat3x14 jn = c.h > 0.0 ? Mat3x14(proj * jd / h_safe) : Mat3x14::Zero();
+  const Row14 jzeta = -c.n.transpose() * jd;
+  const double zeta = st.penetration;
+
+  // penetration rate
+  Mat3x14 jqv1 = Mat3x14::Zero(), jqv2 = Mat3x14::Zero();
+  jqv1.block<3, 4>(0, 3) = c.s1 * pointJacobianTheta(a.theta_rate, kAxis);
+  jqv1 += axis_rate1 * ds1;
+  jqv2.block<3, 4>(0, 10) = c.s2 * pointJacobianTheta(b.theta_rate, kAxis);
+  jqv2 += axis_rate2 * ds2;
+  const Vec3 dv = v1 - v2;
+  const Row14 jq_rate = -dv.transpose() * jn - c.n.transpose() * (jqv1 - jqv2);
+  const Row14 jqd_rate = -c.n.transpose() * (jp1 - jp2);
+
+  // stiffness from the crossing angle
+  const double dot = a.axis.dot(b.axis), m1 = a.axis.squaredNorm(), m2 = b.axis.squaredNorm();
+  const double cos2 = dot * dot / (m1 * m2);
+  const StiffnessValue kv = contactStiffness(p.stiffness90, cos2, set.min_crossing_angle);
+  st.stiffness = kv.k;
+  Row14 jk = Row14::Zero();
+  if (kv.dk_dc2 != 0.0)
+  {
+    const Row14 jdot = b.axis.transpose() * ja1 + a.axis.transpose() * ja2;
+    const Row14 jm1 = 2.0 * a.axis.transpose() * ja1, jm2 = 2.0 * b.axis.transpose() * ja2;
+    jk = kv.dk_dc2 * (2.0 * dot * jdot - cos2 * (m2 * jm1 + m1 * jm2)) / (m1 * m2);
+  }
+
+  // normal force: Lankarani-Nikravesh in dynamics, Hertz in statics, never pulling
+  const double damping =
+      dynamic ? 3.0 * (1.0 - set.restitution * set.restitution) / (4.0 * std::max(impact_speed, set.min_impact_speed)) :
+                0.0;
+  const double hysteresis = dynamic ? 1.0 + damping * st.penetration_rate : 1.0;
+  if (hysteresis <= 0.0)
+    return st;
+  const double z15 = zeta * std::sqrt(zeta);
+  const double fn = kv.k * z15 * hysteresis;
+  st.normal_force = fn;
+  st.force_on_a = fn * c.n;
+  const Row14 jq_fn =
+      z15 * hysteresis * jk + 1.5 * kv.k * std::sqrt(zeta) * hysteresis * jzeta + kv.k * z15 * damping * jq_rate;
+  const Row14 jqd_fn = kv.k * z15 * damping * jqd_rate;
+  if (!out)
+  {
+    // friction magnitude for the report only
+    if (dynamic && set.friction > 0.0)
+    {
+      const Vec4 conj1 = kConjugate.cwiseProduct(a.theta), conj2 = kConjugate.cwiseProduct(b.theta);
+      const Vec3 ua = c.s1 * kAxis - a.radius * (rotationMatrix(conj1) * c.n);
+      const Vec3 ub = c.s2 * kAxis + b.radius * (rotationMatrix(conj2) * c.n);
+      const Vec3 vtol = a.centre_rate + pointJacobianTheta(a.theta, ua) * a.theta_rate - b.centre_rate -
+                        pointJacobianTheta(b.theta, ub) * b.theta_rate;
+      const Vec3 vt = proj * vtol;
+      st.slip_speed = vt.norm();
+      if (st.slip_speed > set.stick_velocity)
+      {
+        const double cd = st.slip_speed >= set.slip_velocity ?
+                              1.0 :
+                              (st.slip_speed - set.stick_velocity) / (set.slip_velocity - set.stick_velocity);
+        st.friction_force = set.friction * cd * fn;
+        st.friction_on_a = -st.friction_force * vt / st.slip_speed;
+        st.force_on_a += st.friction_on_a;
+      }
+    }
+    return st;
+  }
+
+  // generalized normal force g F_N with g = [n; s1 B1^T n; -n; -s2 B2^T n]
+  Vec14 g;
+  g << c.n, c.s1 * a.axis_jac.transpose() * c.n, -c.n, -c.s2 * b.axis_jac.transpose() * c.n;
+  Mat14 jg = Mat14::Zero();
+  jg.block<3, 14>(0, 0) = jn;
+  jg.block<4, 14>(3, 0) = c.s1 * a.axis_jac.transpose() * jn + (a.axis_jac.transpose() * c.n) * ds1;
+  jg.block<4, 4>(3, 3) += pointHessianTheta(c.s1 * kAxis, c.n);
+  jg.block<3, 14>(7, 0) = -jn;
+  jg.block<4, 14>(10, 0) = -(c.s2 * b.axis_jac.transpose() * jn + (b.axis_jac.transpose() * c.n) * ds2);
+  jg.block<4, 4>(10, 10) -= pointHessianTheta(c.s2 * kAxis, c.n);
+  Vec14 force = fn * g;
+  Mat14 jq_force = g * jq_fn + fn * jg;
+  Mat14 jqd_force = g * jqd_fn;
+
+  // friction (dynamics only, and only when mu > 0)
+  if (dynamic && set.friction > 0.0)
+  {
+    // contact points as material points: u_A = s1 z - r1 A1^T n, u_B = s2 z + r2 A2^T n
+    const Vec4 conj1 = kConjugate.cwiseProduct(a.theta), conj2 = kConjugate.cwiseProduct(b.theta);
+    const Mat3 at1 = rotationMatrix(conj1), at2 = rotationMatrix(conj2);  // A^T
+    const Vec3 ua = c.s1 * kAxis - a.radius * (at1 * c.n);
+    const Vec3 ub = c.s2 * kAxis + b.radius * (at2 * c.n);
+    Mat3x14 jua = kAxis * ds1 - a.radius * (at1 * jn);
+    jua.block<3, 4>(0, 3) -= a.radius * pointJacobianTheta(conj1, c.n) * kConjugate.asDiagonal();
+    Mat3x14 jub = kAxis * ds2 + b.radius * (at2 * jn);
+    jub.block<3, 4>(0, 10) += b.radius * pointJacobianTheta(conj2, c.n) * kConjugate.asDiagonal();
+
+    const Mat34 bua = pointJacobianTheta(a.theta, ua), bub = pointJacobianTheta(b.theta, ub);
+    const Vec3 vpa = a.centre_rate + bua * a.theta_rate;
+    const Vec3 vpb = b.centre_rate + bub * b.theta_rate;
+    Mat3x14 jq_vtol = rotationRate(a.theta, a.theta_rate) * jua - rotationRate(b.theta, b.theta_rate) * jub;
+    jq_vtol.block<3, 4>(0, 3) += pointJacobianTheta(a.theta_rate, ua);
+    jq_vtol.block<3, 4>(0, 10) -= pointJacobianTheta(b.theta_rate, ub);
+    Mat3x14 jqd_vtol = Mat3x14::Zero();
+    jqd_vtol.block<3, 3>(0, 0).setIdentity();
+    jqd_vtol.block<3, 4>(0, 3) = bua;
+    jqd_vtol.block<3, 3>(0, 7) = -Mat3::Identity();
+    jqd_vtol.block<3, 4>(0, 10) = -bub;
+
+    const Vec3 vtol = vpa - vpb;
+    const double vn = c.n.dot(vtol);
+    const Vec3 vt = vtol - vn * c.n;
+    st.slip_speed = vt.norm();
+    if (st.slip_speed > set.stick_velocity)
+    {
+      const Mat3x14 jq_vt = proj * jq_vtol - vn * jn - c.n * (vtol.transpose() * jn);
+      const Mat3x14 jqd_vt = proj * jqd_vtol;
+      const Vec3 t = vt / st.slip_speed;
+      const Mat3 tproj = (Mat3::Identity() - t * t.transpose()) / st.slip_speed;
+      double cd = 1.0, dcd = 0.0;
+      if (st.slip_speed < set.slip_velocity)
+      {
+        dcd = 1.0 / (set.slip_velocity - set.stick_velocity);
+        cd = (st.slip_speed - set.stick_velocity) * dcd;
+      }
+      const double ft = set.friction * cd * fn;
+      st.friction_force = ft;
+      const Vec3 f = -ft * t;  // on strut a at PA
+      st.friction_on_a = f;
+      st.force_on_a += f;
+      const Row14 jq_ft = set.friction * (fn * dcd * t.transpose() * jq_vt + cd * jq_fn);
+      const Row14 jqd_ft = set.friction * (fn * dcd * t.transpose() * jqd_vt + cd * jqd_fn);
+      const Mat3x14 jq_f = -(t * jq_ft + ft * tproj * jq_vt);
+      const Mat3x14 jqd_f = -(t * jqd_ft + ft * tproj * jqd_vt);
+
+      Vec14 qt;
+      qt << f, bua.transpose() * f, -f, -bub.transpose() * f;
+      force += qt;
+      Mat4x14 jq_rot_a = bua.transpose() * jq_f + transposedPointJacobianTimes(a.theta, f) * jua;
+      jq_rot_a.block<4, 4>(0, 3) += pointHessianTheta(ua, f);
+      Mat4x14 jq_rot_b = bub.transpose() * jq_f + transposedPointJacobianTimes(b.theta, f) * jub;
+      jq_rot_b.block<4, 4>(0, 10) += pointHessianTheta(ub, f);
+      jq_force.block<3, 14>(0, 0) += jq_f;
+      jq_force.block<4, 14>(3, 0) += jq_rot_a;
+      jq_force.block<3, 14>(7, 0) -= jq_f;
+      jq_force.block<4, 14>(10, 0) -= jq_rot_b;
+      jqd_force.block<3, 14>(0, 0) += jqd_f;
+      jqd_force.block<4, 14>(3, 0) += bua.transpose() * jqd_f;
+      jqd_force.block<3, 14>(7, 0) -= jqd_f;
+      jqd_force.block<4, 14>(10, 0) -= bub.transpose() * jqd_f;
+    }
+  }
+
+  out->force = force;
+  out->stiffness = -jq_force;
+  out->damping = -jqd_force;
+  return st;
+}
+
+}  // namespace active_tensegrity::core

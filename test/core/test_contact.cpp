@@ -1,0 +1,405 @@
+// Strut contact (core/contact): the exact tangents of the normal and friction forces against central
+// differences in all 14 coordinates and 14 velocities of a pair (Theta off the unit sphere too), per
+// regime and for random crossings away from the kinks; the stiffness law; special configurations
+// (parallel, end to end, end to side) stay finite and point the right way; friction never adds energy.
+#include <cmath>
+#include <random>
+
+#include <gtest/gtest.h>
+
+#include "active_tensegrity/core/contact.h"
+#include "active_tensegrity/core/mechanics.h"
+#include "fd_check.h"
+#include "test_models.h"
+
+using namespace active_tensegrity::test;
+
+namespace
+{
+constexpr double kTol = 2e-6;
+
+// two free struts checked against each other (rubber-like outer layers keep forces moderate)
+Model twoStruts(double mu, double restitution, double ra = 0.04, double rb = 0.05)
+{
+  Model m;
+  m.name = "pair";
+  m.bodies.push_back(makeStrut("A", 1.2, ra, 2000.0));
+  m.bodies.push_back(makeStrut("B", 1.0, rb, 2000.0));
+  for (Body& b : m.bodies)
+  {
+    b.layers.back().youngs_modulus = 2.0e7;
+    b.layers.back().poisson_ratio = 0.45;
+  }
+  finalizeModel(m);
+  m.contact.enabled = true;
+  m.contact.friction = mu;
+  m.contact.restitution = restitution;
+  m.contact.stick_velocity = 0.01;
+  m.contact.slip_velocity = 0.1;
+  m.checked_pairs.push_back(makeStrutPair(m, 0, 1));
+  m.q0.setZero(m.nq);
+  return m;
+}
+
+Vec3 randomUnit(std::mt19937& rng)
+{
+  std::normal_distribution<double> n(0.0, 1.0);
+  return Vec3(n(rng), n(rng), n(rng)).normalized();
+}
+
+// a crossing: strut A through the origin along a random axis, B's axis at a random angle (above
+// 25 degrees), the closest points at random interior stations, the surfaces overlapping by `overlap`
+// (negative: apart). Each Theta is then scaled by (1 + 1e-3 * random) off the unit sphere.
+Eigen::VectorXd crossing(const Model& m, double overlap, std::mt19937& rng, bool off_sphere = true)
+{
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  const Body& a = m.bodies[0];
+  const Body& b = m.bodies[1];
+  const Vec3 ax = randomUnit(rng);
+  Vec3 bx;
+  do
+    bx = randomUnit(rng);
+  while (std::abs(ax.dot(bx)) > std::cos(25.0 * M_PI / 180.0));
+  const Vec3 n = ax.cross(bx).normalized();
+  const double s1 = 0.3 * a.length * u(rng), s2 = 0.3 * b.length * u(rng);
+  const Vec3 p1 = Vec3(0.1, -0.2, 0.3) + s1 * ax;
+  const Vec3 p2 = p1 - (a.radius() + b.radius() - overlap) * n;
+  Eigen::VectorXd q(m.nq);
+  q.segment<3>(0) = p1 - s1 * ax;
+  q.segment<4>(3) = thetaFromZAxis(ax);
+  q.segment<3>(7) = p2 - s2 * bx;
+  q.segment<4>(10) = thetaFromZAxis(bx);
+  if (off_sphere)
+  {
+    q.segment<4>(3) *= 1.0 + 1e-3 * u(rng);
+    q.segment<4>(10) *= 1.0 + 1e-3 * u(rng);
+  }
+  return q;
+}
+
+Eigen::VectorXd contactForceOf(const Model& m, const Eigen::VectorXd& q, const Eigen::VectorXd& qd, double v0,
+                               ContactMode mode)
+{
+  ContactContribution c;
+  evaluateContact(m, 0, q, qd, v0, mode, &c);
+  return c.force;
+}
+
+// checks K = -dQ/dq and C = -dQ/dqd at (q, qd)
+void expectExactTangents(const Model& m, const Eigen::VectorXd& q, const Eigen::VectorXd& qd, double v0,
+                         ContactMode mode, const std::string& what)
+{
+  ContactContribution c;
+  evaluateContact(m, 0, q, qd, v0, mode, &c);
+  const auto fq = [&](const Eigen::VectorXd& x) -> Eigen::VectorXd { return -contactForceOf(m, x, qd, v0, mode); };
+  const auto fqd = [&](const Eigen::VectorXd& x) -> Eigen::VectorXd { return -contactForceOf(m, q, x, v0, mode); };
+  const double scale = std::max(1.0, c.force.lpNorm<Eigen::Infinity>());
+  const FdComparison ck = compareJacobians(c.stiffness, fdJacobian(fq, q, 1e-7), kTol, scale);
+  EXPECT_TRUE(ck.ok) << what << ", K: " << ck.message;
+  const FdComparison cc = compareJacobians(c.damping, fdJacobian(fqd, qd, 1e-7), kTol, scale);
+  EXPECT_TRUE(cc.ok) << what << ", C: " << cc.message;
+}
+
+// velocities whose slip speed is `slip` (m/s) at q: random, then scaled (the slip is linear in qd);
+// drawn again until the hysteresis factor 1 + D zeta_dot (D for impact speed v0) is in [0.5, 1.5]
+Eigen::VectorXd velocitiesWithSlip(const Model& m, const Eigen::VectorXd& q, double slip, double v0, std::mt19937& rng)
+{
+  Model with_friction = m;
+  with_friction.contact.friction = 1.0;
+  const double d = 3.0 * (1.0 - m.contact.restitution * m.contact.restitution) / (4.0 * v0);
+  for (;;)
+  {
+    Eigen::VectorXd qd = randomVector(m.nq, 1.0, rng);
+    const ContactPairState st = evaluateContact(with_friction, 0, q, qd, 1e9, ContactMode::kDynamic, nullptr);
+    qd *= slip / st.slip_speed;
+    if (std::abs(d * st.penetration_rate * slip / st.slip_speed) <= 0.5)
+      return qd;
+  }
+}
+}  // namespace
+
+TEST(ContactStiffness, RightCrossingIsJohnsonsAndGrowsAsTheStrutsAlign)
+{
+  const Model m = twoStruts(0.0, 1.0);
+  const double estar = 1.0 / (2.0 * (1.0 - 0.45 * 0.45) / 2.0e7);
+  const double k90 = 4.0 / 3.0 * estar * std::sqrt(std::sqrt(0.04 * 0.05));
+  EXPECT_NEAR(m.checked_pairs[0].stiffness90, k90, 1e-9 * k90);
+  // Re = sqrt(r1 r2) / |sin theta| (Eq. 31-32 with R' = inf): K = k90 / sqrt(sin theta)
+  for (double deg : { 90.0, 60.0, 30.0, 15.0 })
+  {
+    const double c = std::cos(deg * M_PI / 180.0);
+    const StiffnessValue v = contactStiffness(k90, c * c, 10.0 * M_PI / 180.0);
+    EXPECT_NEAR(v.k, k90 / std::sqrt(std::sin(deg * M_PI / 180.0)), 1e-9 * k90) << deg;
+    const double d = 1e-7;
+    const double fd =
+        (contactStiffness(k90, c * c + d, 0.1745).k - contactStiffness(k90, c * c - d, 0.1745).k) / (2 * d);
+    EXPECT_NEAR(v.dk_dc2, fd, 1e-5 * std::abs(fd) + 1e-9) << deg;
+  }
+  // below the floor angle K is capped at its value there
+  const double c5 = std::cos(5.0 * M_PI / 180.0);
+  const StiffnessValue capped = contactStiffness(k90, c5 * c5, 10.0 * M_PI / 180.0);
+  EXPECT_NEAR(capped.k, k90 / std::sqrt(std::sin(10.0 * M_PI / 180.0)), 1e-9 * k90);
+  EXPECT_EQ(capped.dk_dc2, 0.0);
+  EXPECT_TRUE(std::isfinite(contactStiffness(k90, 1.0, 10.0 * M_PI / 180.0).k));
+}
+
+TEST(ContactTangent, NoContactNoForceNoTangent)
+{
+  std::mt19937 rng(1);
+  const Model m = twoStruts(0.3, 0.5);
+  const Eigen::VectorXd q = crossing(m, -1e-3, rng);
+  const Eigen::VectorXd qd = randomVector(m.nq, 1.0, rng);
+  ContactContribution c;
+  const ContactPairState st = evaluateContact(m, 0, q, qd, 0.1, ContactMode::kDynamic, &c);
+  EXPECT_FALSE(st.active);
+  EXPECT_NEAR(st.gap, 1e-3, 1e-9);
+  EXPECT_EQ(c.force.norm(), 0.0);
+  EXPECT_EQ(c.stiffness.norm(), 0.0);
+  EXPECT_EQ(c.damping.norm(), 0.0);
+}
+
+TEST(ContactTangent, HertzStaticsIsExactForRandomCrossings)
+{
+  std::mt19937 rng(2);
+  const Model m = twoStruts(0.3, 0.5);
+  for (int k = 0; k < 20; ++k)
+  {
+    const Eigen::VectorXd q = crossing(m, 2e-3, rng);
+    const ContactPairState st =
+        evaluateContact(m, 0, q, Eigen::VectorXd::Zero(m.nq), 0.0, ContactMode::kStatic, nullptr);
+    ASSERT_TRUE(st.active);
+    ASSERT_EQ(st.region, ClosestRegion::kInterior);
+    expectExactTangents(m, q, Eigen::VectorXd::Zero(m.nq), 0.0, ContactMode::kStatic, "static " + std::to_string(k));
+  }
+}
+
+TEST(ContactTangent, DampedNormalForceBelowTheStickVelocityIsExact)
+{
+  std::mt19937 rng(3);
+  const Model m = twoStruts(0.3, 0.5);
+  for (int k = 0; k < 20; ++k)
+  {
+    const Eigen::VectorXd q = crossing(m, 2e-3, rng);
+    const Eigen::VectorXd qd = velocitiesWithSlip(m, q, 0.5 * m.contact.stick_velocity, 0.05, rng);
+    const ContactPairState st = evaluateContact(m, 0, q, qd, 0.05, ContactMode::kDynamic, nullptr);
+    ASSERT_GT(st.normal_force, 0.0);
+    ASSERT_EQ(st.friction_force, 0.0);
+    expectExactTangents(m, q, qd, 0.05, ContactMode::kDynamic, "below v0, " + std::to_string(k));
+  }
+}
+
+TEST(ContactTangent, FrictionBetweenTheToleranceVelocitiesIsExact)
+{
+  std::mt19937 rng(4);
+  const Model m = twoStruts(0.3, 0.5);
+  for (int k = 0; k < 20; ++k)
+  {
+    const Eigen::VectorXd q = crossing(m, 2e-3, rng);
+    const Eigen::VectorXd qd = velocitiesWithSlip(m, q, 0.05, 0.05, rng);  // v0 = 0.01, v1 = 0.1
+    const ContactPairState st = evaluateContact(m, 0, q, qd, 0.05, ContactMode::kDynamic, nullptr);
+    ASSERT_GT(st.friction_force, 0.0);
+    ASSERT_LT(st.friction_force, 0.3 * st.normal_force);
+    expectExactTangents(m, q, qd, 0.05, ContactMode::kDynamic, "between v0 and v1, " + std::to_string(k));
+  }
+}
+
+TEST(ContactTangent, FullFrictionAboveTheSlipVelocityIsExact)
+{
+  std::mt19937 rng(5);
+  const Model m = twoStruts(0.3, 0.5);
+  for (int k = 0; k < 20; ++k)
+  {
+    const Eigen::VectorXd q = crossing(m, 2e-3, rng);
+    const Eigen::VectorXd qd = velocitiesWithSlip(m, q, 0.4, 0.5, rng);
+    const ContactPairState st = evaluateContact(m, 0, q, qd, 0.5, ContactMode::kDynamic, nullptr);
+    ASSERT_GT(st.normal_force, 0.0);
+    ASSERT_NEAR(st.friction_force, 0.3 * st.normal_force, 1e-9 * st.normal_force);
+    expectExactTangents(m, q, qd, 0.5, ContactMode::kDynamic, "above v1, " + std::to_string(k));
+  }
+}
+
+TEST(ContactTangent, EndAgainstSideIsExact)
+{
+  // strut B's end presses on A's side: s2 is clamped, s1 moves
+  const Model m = twoStruts(0.3, 0.5);
+  std::mt19937 rng(6);
+  for (int k = 0; k < 10; ++k)
+  {
+    const Vec3 ax = Vec3(1.0, 0.2, -0.1).normalized();
+    const Vec3 bx = (Vec3(0.1, 0.3, 1.0) + 0.2 * randomUnit(rng)).normalized();
+    Eigen::VectorXd q(m.nq);
+    q.segment<3>(0) = Vec3::Zero();
+    q.segment<4>(3) = thetaFromZAxis(ax);
+    // B's lower end (its axis point) sits 2 mm closer to A's axis than r_A + r_B, near A's middle, in
+    // the direction n of bx normal to ax: B leans away from A, so its end is its closest point
+    const Vec3 n = (bx - bx.dot(ax) * ax).normalized();
+    const Vec3 end = 0.1 * ax + (m.bodies[0].radius() + m.bodies[1].radius() - 2e-3) * n;
+    q.segment<3>(7) = end + 0.5 * m.bodies[1].length * bx;
+    q.segment<4>(10) = thetaFromZAxis(bx);
+    const ContactPairState st0 = contactGeometry(m, 0, q);
+    ASSERT_EQ(st0.region, ClosestRegion::kEnd);
+    EXPECT_NEAR(st0.penetration, 2e-3, 1e-12);
+    const Eigen::VectorXd qd = velocitiesWithSlip(m, q, 0.4, 0.5, rng);
+    const ContactPairState st = evaluateContact(m, 0, q, qd, 0.5, ContactMode::kDynamic, nullptr);
+    ASSERT_TRUE(st.active);
+    ASSERT_GT(st.normal_force, 0.0);
+    expectExactTangents(m, q, qd, 0.5, ContactMode::kDynamic, "end against side, " + std::to_string(k));
+  }
+}
+
+TEST(ContactTangent, CombinedIntoTheSystemTangent)
+{
+  // System::contactForce places the pair's blocks where the global matrix expects them
+  std::mt19937 rng(7);
+  const Model m = twoStruts(0.3, 0.5);
+  const System sys(m);
+  const Eigen::VectorXd q = crossing(m, 2e-3, rng);
+  const Eigen::VectorXd qd = velocitiesWithSlip(m, q, 0.4, 0.5, rng);
+  const std::vector<double> v0 = { 0.5 };
+  BlockSparseMatrix jac = sys.makeMatrix();
+  Eigen::VectorXd F = Eigen::VectorXd::Zero(m.nq);
+  sys.contactForce(q, qd, v0, ContactMode::kDynamic, F, &jac, 2.0, 3.0, nullptr);
+  ContactContribution c;
+  evaluateContact(m, 0, q, qd, 0.5, ContactMode::kDynamic, &c);
+  EXPECT_TRUE(F.isApprox(Eigen::VectorXd(c.force)));
+  EXPECT_TRUE(denseBlock(jac, 14, 14).isApprox(2.0 * c.stiffness + 3.0 * c.damping));
+}
+
+TEST(ContactForce, ActionEqualsReactionAndActsAtTheContactPoints)
+{
+  std::mt19937 rng(8);
+  const Model m = twoStruts(0.3, 0.5);
+  for (int k = 0; k < 10; ++k)
+  {
+    const Eigen::VectorXd q = crossing(m, 2e-3, rng, false);
+    const Eigen::VectorXd qd = velocitiesWithSlip(m, q, 0.4, 0.5, rng);
+    ContactContribution c;
+    const ContactPairState st = evaluateContact(m, 0, q, qd, 0.5, ContactMode::kDynamic, &c);
+    // translational parts: the force on A and its opposite on B
+    EXPECT_TRUE(c.force.head<3>().isApprox(st.force_on_a, 1e-12));
+    EXPECT_TRUE(c.force.segment<3>(7).isApprox(-st.force_on_a, 1e-12));
+    // the normal force pushes A away from B, along n, at the right magnitude
+    EXPECT_GT(st.force_on_a.dot(st.normal), 0.0);
+    EXPECT_NEAR((st.force_on_a - st.friction_on_a).dot(st.normal), st.normal_force, 1e-9 * st.normal_force);
+    // the contact points lie on each surface, penetration apart along n
+    EXPECT_NEAR((st.point_a - st.point_b).dot(st.normal), -st.penetration, 1e-12);
+  }
+}
+
+TEST(ContactForce, FrictionNeverAddsEnergy)
+{
+  // on the unit sphere with consistent velocities, the friction power -F_T |v_T| is never positive
+  std::mt19937 rng(9);
+  const Model m = twoStruts(0.3, 1.0);
+  Model frictionless = m;
+  frictionless.contact.friction = 0.0;
+  for (int k = 0; k < 50; ++k)
+  {
+    const Eigen::VectorXd q = crossing(m, 2e-3, rng, false);
+    Eigen::VectorXd qd = randomVector(m.nq, 1.0, rng);
+    for (int b = 0; b < 2; ++b)
+    {
+      const Vec4 th = q.segment<4>(7 * b + 3);
+      qd.segment<4>(7 * b + 3) -= th.dot(qd.segment<4>(7 * b + 3)) * th;  // Theta . Theta_dot = 0
+    }
+    const double p_all = contactForceOf(m, q, qd, 0.5, ContactMode::kDynamic).dot(qd);
+    const double p_normal = contactForceOf(frictionless, q, qd, 0.5, ContactMode::kDynamic).dot(qd);
+    const ContactPairState st = evaluateContact(m, 0, q, qd, 0.5, ContactMode::kDynamic, nullptr);
+    EXPECT_LE(p_all - p_normal, 1e-9 * std::max(1.0, std::abs(p_normal))) << k;
+    if (st.slip_speed > m.contact.stick_velocity)
+      EXPECT_NEAR(p_all - p_normal, -st.friction_force * st.slip_speed,
+                  1e-6 * st.friction_force * st.slip_speed + 1e-12);
+  }
+}
+
+TEST(ContactForce, ZeroFrictionCoefficientSkipsFriction)
+{
+  std::mt19937 rng(10);
+  const Model m = twoStruts(0.0, 0.5);
+  const Eigen::VectorXd q = crossing(m, 2e-3, rng);
+  const Eigen::VectorXd qd = velocitiesWithSlip(m, q, 0.4, 0.5, rng);
+  const ContactPairState st = evaluateContact(m, 0, q, qd, 0.5, ContactMode::kDynamic, nullptr);
+  EXPECT_GT(st.normal_force, 0.0);
+  EXPECT_EQ(st.friction_force, 0.0);
+  EXPECT_EQ(st.slip_speed, 0.0);  // not even computed
+}
+
+TEST(ContactForce, SeparatingFastNeverPulls)
+{
+  // 1 + D zeta_dot < 0: the Lankarani-Nikravesh force would pull; it is cut at zero, with no tangent
+  std::mt19937 rng(11);
+  const Model m = twoStruts(0.3, 0.0);
+  const Eigen::VectorXd q = crossing(m, 2e-3, rng, false);
+  Eigen::VectorXd qd = Eigen::VectorXd::Zero(m.nq);
+  const ContactPairState g = contactGeometry(m, 0, q);
+  qd.segment<3>(0) = 1.0 * g.normal;  // A leaves B at 1 m/s; D = 0.75 / v0
+  ContactContribution c;
+  const ContactPairState st = evaluateContact(m, 0, q, qd, 0.1, ContactMode::kDynamic, &c);
+  EXPECT_TRUE(st.active);
+  EXPECT_LT(st.penetration_rate, -0.9);
+  EXPECT_EQ(st.normal_force, 0.0);
+  EXPECT_EQ(c.force.norm(), 0.0);
+  EXPECT_EQ(c.stiffness.norm(), 0.0);
+}
+
+TEST(ContactSpecialCases, ParallelStrutsPressedTogetherPushApart)
+{
+  const Model m = twoStruts(0.3, 0.5);
+  for (double tilt : { 0.0, 1e-9, 1e-6, 1e-3 })
+  {
+    Eigen::VectorXd q(m.nq);
+    q.segment<3>(0) = Vec3::Zero();
+    q.segment<4>(3) = thetaFromZAxis(Vec3::UnitZ());
+    q.segment<3>(7) = Vec3(0.088, 0.0, 0.1);  // overlap 2 mm
+    q.segment<4>(10) = thetaFromZAxis(Vec3(tilt, 0.0, 1.0));
+    const Eigen::VectorXd qd = Eigen::VectorXd::Zero(m.nq);
+    ContactContribution c;
+    const ContactPairState st = evaluateContact(m, 0, q, qd, 0.1, ContactMode::kDynamic, &c);
+    ASSERT_TRUE(st.active) << tilt;
+    EXPECT_TRUE(c.force.allFinite() && c.stiffness.allFinite() && c.damping.allFinite()) << tilt;
+    EXPECT_NEAR(st.penetration, 2e-3 + 0.5 * tilt, 1e-6) << tilt;  // B's lower end leans towards A
+    EXPECT_NEAR(st.normal.x(), -1.0, 1e-3) << tilt;                // A is pushed to -x, away from B
+    EXPECT_LT(c.force(0), 0.0) << tilt;
+    EXPECT_GT(c.force(7), 0.0) << tilt;
+    // the capped stiffness: never above K at the floor angle
+    EXPECT_LE(st.stiffness,
+              m.checked_pairs[0].stiffness90 / std::sqrt(std::sin(m.contact.min_crossing_angle)) * (1 + 1e-12));
+  }
+}
+
+TEST(ContactSpecialCases, StrutsMeetingEndToEndPushAlongTheirAxes)
+{
+  const Model m = twoStruts(0.3, 0.5);
+  Eigen::VectorXd q(m.nq);
+  const Vec3 axis = Vec3(0.3, -0.2, 1.0).normalized();
+  q.segment<3>(0) = Vec3::Zero();
+  q.segment<4>(3) = thetaFromZAxis(axis);
+  // B collinear above A, its lower end 2 mm past A's upper end... then shifted sideways less than the radii
+  q.segment<3>(7) = (0.6 + 0.5 + 0.085) * axis;
+  q.segment<4>(10) = thetaFromZAxis(axis);
+  const Eigen::VectorXd qd = Eigen::VectorXd::Zero(m.nq);
+  ContactContribution c;
+  const ContactPairState st = evaluateContact(m, 0, q, qd, 0.1, ContactMode::kDynamic, &c);
+  ASSERT_TRUE(st.active);
+  EXPECT_TRUE(c.force.allFinite() && c.stiffness.allFinite() && c.damping.allFinite());
+  EXPECT_NEAR(st.normal.dot(axis), -1.0, 1e-9);  // A is pushed down its axis, B up
+  EXPECT_NEAR(st.penetration, 0.005, 1e-9);
+  EXPECT_LT(c.force.head<3>().dot(axis), 0.0);
+}
+
+TEST(ContactSpecialCases, AxesThroughEachOtherStayFinite)
+{
+  // a deep, unphysical overlap (axes intersecting): finite forces along the common normal
+  const Model m = twoStruts(0.3, 0.5);
+  Eigen::VectorXd q(m.nq);
+  q.segment<3>(0) = Vec3::Zero();
+  q.segment<4>(3) = thetaFromZAxis(Vec3::UnitX());
+  q.segment<3>(7) = Vec3(0.0, 0.0, 0.0);
+  q.segment<4>(10) = thetaFromZAxis(Vec3::UnitY());
+  std::mt19937 rng(12);
+  ContactContribution c;
+  const ContactPairState st = evaluateContact(m, 0, q, randomVector(m.nq, 1.0, rng), 0.1, ContactMode::kDynamic, &c);
+  EXPECT_TRUE(st.active);
+  EXPECT_NEAR(std::abs(st.normal.z()), 1.0, 1e-12);
+  EXPECT_TRUE(c.force.allFinite() && c.stiffness.allFinite() && c.damping.allFinite());
+}
