@@ -379,4 +379,42 @@ ContactPairState evaluateContact(const Model& model, int pair, const Eigen::Vect
   return st;
 }
 
+bool passedThrough(const Model& model, int pair, const Eigen::VectorXd& q0, const Eigen::VectorXd& q1)
+{
+  const StrutPair& p = model.checked_pairs[pair];
+  const Body& ba = model.bodies[p.body_a];
+  const Body& bb = model.bodies[p.body_b];
+  const StrutAxis a0 = strutAxis(ba, q0, nullptr), b0 = strutAxis(bb, q0, nullptr);
+  const StrutAxis a1 = strutAxis(ba, q1, nullptr), b1 = strutAxis(bb, q1, nullptr);
+  const Vec3 m0 = a0.axis.cross(b0.axis), m1 = a1.axis.cross(b1.axis);
+  if (m0.dot(m1) <= 0.0)
+    return false;
+  // signed distance of the axis lines (times |a1 x a2|) at both ends of the step
+  const double side0 = (a0.centre - b0.centre).dot(m0), side1 = (a1.centre - b1.centre).dot(m1);
+  if (side0 * side1 > 0.0 || (side0 == 0.0 && side1 == 0.0))
+    return false;
+  // where the lines met, moving linearly between the two states: inside both struts?
+  const double tau = side0 / (side0 - side1);
+  const Vec3 ca = (1.0 - tau) * a0.centre + tau * a1.centre, cb = (1.0 - tau) * b0.centre + tau * b1.centre;
+  const Vec3 da = (1.0 - tau) * a0.axis + tau * a1.axis, db = (1.0 - tau) * b0.axis + tau * b1.axis;
+  const double aa = da.squaredNorm(), bbn = db.squaredNorm(), ab = da.dot(db);
+  const double det = aa * bbn - ab * ab;
+  if (det <= 1e-12 * aa * bbn)
+    return false;
+  const Vec3 r = ca - cb;
+  const double sa = (ab * db.dot(r) - bbn * da.dot(r)) / det;  // P_a = ca + sa da
+  const double sb = (aa * db.dot(r) - ab * da.dot(r)) / det;   // P_b = cb + sb db
+  const double reach_a = (a0.half_length + b0.radius) / std::sqrt(aa);
+  const double reach_b = (b0.half_length + a0.radius) / std::sqrt(bbn);
+  return std::abs(sa) <= reach_a && std::abs(sb) <= reach_b;
+}
+
+int firstPassedThrough(const Model& model, const Eigen::VectorXd& q0, const Eigen::VectorXd& q1)
+{
+  for (size_t i = 0; i < model.checked_pairs.size(); ++i)
+    if (passedThrough(model, static_cast<int>(i), q0, q1))
+      return static_cast<int>(i);
+  return -1;
+}
+
 }  // namespace active_tensegrity::core

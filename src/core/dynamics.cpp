@@ -139,6 +139,16 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law)
     if (sum.residual <= options_.newton_tolerance)
     {
       predict(s, h, qdd, q_, qd_, acc_);
+      const int crossed = system_.model().contact.enabled ? firstPassedThrough(system_.model(), s.q, q_) : -1;
+      if (crossed >= 0)
+      {
+        // a step that jumps a strut through another is refused (and cut), never accepted silently
+        const StrutPair& p = system_.model().checked_pairs[crossed];
+        sum.status = SolveStatus::kPassedThrough;
+        sum.message = "struts '" + system_.model().bodies[p.body_a].name + "' and '" +
+                      system_.model().bodies[p.body_b].name + "' passed through each other";
+        return sum;
+      }
       s.q = q_;
       s.qd = qd_;
       s.acc = acc_;

@@ -27,6 +27,8 @@ const char* toString(SolveStatus s)
       return "singular";
     case SolveStatus::kNonFinite:
       return "non_finite";
+    case SolveStatus::kPassedThrough:
+      return "passed_through";
   }
   return "unknown";
 }

@@ -141,6 +141,17 @@ Summary StaticSolver::followPath(State& s, const ActuationValues& u_end, int ste
         attempt = solve(trial, u);
         total.iterations += attempt.iterations;
       }
+      if (attempt.ok() && system_.model().contact.enabled)
+      {
+        const int crossed = firstPassedThrough(system_.model(), s.q, trial.q);
+        if (crossed >= 0)
+        {
+          const StrutPair& p = system_.model().checked_pairs[crossed];
+          attempt.status = SolveStatus::kPassedThrough;
+          attempt.message = "struts '" + system_.model().bodies[p.body_a].name + "' and '" +
+                            system_.model().bodies[p.body_b].name + "' passed through each other";
+        }
+      }
       if (attempt.ok())
       {
         previous = s;

@@ -90,4 +90,13 @@ ContactPairState contactGeometry(const Model& model, int pair, const Eigen::Vect
 ContactPairState evaluateContact(const Model& model, int pair, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
                                  double impact_speed, ContactMode mode, ContactContribution* out);
 
+/// True when the axes of pair `pair` passed through each other between q0 and q1: the signed distance
+/// (c1 - c2) . (a1 x a2) of the axis lines changed sign while the lines' closest points lie inside both
+/// segments at q1 and the struts touched or overlapped at q0 or q1. A common normal a1 x a2 that turned
+/// by more than 90 degrees (motion through a parallel configuration) is not judged.
+bool passedThrough(const Model& model, int pair, const Eigen::VectorXd& q0, const Eigen::VectorXd& q1);
+
+/// The first checked pair that passed through between q0 and q1, or -1.
+int firstPassedThrough(const Model& model, const Eigen::VectorXd& q0, const Eigen::VectorXd& q1);
+
 }  // namespace active_tensegrity::core

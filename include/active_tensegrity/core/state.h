@@ -34,7 +34,8 @@ enum class SolveStatus
   kConverged,
   kMaxIterations,  // Newton did not converge within max_iterations (after all step cuts)
   kSingular,       // the Newton matrix could not be factorized (a mechanism, or a degenerate state)
-  kNonFinite       // a NaN or infinity appeared
+  kNonFinite,      // a NaN or infinity appeared
+  kPassedThrough   // the solution has two checked struts passed through each other (contact tunnelling)
 };
 
 const char* toString(SolveStatus s);
