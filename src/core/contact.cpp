@@ -178,20 +178,78 @@ ContactPairState evaluateContact(const Model& model, int pair, const Eigen::Vect
   const StrutAxis b = strutAxis(model.bodies[p.body_b], q, &qd);
   const Closest c = closest(a, b);
   ContactPairState st = baseState(pair, c, a, b);
-
-  // velocities of the axis points at fixed s, and the penetration rate (also outside contact: the
-  // dynamics solver takes the impact speed from it)
-  const Vec3 axis_rate1 = a.axis_jac * a.theta_rate, axis_rate2 = b.axis_jac * b.theta_rate;
-  const Vec3 v1 = a.centre_rate + c.s1 * axis_rate1;
-  const Vec3 v2 = b.centre_rate + c.s2 * axis_rate2;
-  st.penetration_rate = -c.n.dot(v1 - v2);
   if (out)
   {
     out->force.setZero();
     out->stiffness.setZero();
     out->damping.setZero();
   }
+
+  // velocities of the axis points at fixed s, and the penetration rate (also outside contact: the
+  // dynamics solver takes the impact speed from it)
+  const Vec3 axis_rate1 = a.axis_jac * a.theta_rate, axis_rate2 = b.axis_jac * b.theta_rate;
+  const Vec3 v1 = a.centre_rate + c.s1 * axis_rate1;
+  const Vec3 v2 = b.centre_rate + c.s2 * axis_rate2;
+  const Vec3 dv = v1 - v2;
+  st.penetration_rate = -c.n.dot(dv);
   if (!st.active)
+    return st;
+
+  // the forces: stiffness from the crossing angle, then Lankarani-Nikravesh (dynamics) or Hertz
+  // (statics), never pulling
+  const double dot = a.axis.dot(b.axis), m1 = a.axis.squaredNorm(), m2 = b.axis.squaredNorm();
+  const double cos2 = dot * dot / (m1 * m2);
+  const StiffnessValue kv = contactStiffness(p.stiffness90, cos2, set.min_crossing_angle);
+  st.stiffness = kv.k;
+  const double damping =
+      dynamic ? 3.0 * (1.0 - set.restitution * set.restitution) / (4.0 * std::max(impact_speed, set.min_impact_speed)) :
+                0.0;
+  const double hysteresis = 1.0 + damping * st.penetration_rate;
+  if (hysteresis <= 0.0)
+    return st;
+  const double zeta = st.penetration;
+  const double z15 = zeta * std::sqrt(zeta);
+  const double fn = kv.k * z15 * hysteresis;
+  st.normal_force = fn;
+  st.force_on_a = fn * c.n;
+
+  // friction (dynamics only, and only when mu > 0): slip of the contact points as material points,
+  // u_A = s1 z - r1 A1^T n, u_B = s2 z + r2 A2^T n
+  const bool friction = dynamic && set.friction > 0.0;
+  const Vec4 conj1 = kConjugate.cwiseProduct(a.theta), conj2 = kConjugate.cwiseProduct(b.theta);
+  Mat3 at1, at2;  // A^T
+  Vec3 ua, ub;
+  Mat34 bua, bub;
+  Vec3 vtol = Vec3::Zero(), vt = Vec3::Zero(), t = Vec3::Zero(), f = Vec3::Zero();
+  double cd = 0.0, dcd = 0.0, ft = 0.0;
+  if (friction)
+  {
+    at1 = rotationMatrix(conj1);
+    at2 = rotationMatrix(conj2);
+    ua = c.s1 * kAxis - a.radius * (at1 * c.n);
+    ub = c.s2 * kAxis + b.radius * (at2 * c.n);
+    bua = pointJacobianTheta(a.theta, ua);
+    bub = pointJacobianTheta(b.theta, ub);
+    vtol = a.centre_rate + bua * a.theta_rate - b.centre_rate - bub * b.theta_rate;
+    vt = vtol - c.n.dot(vtol) * c.n;
+    st.slip_speed = vt.norm();
+    if (st.slip_speed > set.stick_velocity)
+    {
+      t = vt / st.slip_speed;
+      cd = 1.0;
+      if (st.slip_speed < set.slip_velocity)
+      {
+        dcd = 1.0 / (set.slip_velocity - set.stick_velocity);
+        cd = (st.slip_speed - set.stick_velocity) * dcd;
+      }
+      ft = set.friction * cd * fn;
+      f = -ft * t;  // on strut a at PA
+      st.friction_force = ft;
+      st.friction_on_a = f;
+      st.force_on_a += f;
+    }
+  }
+  if (!out)
     return st;
 
   // Jacobians over x = [q_a; q_b] (14 columns): axis points at fixed s, axes
@@ -212,7 +270,7 @@ ContactPairState evaluateContact(const Model& model, int pair, const Eigen::Vect
     const double h11 = a.axis.squaredNorm(), h12 = -a.axis.dot(b.axis), h22 = -b.axis.squaredNorm();
     if (c.free1 && c.free2)
     {
-      const double det = h11 * h22 - h12 * (-h12);  // H = [h11 h12; -h12 h22]
+      const double det = h11 * h22 + h12 * h12;  // H = [h11 h12; -h12 h22]
       ds1 = -(h22 * g1 - h12 * g2) / det;
       ds2 = -(h11 * g2 + h12 * g1) / det;
     }
@@ -223,26 +281,17 @@ ContactPairState evaluateContact(const Model& model, int pair, const Eigen::Vect
   }
   const Mat3x14 jd = jp1 - jp2 + a.axis * ds1 - b.axis * ds2;
   const Mat3 proj = Mat3::Identity() - c.n * c.n.transpose();
-  const double h_safe = std::max(c.h, 1e-12);
-  const Mat3x14 jn = c.h > 0.0 ? Mat3x14(proj * jd / h_safe) : Mat3x14::Zero();
+  const Mat3x14 jn = c.h > 0.0 ? Mat3x14(proj * jd / c.h) : Mat3x14::Zero();
   const Row14 jzeta = -c.n.transpose() * jd;
-  const double zeta = st.penetration;
 
   // penetration rate
-  Mat3x14 jqv1 = Mat3x14::Zero(), jqv2 = Mat3x14::Zero();
-  jqv1.block<3, 4>(0, 3) = c.s1 * pointJacobianTheta(a.theta_rate, kAxis);
-  jqv1 += axis_rate1 * ds1;
-  jqv2.block<3, 4>(0, 10) = c.s2 * pointJacobianTheta(b.theta_rate, kAxis);
-  jqv2 += axis_rate2 * ds2;
-  const Vec3 dv = v1 - v2;
+  Mat3x14 jqv1 = axis_rate1 * ds1, jqv2 = axis_rate2 * ds2;
+  jqv1.block<3, 4>(0, 3) += c.s1 * pointJacobianTheta(a.theta_rate, kAxis);
+  jqv2.block<3, 4>(0, 10) += c.s2 * pointJacobianTheta(b.theta_rate, kAxis);
   const Row14 jq_rate = -dv.transpose() * jn - c.n.transpose() * (jqv1 - jqv2);
   const Row14 jqd_rate = -c.n.transpose() * (jp1 - jp2);
 
-  // stiffness from the crossing angle
-  const double dot = a.axis.dot(b.axis), m1 = a.axis.squaredNorm(), m2 = b.axis.squaredNorm();
-  const double cos2 = dot * dot / (m1 * m2);
-  const StiffnessValue kv = contactStiffness(p.stiffness90, cos2, set.min_crossing_angle);
-  st.stiffness = kv.k;
+  // stiffness
   Row14 jk = Row14::Zero();
   if (kv.dk_dc2 != 0.0)
   {
@@ -251,46 +300,10 @@ ContactPairState evaluateContact(const Model& model, int pair, const Eigen::Vect
     jk = kv.dk_dc2 * (2.0 * dot * jdot - cos2 * (m2 * jm1 + m1 * jm2)) / (m1 * m2);
   }
 
-  // normal force: Lankarani-Nikravesh in dynamics, Hertz in statics, never pulling
-  const double damping =
-      dynamic ? 3.0 * (1.0 - set.restitution * set.restitution) / (4.0 * std::max(impact_speed, set.min_impact_speed)) :
-                0.0;
-  const double hysteresis = dynamic ? 1.0 + damping * st.penetration_rate : 1.0;
-  if (hysteresis <= 0.0)
-    return st;
-  const double z15 = zeta * std::sqrt(zeta);
-  const double fn = kv.k * z15 * hysteresis;
-  st.normal_force = fn;
-  st.force_on_a = fn * c.n;
+  // normal force F_N and the generalized normal force g F_N with g = [n; s1 B1^T n; -n; -s2 B2^T n]
   const Row14 jq_fn =
       z15 * hysteresis * jk + 1.5 * kv.k * std::sqrt(zeta) * hysteresis * jzeta + kv.k * z15 * damping * jq_rate;
   const Row14 jqd_fn = kv.k * z15 * damping * jqd_rate;
-  if (!out)
-  {
-    // friction magnitude for the report only
-    if (dynamic && set.friction > 0.0)
-    {
-      const Vec4 conj1 = kConjugate.cwiseProduct(a.theta), conj2 = kConjugate.cwiseProduct(b.theta);
-      const Vec3 ua = c.s1 * kAxis - a.radius * (rotationMatrix(conj1) * c.n);
-      const Vec3 ub = c.s2 * kAxis + b.radius * (rotationMatrix(conj2) * c.n);
-      const Vec3 vtol = a.centre_rate + pointJacobianTheta(a.theta, ua) * a.theta_rate - b.centre_rate -
-                        pointJacobianTheta(b.theta, ub) * b.theta_rate;
-      const Vec3 vt = proj * vtol;
-      st.slip_speed = vt.norm();
-      if (st.slip_speed > set.stick_velocity)
-      {
-        const double cd = st.slip_speed >= set.slip_velocity ?
-                              1.0 :
-                              (st.slip_speed - set.stick_velocity) / (set.slip_velocity - set.stick_velocity);
-        st.friction_force = set.friction * cd * fn;
-        st.friction_on_a = -st.friction_force * vt / st.slip_speed;
-        st.force_on_a += st.friction_on_a;
-      }
-    }
-    return st;
-  }
-
-  // generalized normal force g F_N with g = [n; s1 B1^T n; -n; -s2 B2^T n]
   Vec14 g;
   g << c.n, c.s1 * a.axis_jac.transpose() * c.n, -c.n, -c.s2 * b.axis_jac.transpose() * c.n;
   Mat14 jg = Mat14::Zero();
@@ -300,26 +313,17 @@ ContactPairState evaluateContact(const Model& model, int pair, const Eigen::Vect
   jg.block<3, 14>(7, 0) = -jn;
   jg.block<4, 14>(10, 0) = -(c.s2 * b.axis_jac.transpose() * jn + (b.axis_jac.transpose() * c.n) * ds2);
   jg.block<4, 4>(10, 10) -= pointHessianTheta(c.s2 * kAxis, c.n);
-  Vec14 force = fn * g;
+  out->force = fn * g;
   Mat14 jq_force = g * jq_fn + fn * jg;
   Mat14 jqd_force = g * jqd_fn;
 
-  // friction (dynamics only, and only when mu > 0)
-  if (dynamic && set.friction > 0.0)
+  if (ft > 0.0)
   {
-    // contact points as material points: u_A = s1 z - r1 A1^T n, u_B = s2 z + r2 A2^T n
-    const Vec4 conj1 = kConjugate.cwiseProduct(a.theta), conj2 = kConjugate.cwiseProduct(b.theta);
-    const Mat3 at1 = rotationMatrix(conj1), at2 = rotationMatrix(conj2);  // A^T
-    const Vec3 ua = c.s1 * kAxis - a.radius * (at1 * c.n);
-    const Vec3 ub = c.s2 * kAxis + b.radius * (at2 * c.n);
+    // friction: Q_T = [f; B_A^T f; -f; -B_B^T f] with f = -F_T t
     Mat3x14 jua = kAxis * ds1 - a.radius * (at1 * jn);
     jua.block<3, 4>(0, 3) -= a.radius * pointJacobianTheta(conj1, c.n) * kConjugate.asDiagonal();
     Mat3x14 jub = kAxis * ds2 + b.radius * (at2 * jn);
     jub.block<3, 4>(0, 10) += b.radius * pointJacobianTheta(conj2, c.n) * kConjugate.asDiagonal();
-
-    const Mat34 bua = pointJacobianTheta(a.theta, ua), bub = pointJacobianTheta(b.theta, ub);
-    const Vec3 vpa = a.centre_rate + bua * a.theta_rate;
-    const Vec3 vpb = b.centre_rate + bub * b.theta_rate;
     Mat3x14 jq_vtol = rotationRate(a.theta, a.theta_rate) * jua - rotationRate(b.theta, b.theta_rate) * jub;
     jq_vtol.block<3, 4>(0, 3) += pointJacobianTheta(a.theta_rate, ua);
     jq_vtol.block<3, 4>(0, 10) -= pointJacobianTheta(b.theta_rate, ub);
@@ -329,51 +333,31 @@ ContactPairState evaluateContact(const Model& model, int pair, const Eigen::Vect
     jqd_vtol.block<3, 3>(0, 7) = -Mat3::Identity();
     jqd_vtol.block<3, 4>(0, 10) = -bub;
 
-    const Vec3 vtol = vpa - vpb;
     const double vn = c.n.dot(vtol);
-    const Vec3 vt = vtol - vn * c.n;
-    st.slip_speed = vt.norm();
-    if (st.slip_speed > set.stick_velocity)
-    {
-      const Mat3x14 jq_vt = proj * jq_vtol - vn * jn - c.n * (vtol.transpose() * jn);
-      const Mat3x14 jqd_vt = proj * jqd_vtol;
-      const Vec3 t = vt / st.slip_speed;
-      const Mat3 tproj = (Mat3::Identity() - t * t.transpose()) / st.slip_speed;
-      double cd = 1.0, dcd = 0.0;
-      if (st.slip_speed < set.slip_velocity)
-      {
-        dcd = 1.0 / (set.slip_velocity - set.stick_velocity);
-        cd = (st.slip_speed - set.stick_velocity) * dcd;
-      }
-      const double ft = set.friction * cd * fn;
-      st.friction_force = ft;
-      const Vec3 f = -ft * t;  // on strut a at PA
-      st.friction_on_a = f;
-      st.force_on_a += f;
-      const Row14 jq_ft = set.friction * (fn * dcd * t.transpose() * jq_vt + cd * jq_fn);
-      const Row14 jqd_ft = set.friction * (fn * dcd * t.transpose() * jqd_vt + cd * jqd_fn);
-      const Mat3x14 jq_f = -(t * jq_ft + ft * tproj * jq_vt);
-      const Mat3x14 jqd_f = -(t * jqd_ft + ft * tproj * jqd_vt);
+    const Mat3x14 jq_vt = proj * jq_vtol - vn * jn - c.n * (vtol.transpose() * jn);
+    const Mat3x14 jqd_vt = proj * jqd_vtol;
+    const Mat3 tproj = (Mat3::Identity() - t * t.transpose()) / st.slip_speed;
+    const Row14 jq_ft = set.friction * (fn * dcd * t.transpose() * jq_vt + cd * jq_fn);
+    const Row14 jqd_ft = set.friction * (fn * dcd * t.transpose() * jqd_vt + cd * jqd_fn);
+    const Mat3x14 jq_f = -(t * jq_ft + ft * tproj * jq_vt);
+    const Mat3x14 jqd_f = -(t * jqd_ft + ft * tproj * jqd_vt);
 
-      Vec14 qt;
-      qt << f, bua.transpose() * f, -f, -bub.transpose() * f;
-      force += qt;
-      Mat4x14 jq_rot_a = bua.transpose() * jq_f + transposedPointJacobianTimes(a.theta, f) * jua;
-      jq_rot_a.block<4, 4>(0, 3) += pointHessianTheta(ua, f);
-      Mat4x14 jq_rot_b = bub.transpose() * jq_f + transposedPointJacobianTimes(b.theta, f) * jub;
-      jq_rot_b.block<4, 4>(0, 10) += pointHessianTheta(ub, f);
-      jq_force.block<3, 14>(0, 0) += jq_f;
-      jq_force.block<4, 14>(3, 0) += jq_rot_a;
-      jq_force.block<3, 14>(7, 0) -= jq_f;
-      jq_force.block<4, 14>(10, 0) -= jq_rot_b;
-      jqd_force.block<3, 14>(0, 0) += jqd_f;
-      jqd_force.block<4, 14>(3, 0) += bua.transpose() * jqd_f;
-      jqd_force.block<3, 14>(7, 0) -= jqd_f;
-      jqd_force.block<4, 14>(10, 0) -= bub.transpose() * jqd_f;
-    }
+    Vec14 qt;
+    qt << f, bua.transpose() * f, -f, -bub.transpose() * f;
+    out->force += qt;
+    Mat4x14 jq_rot_a = bua.transpose() * jq_f + transposedPointJacobianTimes(a.theta, f) * jua;
+    jq_rot_a.block<4, 4>(0, 3) += pointHessianTheta(ua, f);
+    Mat4x14 jq_rot_b = bub.transpose() * jq_f + transposedPointJacobianTimes(b.theta, f) * jub;
+    jq_rot_b.block<4, 4>(0, 10) += pointHessianTheta(ub, f);
+    jq_force.block<3, 14>(0, 0) += jq_f;
+    jq_force.block<4, 14>(3, 0) += jq_rot_a;
+    jq_force.block<3, 14>(7, 0) -= jq_f;
+    jq_force.block<4, 14>(10, 0) -= jq_rot_b;
+    jqd_force.block<3, 14>(0, 0) += jqd_f;
+    jqd_force.block<4, 14>(3, 0) += bua.transpose() * jqd_f;
+    jqd_force.block<3, 14>(7, 0) -= jqd_f;
+    jqd_force.block<4, 14>(10, 0) -= bub.transpose() * jqd_f;
   }
-
-  out->force = force;
   out->stiffness = -jq_force;
   out->damping = -jqd_force;
   return st;

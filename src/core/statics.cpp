@@ -1,5 +1,6 @@
 #include "active_tensegrity/core/statics.h"
 
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 
@@ -120,8 +121,10 @@ Summary StaticSolver::followPath(State& s, const ActuationValues& u_end, int ste
     int cuts = 0;
     while (w < w_target)
     {
-      double dw = (w_target - w) / std::pow(2.0, cuts);
-      const double w_next = w + dw;
+      // the increment is the requested one halved `cuts` times; after a success it doubles again
+      // (one cut less), and the last piece of a load step lands exactly on its target
+      const double dw = std::min(w_target - w, std::ldexp(1.0 / steps, -cuts));
+      const double w_next = w_target - (w + dw) <= 1e-9 / steps ? w_target : w + dw;
       const ActuationValues u = blend(u_start, u_end, w_next);
       // secant predictor from the last two equilibria, then a plain warm start
       State trial = s;
@@ -159,6 +162,7 @@ Summary StaticSolver::followPath(State& s, const ActuationValues& u_end, int ste
         trial.t = w_next;
         s = trial;
         w = w_next;
+        cuts = std::max(0, cuts - 1);
         total.residual = attempt.residual;
         continue;
       }

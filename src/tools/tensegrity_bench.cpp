@@ -2,13 +2,26 @@
 //   tensegrity_bench steps SCENE [--set key=value]... [--repeat N]
 // runs the scene's analysis N times and prints the wall time per solver step (median and minimum
 // over the runs), Newton iterations per step, and for dynamic runs the real-time factor.
+//   tensegrity_bench contact-pair [--repeat N]
+// times one strut pair's contact evaluation (evaluateContact, contactGeometry) in dynamics with
+// friction, with and without the tangents, and in statics: ns per call, the median over N loops of
+// 100000 calls on a two-strut model built in code.
+//   tensegrity_bench broad-phase [--repeat N]
+// random scenes of 10 to 1000 struts (1 m long, radius 0.02 m, a constant number of struts per m^3)
+// with every pair checked: candidates found and the time of BroadPhase::candidates() (the sweep),
+// BroadPhase::direct() and of the narrow phase over the candidates (median over N timings).
 #include <algorithm>
+#include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <iostream>
+#include <random>
 #include <string>
 #include <vector>
 
 #include "active_tensegrity/core/analysis.h"
+#include "active_tensegrity/core/broad_phase.h"
+#include "active_tensegrity/core/contact.h"
 #include "active_tensegrity/core/scene.h"
 
 namespace at = active_tensegrity::core;
@@ -17,7 +30,250 @@ namespace
 {
 const char* kUsage =
     "usage: tensegrity_bench steps SCENE.yaml [--set key=value]... [--repeat N]\n"
-    "  Runs the scene's analysis N times (default 5) and prints wall time and Newton iterations per step.\n";
+    "  Runs the scene's analysis N times (default 5) and prints wall time and Newton iterations per step.\n"
+    "       tensegrity_bench contact-pair [--repeat N]\n"
+    "  Times one strut pair's contact evaluation (dynamic with friction, with and without tangents;\n"
+    "  static): ns per call, median over N (default 5) loops of 100000 calls.\n"
+    "       tensegrity_bench broad-phase [--repeat N]\n"
+    "  Random scenes of 10 to 1000 struts with all pairs checked: candidates and the time of the broad\n"
+    "  phase (sweep and direct) and of the narrow phase over the candidates, median over N (default 5).\n";
+
+using Clock = std::chrono::steady_clock;
+
+double seconds(Clock::time_point t0, Clock::time_point t1)
+{
+  return std::chrono::duration<double>(t1 - t0).count();
+}
+
+// keeps a result alive so that the timed calls cannot be dropped
+volatile double g_sink = 0.0;
+
+// median over `repeat` samples of the time of one call of f (s); each sample runs f `calls` times
+template <typename F>
+double medianPerCall(const F& f, int calls, int repeat)
+{
+  std::vector<double> t;
+  for (int r = 0; r < repeat; ++r)
+  {
+    const Clock::time_point t0 = Clock::now();
+    for (int i = 0; i < calls; ++i)
+      f();
+    t.push_back(seconds(t0, Clock::now()) / calls);
+  }
+  std::sort(t.begin(), t.end());
+  return t[t.size() / 2];
+}
+
+// calls per sample so that one sample takes about `target` seconds (at least 1)
+template <typename F>
+int callsFor(const F& f, double target)
+{
+  const Clock::time_point t0 = Clock::now();
+  f();
+  const double once = std::max(1e-9, seconds(t0, Clock::now()));
+  return std::max(1, static_cast<int>(target / once));
+}
+
+at::Body strut(const std::string& name, double length, double radius, double youngs_modulus, double poisson_ratio)
+{
+  at::Body b;
+  b.name = name;
+  b.kind = at::BodyKind::kStrut;
+  b.length = length;
+  at::StrutLayer layer;
+  layer.material = "bench";
+  layer.outer_radius = radius;
+  layer.density = 2000.0;
+  layer.youngs_modulus = youngs_modulus;
+  layer.poisson_ratio = poisson_ratio;
+  b.layers.push_back(layer);
+  b.mass = layer.density * M_PI * radius * radius * length;
+  const double jt = b.mass * (3.0 * radius * radius + length * length) / 12.0;
+  b.inertia = at::Vec3(jt, jt, 0.5 * b.mass * radius * radius);
+  return b;
+}
+
+// Theta_dot tangent to the unit sphere at theta
+at::Vec4 tangentRate(const at::Vec4& theta, const at::Vec4& rate)
+{
+  return rate - theta.dot(rate) * theta;
+}
+
+int contactPair(int repeat)
+{
+  // two free rubber-coated struts (as test_contact's twoStruts), crossing at about 75 degrees with the
+  // closest points inside both axes and 2 mm of overlap, sliding across each other faster than v1
+  at::Model m;
+  m.name = "pair";
+  m.bodies.push_back(strut("A", 1.2, 0.04, 2.0e7, 0.45));
+  m.bodies.push_back(strut("B", 1.0, 0.05, 2.0e7, 0.45));
+  at::finalizeModel(m);
+  m.contact.enabled = true;
+  m.contact.friction = 0.1;
+  m.contact.restitution = 0.5;
+  m.contact.stick_velocity = 0.01;
+  m.contact.slip_velocity = 0.1;
+  m.checked_pairs.push_back(at::makeStrutPair(m, 0, 1));
+  const at::Vec3 ax = at::Vec3(1.0, 0.2, -0.1).normalized(), bx = at::Vec3(0.1, 1.0, 0.3).normalized();
+  const at::Vec3 n = ax.cross(bx).normalized();
+  const double s1 = 0.2, s2 = -0.15, overlap = 2e-3;
+  const at::Vec3 p1 = at::Vec3(0.1, -0.2, 0.3) + s1 * ax;
+  const at::Vec3 p2 = p1 - (0.04 + 0.05 - overlap) * n;
+  Eigen::VectorXd q(m.nq), qd(m.nq);
+  q.segment<3>(0) = p1 - s1 * ax;
+  q.segment<4>(3) = at::thetaFromZAxis(ax);
+  q.segment<3>(7) = p2 - s2 * bx;
+  q.segment<4>(10) = at::thetaFromZAxis(bx);
+  qd.segment<3>(0) = at::Vec3(0.3, -0.1, 0.05);
+  qd.segment<4>(3) = tangentRate(q.segment<4>(3), at::Vec4(0.1, -0.2, 0.3, 0.05));
+  qd.segment<3>(7) = at::Vec3(-0.2, 0.25, 0.0);
+  qd.segment<4>(10) = tangentRate(q.segment<4>(10), at::Vec4(-0.05, 0.1, 0.2, -0.1));
+  const double v0 = 0.5;
+
+  at::Model frictionless = m;
+  frictionless.contact.friction = 0.0;
+  const at::ContactPairState st = at::evaluateContact(m, 0, q, qd, v0, at::ContactMode::kDynamic, nullptr);
+  if (!st.active || st.normal_force <= 0.0 || st.slip_speed <= m.contact.slip_velocity)
+  {
+    std::cerr << "tensegrity_bench: the pair is not in sliding contact\n";
+    return 3;
+  }
+  std::printf("pair: A 1.2 m x r 0.04 m, B 1.0 m x r 0.05 m, E 2e7 Pa, nu 0.45; crossing %.1f deg, region %s\n",
+              std::acos(std::abs(ax.dot(bx))) * 180.0 / M_PI,
+              st.region == at::ClosestRegion::kInterior ? "interior" : "end/parallel");
+  std::printf("state: penetration %.3g m, rate %.3g m/s, F_N %.4g N, slip %.3g m/s (v1 %.3g), F_T %.4g N (mu %.2g)\n",
+              st.penetration, st.penetration_rate, st.normal_force, st.slip_speed, m.contact.slip_velocity,
+              st.friction_force, m.contact.friction);
+
+  constexpr int kCalls = 100000;
+  at::ContactContribution c;
+  struct Row
+  {
+    const char* what;
+    double ns;
+  };
+  std::vector<Row> rows;
+  const auto time = [&](const char* what, const auto& f)
+  {
+    f();  // warm up
+    rows.push_back({ what, 1e9 * medianPerCall(f, kCalls, repeat) });
+  };
+  time("dynamic, friction (slip > v1), force + tangents",
+       [&]
+       {
+         g_sink = g_sink + at::evaluateContact(m, 0, q, qd, v0, at::ContactMode::kDynamic, &c).normal_force +
+                  c.stiffness(3, 12) + c.damping(5, 9);
+       });
+  time("dynamic, friction (slip > v1), state only (out = nullptr)", [&]
+       { g_sink = g_sink + at::evaluateContact(m, 0, q, qd, v0, at::ContactMode::kDynamic, nullptr).friction_force; });
+  time("dynamic, mu = 0, force + tangents",
+       [&]
+       {
+         g_sink = g_sink + at::evaluateContact(frictionless, 0, q, qd, v0, at::ContactMode::kDynamic, &c).normal_force +
+                  c.stiffness(3, 12) + c.damping(5, 9);
+       });
+  time("static (Hertz), force + tangents",
+       [&]
+       {
+         g_sink = g_sink + at::evaluateContact(m, 0, q, qd, 0.0, at::ContactMode::kStatic, &c).normal_force +
+                  c.stiffness(3, 12);
+       });
+  time("static (Hertz), state only (out = nullptr)", [&]
+       { g_sink = g_sink + at::evaluateContact(m, 0, q, qd, 0.0, at::ContactMode::kStatic, nullptr).normal_force; });
+  time("narrow phase only (contactGeometry)", [&] { g_sink = g_sink + at::contactGeometry(m, 0, q).gap; });
+  std::printf("time per call, median over %d loops of %d calls:\n", repeat, kCalls);
+  for (const Row& r : rows)
+    std::printf("  %-58s %8.1f ns\n", r.what, r.ns);
+  return 0;
+}
+
+// n struts of length 1 m and radius 0.02 m, centres uniform in a cube of n / density m^3, random
+// axes, every pair checked
+at::Model randomStruts(int n, double density, std::mt19937& rng)
+{
+  at::Model m;
+  m.name = "random";
+  for (int i = 0; i < n; ++i)
+    m.bodies.push_back(strut("S" + std::to_string(i), 1.0, 0.02, 210e9, 0.3));
+  at::finalizeModel(m);
+  const double side = std::cbrt(n / density);
+  std::uniform_real_distribution<double> u(0.0, side);
+  std::normal_distribution<double> g(0.0, 1.0);
+  m.q0.setZero(m.nq);
+  for (const at::Body& b : m.bodies)
+  {
+    m.q0.segment<3>(b.offset) = at::Vec3(u(rng), u(rng), u(rng));
+    m.q0.segment<4>(b.offset + 3) = at::thetaFromZAxis(at::Vec3(g(rng), g(rng), g(rng)));
+  }
+  m.checked_pairs.reserve(static_cast<size_t>(n) * (n - 1) / 2);
+  for (int i = 0; i < n; ++i)
+    for (int j = i + 1; j < n; ++j)
+      m.checked_pairs.push_back(at::makeStrutPair(m, i, j));
+  return m;
+}
+
+int broadPhase(int repeat)
+{
+  constexpr double kDensity = 4.0;  // struts per m^3
+  constexpr double kTarget = 0.02;  // s per timing sample
+  std::printf("struts 1 m x r 0.02 m, centres uniform in a cube of n / %.0f m^3, all pairs checked, margin 0;\n",
+              kDensity);
+  std::printf("times: median over %d samples of about %.0f ms each\n", repeat, 1e3 * kTarget);
+  std::printf("%6s %8s %6s %7s %8s %6s %9s %12s %12s %12s %12s\n", "n", "pairs", "cand", "contacts", "cand/n", "sweep",
+              "setup ms", "candidates", "direct", "narrow/cand", "narrow/all");
+  for (int n : { 10, 20, 50, 100, 200, 500, 1000 })
+  {
+    std::mt19937 rng(n);
+    const at::Model m = randomStruts(n, kDensity, rng);
+    const Clock::time_point t0 = Clock::now();
+    const at::BroadPhase broad(m);
+    const double setup = seconds(t0, Clock::now());
+    std::vector<int> cand, dir;
+    broad.candidates(m.q0, 0.0, cand);
+    broad.direct(m.q0, 0.0, dir);
+    if (cand != dir)
+    {
+      std::cerr << "tensegrity_bench: candidates() and direct() disagree at n = " << n << "\n";
+      return 3;
+    }
+    int contacts = 0;
+    for (size_t i = 0; i < m.checked_pairs.size(); ++i)
+      contacts += at::contactGeometry(m, static_cast<int>(i), m.q0).gap < 0.0 ? 1 : 0;
+
+    const auto f_cand = [&]
+    {
+      broad.candidates(m.q0, 0.0, cand);
+      g_sink = g_sink + cand.size();
+    };
+    const auto f_direct = [&]
+    {
+      broad.direct(m.q0, 0.0, dir);
+      g_sink = g_sink + dir.size();
+    };
+    const auto f_narrow = [&]
+    {
+      double s = 0.0;
+      for (int i : cand)
+        s += at::contactGeometry(m, i, m.q0).gap;
+      g_sink = g_sink + s;
+    };
+    const auto f_all = [&]
+    {
+      double s = 0.0;
+      for (size_t i = 0; i < m.checked_pairs.size(); ++i)
+        s += at::contactGeometry(m, static_cast<int>(i), m.q0).gap;
+      g_sink = g_sink + s;
+    };
+    const double t_cand = medianPerCall(f_cand, callsFor(f_cand, kTarget), repeat);
+    const double t_direct = medianPerCall(f_direct, callsFor(f_direct, kTarget), repeat);
+    const double t_narrow = medianPerCall(f_narrow, callsFor(f_narrow, kTarget), repeat);
+    const double t_all = medianPerCall(f_all, callsFor(f_all, kTarget), repeat);
+    std::printf("%6d %8zu %6zu %7d %8.2f %6s %9.2f %9.2f us %9.2f us %9.2f us %9.2f us\n", n, m.checked_pairs.size(),
+                cand.size(), contacts, static_cast<double>(cand.size()) / n, broad.usesSweep() ? "yes" : "no",
+                1e3 * setup, 1e6 * t_cand, 1e6 * t_direct, 1e6 * t_narrow, 1e6 * t_all);
+  }
+  return 0;
+}
 
 int steps(const std::string& scene, const std::vector<at::Override>& overrides, int repeat)
 {
@@ -58,20 +314,22 @@ int steps(const std::string& scene, const std::vector<at::Override>& overrides, 
 
 int main(int argc, char** argv)
 {
-  if (argc < 3 || std::string(argv[1]) != "steps")
+  const std::string command = argc >= 2 ? argv[1] : "";
+  const bool needs_scene = command == "steps";
+  if ((command != "steps" && command != "contact-pair" && command != "broad-phase") || (needs_scene && argc < 3))
   {
     std::cerr << kUsage;
     return 2;
   }
   std::vector<at::Override> overrides;
   int repeat = 5;
-  const std::string scene = argv[2];
+  const std::string scene = needs_scene ? argv[2] : "";
   try
   {
-    for (int i = 3; i < argc; ++i)
+    for (int i = needs_scene ? 3 : 2; i < argc; ++i)
     {
       const std::string arg = argv[i];
-      if (arg == "--set" && i + 1 < argc)
+      if (needs_scene && arg == "--set" && i + 1 < argc)
         overrides.push_back(at::parseOverride(argv[++i]));
       else if (arg == "--repeat" && i + 1 < argc)
         repeat = std::max(1, std::stoi(argv[++i]));
@@ -81,6 +339,10 @@ int main(int argc, char** argv)
         return 2;
       }
     }
+    if (command == "contact-pair")
+      return contactPair(repeat);
+    if (command == "broad-phase")
+      return broadPhase(repeat);
     return steps(scene, overrides, repeat);
   }
   catch (const std::exception& e)
