@@ -177,3 +177,68 @@ TEST(Statics, MechanismIsReportedNotHidden)
   EXPECT_NE(r.message.find("mechanism"), std::string::npos) << r.message;
   EXPECT_TRUE(s.q.allFinite());
 }
+
+// ---------------------------------------------------------------------------------------------------
+// the quadruplex with strut contact (paper Sec. 6.1, Fig. 10-11)
+
+namespace
+{
+struct ContactPath
+{
+  std::vector<double> v, force, gap;
+  std::vector<int> contacts;
+  double onset = -1.0;  // first v with a contact
+};
+
+ContactPath contactPath(double radius, double max_v, int steps, bool contact = true)
+{
+  const Model model = quadruplex({ { "struts.radius", std::to_string(radius) },
+                                   { "contact.enabled", contact ? "true" : "false" },
+                                   { "analysis.max_actuation", std::to_string(max_v) },
+                                   { "analysis.steps", std::to_string(steps) } });
+  ContactPath p;
+  const RunResult r = runAnalysis(model,
+                                  [&](const State& s)
+                                  {
+                                    const int n = static_cast<int>(activeContacts(model, s).size());
+                                    if (n > 0 && p.onset < 0.0)
+                                      p.onset = s.u[0].value;
+                                    p.v.push_back(s.u[0].value);
+                                    p.force.push_back(actuationForce(model, s, 0));
+                                    p.gap.push_back(minimumGap(model, s.q));
+                                    p.contacts.push_back(n);
+                                  });
+  EXPECT_TRUE(r.summary.ok()) << r.summary.message;
+  return p;
+}
+}  // namespace
+
+TEST(QuadruplexContact, OnsetComesLaterForThinnerStrutsAndStiffensThePath)
+{
+  // 1 mm load steps to v = 0.3 m, Rs = 4, 6, 8 cm
+  const ContactPath free = contactPath(0.06, 0.3, 300, false);
+  double previous_onset = 1.0;
+  for (double radius : { 0.04, 0.06, 0.08 })
+  {
+    const ContactPath p = contactPath(radius, 0.3, 300);
+    ASSERT_GT(p.onset, 0.0) << radius;
+    // the onset is where the no-contact path first overlaps, within a load step
+    const ContactPath ghost = contactPath(radius, 0.3, 300, false);
+    size_t first_overlap = 0;
+    while (first_overlap < ghost.gap.size() && ghost.gap[first_overlap] >= 0.0)
+      ++first_overlap;
+    EXPECT_NEAR(p.onset, ghost.v[first_overlap], 1.5e-3) << radius;
+    EXPECT_LT(p.onset, previous_onset) << "thicker struts touch earlier";
+    previous_onset = p.onset;
+    for (size_t i = 0; i < p.v.size(); ++i)
+    {
+      // before contact the path is the no-contact one; 0.1 m after onset the force is far above it
+      if (p.v[i] < p.onset - 1e-9)
+        EXPECT_NEAR(p.force[i], free.force[i], 1e-6 * (1.0 + std::abs(free.force[i]))) << radius << " v " << p.v[i];
+      if (p.v[i] > p.onset + 0.1)
+        EXPECT_GT(p.force[i], 5.0 * free.force[i]) << radius << " v " << p.v[i];
+      // Hertz keeps the overlap a tiny fraction of the radius (steel: tens of micrometres)
+      EXPECT_GT(p.gap[i], -0.005 * radius) << radius << " v " << p.v[i];
+    }
+  }
+}
