@@ -516,6 +516,26 @@ const std::vector<BadScene> kBadScenes = {
     { { kAnalysis, kAnalysis + "contact:\n  pairs: [[S1, S1]]\n" } },
     "contact.pairs",
     { "S1, S1" } },
+  { "RestitutionAboveOne",
+    { { kAnalysis, kAnalysis + "contact:\n  restitution: 1.5\n" } },
+    "contact.restitution",
+    { "[0, 1]", "1.5" } },
+  { "NegativeFriction",
+    { { kAnalysis, kAnalysis + "contact:\n  friction: -0.1\n" } },
+    "contact.friction",
+    { "negative", "-0.1" } },
+  { "SlipVelocityBelowStickVelocity",
+    { { kAnalysis, kAnalysis + "contact:\n  stick_velocity: 0.01\n  slip_velocity: 0.005\n" } },
+    "contact.slip_velocity",
+    { "stick_velocity", "0.005" } },
+  { "CrossingAngleOfNinetyDegrees",
+    { { kAnalysis, kAnalysis + "contact:\n  min_crossing_angle: 90\n" } },
+    "contact.min_crossing_angle",
+    { "90" } },
+  { "ContactSwitchNotABoolean",
+    { { kAnalysis, kAnalysis + "contact:\n  enabled: maybe\n" } },
+    "contact.enabled",
+    { "true or false", "maybe" } },
   { "PrestressAndRestLength",
     { { "prestress: 50.0", "prestress: 50.0\n    rest_length: 1.0" } },
     "cables.cords.rest_length",
@@ -583,4 +603,28 @@ TEST(BadScene, MissingFileIsNamed)
 {
   const std::string path = std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) + "/config/scenes/no_such_scene.yaml";
   EXPECT_TRUE(refused([&] { loadScene(path); }, "", { path, "cannot open" }));
+}
+
+TEST(ContactSettings, KeysReachTheModelAndPairsGetTheirStiffness)
+{
+  const Model m = loadScene(std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) + "/config/scenes/quadruplex.yaml",
+                            { { "contact.enabled", "true" },
+                              { "contact.restitution", "0.5" },
+                              { "contact.friction", "0.1" },
+                              { "contact.stick_velocity", "0.002" },
+                              { "contact.slip_velocity", "0.04" },
+                              { "contact.min_crossing_angle", "5" },
+                              { "contact.min_impact_speed", "0.01" } });
+  EXPECT_TRUE(m.contact.enabled);
+  EXPECT_EQ(m.contact.restitution, 0.5);
+  EXPECT_EQ(m.contact.friction, 0.1);
+  EXPECT_EQ(m.contact.stick_velocity, 0.002);
+  EXPECT_EQ(m.contact.slip_velocity, 0.04);
+  EXPECT_NEAR(m.contact.min_crossing_angle, 5.0 * M_PI / 180.0, 1e-15);
+  EXPECT_EQ(m.contact.min_impact_speed, 0.01);
+  // steel on steel (E 210 GPa, nu 0.31), r = 0.05 m: K90 = 4/3 E* sqrt(r)
+  const double estar = 210e9 / (2.0 * (1.0 - 0.31 * 0.31));
+  ASSERT_EQ(m.checked_pairs.size(), 6u);
+  for (const StrutPair& p : m.checked_pairs)
+    EXPECT_NEAR(p.stiffness90, 4.0 / 3.0 * estar * std::sqrt(0.05), 1e-6 * p.stiffness90);
 }
