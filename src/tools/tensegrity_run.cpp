@@ -16,10 +16,17 @@ namespace at = active_tensegrity::core;
 
 namespace
 {
-const char* kUsage = "usage: tensegrity_run SCENE.yaml [--set key=value]... [--out FILE.csv] [--summary FILE.yaml]\n"
-                     "  Runs the scene's analysis (static path or dynamic run) and writes one CSV row per output step\n"
-                     "  (stdout when --out is not given) and a YAML summary. Any scene key can be overridden with\n"
-                     "  --set, e.g. --set struts.radius=0.06 --set analysis.max_actuation=1.0\n";
+const char* kUsage =
+    "usage: tensegrity_run SCENE.yaml [--set key=value]... [--out FILE.csv] [--summary FILE.yaml]\n"
+    "                     [--contacts FILE.csv]\n"
+    "  Runs the scene's analysis (static path or dynamic run) and writes one CSV row per output step\n"
+    "  (stdout when --out is not given) and a YAML summary. Any scene key can be overridden with\n"
+    "  --set, e.g. --set struts.radius=0.06 --set analysis.max_actuation=1.0\n"
+    "  --contacts writes one row per strut pair in contact per output step (points, normal, forces).\n";
+
+const char* kContactColumns = "t,strut_a,strut_b,point_a_x,point_a_y,point_a_z,point_b_x,point_b_y,point_b_z,"
+                              "normal_x,normal_y,normal_z,penetration,penetration_rate,normal_force,friction_x,"
+                              "friction_y,friction_z\n";
 
 std::string csvNumber(double v)
 {
@@ -33,7 +40,7 @@ std::string csvNumber(double v)
 
 int main(int argc, char** argv)
 {
-  std::string scene, out_path, summary_path;
+  std::string scene, out_path, summary_path, contacts_path;
   std::vector<at::Override> overrides;
   try
   {
@@ -57,6 +64,8 @@ int main(int argc, char** argv)
         out_path = value("--out");
       else if (arg == "--summary")
         summary_path = value("--summary");
+      else if (arg == "--contacts")
+        contacts_path = value("--contacts");
       else if (!arg.empty() && arg[0] == '-')
         throw std::invalid_argument("unknown option '" + arg + "'");
       else if (scene.empty())
@@ -95,6 +104,17 @@ int main(int argc, char** argv)
     }
   }
   std::ostream& csv = out_path.empty() ? std::cout : file;
+  std::ofstream contacts;
+  if (!contacts_path.empty())
+  {
+    contacts.open(contacts_path);
+    if (!contacts)
+    {
+      std::cerr << "tensegrity_run: cannot write '" << contacts_path << "'\n";
+      return 1;
+    }
+    contacts << kContactColumns;
+  }
   const std::vector<std::string> cols = at::csvColumns(model);
   for (size_t i = 0; i < cols.size(); ++i)
     csv << (i ? "," : "") << cols[i];
@@ -112,6 +132,20 @@ int main(int argc, char** argv)
         for (size_t i = 0; i < row.size(); ++i)
           csv << (i ? "," : "") << csvNumber(row[i]);
         csv << "\n";
+        if (!contacts.is_open())
+          return;
+        for (const at::ContactPairState& c : at::activeContacts(model, s))
+        {
+          const at::StrutPair& p = model.checked_pairs[c.pair];
+          contacts << csvNumber(s.t) << "," << model.bodies[p.body_a].name << "," << model.bodies[p.body_b].name;
+          for (const at::Vec3* v : { &c.point_a, &c.point_b, &c.normal })
+            contacts << "," << csvNumber(v->x()) << "," << csvNumber(v->y()) << "," << csvNumber(v->z());
+          contacts << "," << csvNumber(c.penetration) << "," << csvNumber(c.penetration_rate) << ","
+                   << csvNumber(c.normal_force);
+          for (int k = 0; k < 3; ++k)
+            contacts << "," << csvNumber(c.friction_on_a(k));
+          contacts << "\n";
+        }
       },
       [&](double fraction)
       {

@@ -1,4 +1,5 @@
 // The batch command as a user runs it: exit codes, CSV shape, messages on bad input.
+#include <algorithm>
 #include <cstdio>
 #include <fstream>
 #include <sstream>
@@ -118,4 +119,27 @@ TEST(TensegrityRun, DynamicPrismRuns)
   ASSERT_EQ(r.code, 0) << r.output;
   const std::vector<std::string> rows = lines(csv);
   EXPECT_EQ(rows.size(), 1u + 1u + 10u);  // header, t = 0, every 5 ms
+}
+
+TEST(TensegrityRun, ContactsFileListsEveryTouchingPairPerOutputStep)
+{
+  // Rs = 0.05 m: the four neighbouring pairs touch from v = 0.138 m (docs/validation.md)
+  const std::string csv = tmp("qc.csv"), contacts = tmp("qc_contacts.csv");
+  const Result r = run(scene("quadruplex.yaml") +
+                       " --set contact.enabled=true --set analysis.steps=20 --set analysis.max_actuation=0.2 --out " +
+                       csv + " --summary " + tmp("qc.yaml") + " --contacts " + contacts);
+  ASSERT_EQ(r.code, 0) << r.output;
+  const std::vector<std::string> rows = lines(contacts);
+  ASSERT_FALSE(rows.empty());
+  EXPECT_EQ(rows[0].rfind("t,strut_a,strut_b,point_a_x", 0), 0u) << rows[0];
+  // load steps at v = 0.14 ... 0.2 (7 of them) with four pairs each
+  EXPECT_EQ(rows.size(), 1u + 7u * 4u);
+  for (size_t i = 1; i < rows.size(); ++i)
+  {
+    EXPECT_NE(rows[i].find(",S"), std::string::npos) << rows[i];
+    EXPECT_EQ(std::count(rows[i].begin(), rows[i].end(), ','), 17) << rows[i];
+  }
+  // the main CSV counts the same contacts
+  const std::vector<std::string> main_rows = lines(csv);
+  EXPECT_NE(main_rows.back().find(",4,"), std::string::npos) << main_rows.back();
 }
