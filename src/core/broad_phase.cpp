@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <limits>
+#include <stdexcept>
+#include <string>
 
 #include "active_tensegrity/core/rotation.h"
 
@@ -29,7 +31,9 @@ BroadPhase::BroadPhase(const Model& model) : model_(model)
         slot_[b] = static_cast<int>(struts_.size());
         struts_.push_back(b);
       }
-    pair_index_[pairKey(p.body_a, p.body_b)] = static_cast<int>(i);
+    if (!pair_index_.emplace(pairKey(p.body_a, p.body_b), static_cast<int>(i)).second)
+      throw std::invalid_argument("BroadPhase: the pair of bodies " + std::to_string(p.body_a) + " and " +
+                                  std::to_string(p.body_b) + " is listed twice in Model::checked_pairs");
   }
   // sorting n boxes costs about n log n comparisons; comparing every listed pair costs one each
   const double n = static_cast<double>(struts_.size());

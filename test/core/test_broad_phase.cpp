@@ -353,3 +353,11 @@ TEST(BroadPhase, AxisAlignedStrutsTouchingBy1nmAreCandidates)
         EXPECT_EQ(dir, expected) << what;
       }
 }
+
+TEST(BroadPhase, APairListedTwiceIsRefused)
+{
+  // the sweep finds a pair once: a duplicate would make it disagree with the direct comparison
+  Model m = parallelPair(0.03);
+  m.checked_pairs.push_back(makeStrutPair(m, 1, 0));
+  EXPECT_THROW(BroadPhase{ m }, std::invalid_argument);
+}

@@ -243,6 +243,9 @@ TEST(ContactTangent, EndAgainstSideIsExact)
     const ContactPairState st = evaluateContact(m, 0, q, qd, 0.5, ContactMode::kDynamic, nullptr);
     ASSERT_TRUE(st.active);
     ASSERT_GT(st.normal_force, 0.0);
+    // the normal runs from B's end to A's axis: A is pushed away from B's end
+    EXPECT_NEAR(st.normal.dot(-n), 1.0, 1e-9);
+    EXPECT_GT((st.force_on_a - st.friction_on_a).dot(-n), 0.0);
     expectExactTangents(m, q, qd, 0.5, ContactMode::kDynamic, "end against side, " + std::to_string(k));
   }
 }

@@ -14,9 +14,11 @@
 
 namespace active_tensegrity::core
 {
+/// Not thread-safe: its scratch (boxes, sort order) is shared by its const calls; use one per thread.
 class BroadPhase
 {
 public:
+  /// Throws std::invalid_argument when a pair of bodies is listed twice in model.checked_pairs.
   explicit BroadPhase(const Model& model);
 
   /// Indices (into Model::checked_pairs, ascending) of the pairs whose boxes, grown by `margin` (m),

@@ -54,7 +54,7 @@ using ActuationValues = std::vector<ActuationValue>;
 
 /// The equations of one model plus optional extra constraints (e.g. statics' spin locks), with a
 /// sparse Jacobian whose pattern is fixed at construction: rows and columns are [q; lambda], one
-/// group per body then one per constraint.
+/// group per body then one per constraint. Not thread-safe (contact scratch): one System per thread.
 class System
 {
 public:
