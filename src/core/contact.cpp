@@ -393,12 +393,4 @@ bool passedThrough(const Model& model, int pair, const Eigen::VectorXd& q0, cons
   return std::abs(sa) <= reach_a && std::abs(sb) <= reach_b;
 }
 
-int firstPassedThrough(const Model& model, const Eigen::VectorXd& q0, const Eigen::VectorXd& q1)
-{
-  for (size_t i = 0; i < model.checked_pairs.size(); ++i)
-    if (passedThrough(model, static_cast<int>(i), q0, q1))
-      return static_cast<int>(i);
-  return -1;
-}
-
 }  // namespace active_tensegrity::core

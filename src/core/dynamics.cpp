@@ -139,7 +139,7 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law)
     if (sum.residual <= options_.newton_tolerance)
     {
       predict(s, h, qdd, q_, qd_, acc_);
-      const int crossed = system_.model().contact.enabled ? firstPassedThrough(system_.model(), s.q, q_) : -1;
+      const int crossed = system_.model().contact.enabled ? system_.firstPassedThrough(s.q, q_) : -1;
       if (crossed >= 0)
       {
         // a step that jumps a strut through another is refused (and cut), never accepted silently

@@ -230,6 +230,24 @@ void System::contactForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, c
   }
 }
 
+int System::firstPassedThrough(const Eigen::VectorXd& q0, const Eigen::VectorXd& q1) const
+{
+  double reach = 0.0;
+  for (const Body& b : model_.bodies)
+    if (b.kind == BodyKind::kStrut)
+    {
+      const Vec3 z0 = rotationMatrix(q0.segment<4>(b.offset + 3)) * Vec3::UnitZ();
+      const Vec3 z1 = rotationMatrix(q1.segment<4>(b.offset + 3)) * Vec3::UnitZ();
+      reach = std::max(reach,
+                       (q1.segment<3>(b.offset) - q0.segment<3>(b.offset)).norm() + 0.5 * b.length * (z1 - z0).norm());
+    }
+  broad_phase_.candidates(q1, reach, candidates_);
+  for (int i : candidates_)
+    if (passedThrough(model_, i, q0, q1))
+      return i;
+  return -1;
+}
+
 void System::addMass(const Eigen::VectorXd& q, BlockSparseMatrix& jac, double weight) const
 {
   Eigen::Matrix<double, 7, 7> m = Eigen::Matrix<double, 7, 7>::Zero();

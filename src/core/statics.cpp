@@ -146,7 +146,7 @@ Summary StaticSolver::followPath(State& s, const ActuationValues& u_end, int ste
       }
       if (attempt.ok() && system_.model().contact.enabled)
       {
-        const int crossed = firstPassedThrough(system_.model(), s.q, trial.q);
+        const int crossed = system_.firstPassedThrough(s.q, trial.q);
         if (crossed >= 0)
         {
           const StrutPair& p = system_.model().checked_pairs[crossed];

@@ -96,7 +96,4 @@ ContactPairState evaluateContact(const Model& model, int pair, const Eigen::Vect
 /// by more than 90 degrees (motion through a parallel configuration) is not judged.
 bool passedThrough(const Model& model, int pair, const Eigen::VectorXd& q0, const Eigen::VectorXd& q1);
 
-/// The first checked pair that passed through between q0 and q1, or -1.
-int firstPassedThrough(const Model& model, const Eigen::VectorXd& q0, const Eigen::VectorXd& q1);
-
 }  // namespace active_tensegrity::core

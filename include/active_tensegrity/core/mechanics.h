@@ -95,6 +95,11 @@ public:
   void contactForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const std::vector<double>& impact_speeds,
                     ContactMode mode, Eigen::VectorXd& F, BlockSparseMatrix* jac, double k_weight, double c_weight,
                     std::vector<ContactPairState>* active) const;
+  /// The first checked pair whose struts passed through each other between q0 and q1 (contact.h,
+  /// passedThrough), or -1. Only pairs within reach of each other at q1 (the broad phase with boxes grown
+  /// by the largest motion of a strut point between q0 and q1) are judged: a pair that crossed was in
+  /// touch at the crossing, so it is never further apart than that motion at q1.
+  int firstPassedThrough(const Eigen::VectorXd& q0, const Eigen::VectorXd& q1) const;
   /// Checked pairs that can touch at q with boxes grown by margin (m).
   void contactCandidates(const Eigen::VectorXd& q, double margin, std::vector<int>& out) const
   {
