@@ -39,12 +39,12 @@ void DynamicsSolver::residualAndJacobian(const State& s, double h, const Actuati
   residual(s, h, u, qdd_new, lambda_new, r, jac);
 }
 
-const std::vector<double>& DynamicsSolver::prepareContact(const State& s, double h)
+void DynamicsSolver::prepareContact(const State& s, double h)
 {
   const Model& model = system_.model();
   step_speeds_.assign(model.checked_pairs.size(), model.contact.min_impact_speed);
   if (!model.contact.enabled)
-    return step_speeds_;
+    return;
   // how far any strut point can move in this step, from the speeds at its start (doubled: a margin)
   double reach = 0.0;
   for (const Body& b : model.bodies)
@@ -62,7 +62,6 @@ const std::vector<double>& DynamicsSolver::prepareContact(const State& s, double
       step_speeds_[i] = std::max(st.penetration_rate, model.contact.min_impact_speed);
     }
   }
-  return step_speeds_;
 }
 
 void DynamicsSolver::updateContactMemory(State& s)
@@ -88,7 +87,7 @@ void DynamicsSolver::residual(const State& s, double h, const ActuationValues& u
     jac->setZero();
   system_.inertialForce(q_, qd_, qdd_new, inertial_, jac, 1.0, bh2, gh);
   system_.appliedForce(q_, qd_, applied_, jac, bh2, gh);
-  system_.contactForce(q_, qd_, step_speeds_, ContactMode::kDynamic, applied_, jac, bh2, gh, nullptr);
+  system_.contactForce(q_, qd_, step_speeds_, ContactMode::kDynamic, applied_, jac, bh2, gh);
   system_.constraintForce(q_, lambda_new, cforce_);
   system_.constraintValue(q_, u, phi_);
   if (jac)
@@ -143,10 +142,8 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law)
       if (crossed >= 0)
       {
         // a step that jumps a strut through another is refused (and cut), never accepted silently
-        const StrutPair& p = system_.model().checked_pairs[crossed];
         sum.status = SolveStatus::kPassedThrough;
-        sum.message = "struts '" + system_.model().bodies[p.body_a].name + "' and '" +
-                      system_.model().bodies[p.body_b].name + "' passed through each other";
+        sum.message = system_.passedThroughMessage(crossed);
         return sum;
       }
       s.q = q_;
@@ -240,7 +237,7 @@ Summary DynamicsSolver::initialize(State& s, const ActuationLaw& law)
   system_.appliedForce(s.q, s.qd, applied_, nullptr, 0.0, 0.0);
   if (s.contact_speed.size() != system_.model().checked_pairs.size())
     s.contact_speed.assign(system_.model().checked_pairs.size(), 0.0);
-  system_.contactForce(s.q, s.qd, s.contact_speed, ContactMode::kDynamic, applied_, nullptr, 0.0, 0.0, nullptr);
+  system_.contactForce(s.q, s.qd, s.contact_speed, ContactMode::kDynamic, applied_, nullptr, 0.0, 0.0);
   rhs.head(nq) = applied_ - inertial_;
   system_.accelerationRhs(s.q, s.qd, s.u, tmp);
   rhs.tail(nl) = tmp;

@@ -197,7 +197,7 @@ void System::appliedForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, E
 
 void System::contactForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const std::vector<double>& impact_speeds,
                           ContactMode mode, Eigen::VectorXd& F, BlockSparseMatrix* jac, double k_weight,
-                          double c_weight, std::vector<ContactPairState>* active) const
+                          double c_weight) const
 {
   if (!model_.contact.enabled)
     return;
@@ -205,12 +205,7 @@ void System::contactForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, c
   for (int i : candidates_)
   {
     const double v0 = impact_speeds.empty() ? 0.0 : impact_speeds[i];
-    const ContactPairState st = evaluateContact(model_, i, q, qd, v0, mode, &contribution_);
-    if (!st.active)
-      continue;
-    if (active)
-      active->push_back(st);
-    if (st.normal_force <= 0.0)
+    if (evaluateContact(model_, i, q, qd, v0, mode, &contribution_).normal_force <= 0.0)
       continue;
     const StrutPair& p = model_.checked_pairs[i];
     const Body& a = model_.bodies[p.body_a];
@@ -246,6 +241,13 @@ int System::firstPassedThrough(const Eigen::VectorXd& q0, const Eigen::VectorXd&
     if (passedThrough(model_, i, q0, q1))
       return i;
   return -1;
+}
+
+std::string System::passedThroughMessage(int pair) const
+{
+  const StrutPair& p = model_.checked_pairs[pair];
+  return "struts '" + model_.bodies[p.body_a].name + "' and '" + model_.bodies[p.body_b].name +
+         "' passed through each other";
 }
 
 void System::addMass(const Eigen::VectorXd& q, BlockSparseMatrix& jac, double weight) const

@@ -55,7 +55,7 @@ Summary StaticSolver::solve(State& s, const ActuationValues& u)
   {
     jac_.setZero();
     system_.appliedForce(q, zero, F_, &jac_, 1.0, 0.0);
-    system_.contactForce(q, zero, {}, ContactMode::kStatic, F_, &jac_, 1.0, 0.0, nullptr);
+    system_.contactForce(q, zero, {}, ContactMode::kStatic, F_, &jac_, 1.0, 0.0);
     system_.constraintForce(q, lambda, cforce_);
     system_.constraintValue(q, u, phi_);
     system_.addLambdaHessian(q, lambda, jac_, 1.0);
@@ -149,10 +149,8 @@ Summary StaticSolver::followPath(State& s, const ActuationValues& u_end, int ste
         const int crossed = system_.firstPassedThrough(s.q, trial.q);
         if (crossed >= 0)
         {
-          const StrutPair& p = system_.model().checked_pairs[crossed];
           attempt.status = SolveStatus::kPassedThrough;
-          attempt.message = "struts '" + system_.model().bodies[p.body_a].name + "' and '" +
-                            system_.model().bodies[p.body_b].name + "' passed through each other";
+          attempt.message = system_.passedThroughMessage(crossed);
         }
       }
       if (attempt.ok())
@@ -187,7 +185,7 @@ double StaticSolver::forceResidual(const State& s)
 {
   const Eigen::VectorXd zero = Eigen::VectorXd::Zero(system_.nq());
   system_.appliedForce(s.q, zero, F_, nullptr, 0.0, 0.0);
-  system_.contactForce(s.q, zero, {}, ContactMode::kStatic, F_, nullptr, 0.0, 0.0, nullptr);
+  system_.contactForce(s.q, zero, {}, ContactMode::kStatic, F_, nullptr, 0.0, 0.0);
   Eigen::VectorXd lambda = s.lambda;
   if (lambda.size() != system_.nLambda())
     lambda.conservativeResizeLike(Eigen::VectorXd::Zero(system_.nLambda()));
@@ -200,7 +198,7 @@ Eigen::VectorXd leastSquaresMultipliers(const System& system, const Eigen::Vecto
   const Eigen::VectorXd zero = Eigen::VectorXd::Zero(system.nq());
   Eigen::VectorXd F;
   system.appliedForce(q, zero, F, nullptr, 0.0, 0.0);
-  system.contactForce(q, zero, {}, ContactMode::kStatic, F, nullptr, 0.0, 0.0, nullptr);
+  system.contactForce(q, zero, {}, ContactMode::kStatic, F, nullptr, 0.0, 0.0);
   const Eigen::MatrixXd jt = system.constraintJacobianDense(q).transpose();
   return jt.colPivHouseholderQr().solve(F);
 }

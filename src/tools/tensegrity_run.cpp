@@ -93,28 +93,22 @@ int main(int argc, char** argv)
     return 1;
   }
 
-  std::ofstream file;
-  if (!out_path.empty())
+  // output files are opened before the run, so that a bad path costs no simulation
+  const auto open = [](const std::string& path, std::ofstream& f)
   {
-    file.open(out_path);
-    if (!file)
-    {
-      std::cerr << "tensegrity_run: cannot write '" << out_path << "'\n";
-      return 1;
-    }
-  }
+    if (path.empty())
+      return true;
+    f.open(path);
+    if (!f)
+      std::cerr << "tensegrity_run: cannot write '" << path << "'\n";
+    return static_cast<bool>(f);
+  };
+  std::ofstream file, contacts;
+  if (!open(out_path, file) || !open(contacts_path, contacts))
+    return 1;
   std::ostream& csv = out_path.empty() ? std::cout : file;
-  std::ofstream contacts;
-  if (!contacts_path.empty())
-  {
-    contacts.open(contacts_path);
-    if (!contacts)
-    {
-      std::cerr << "tensegrity_run: cannot write '" << contacts_path << "'\n";
-      return 1;
-    }
+  if (contacts.is_open())
     contacts << kContactColumns;
-  }
   const std::vector<std::string> cols = at::csvColumns(model);
   for (size_t i = 0; i < cols.size(); ++i)
     csv << (i ? "," : "") << cols[i];

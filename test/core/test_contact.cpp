@@ -261,7 +261,7 @@ TEST(ContactTangent, CombinedIntoTheSystemTangent)
   const std::vector<double> v0 = { 0.5 };
   BlockSparseMatrix jac = sys.makeMatrix();
   Eigen::VectorXd F = Eigen::VectorXd::Zero(m.nq);
-  sys.contactForce(q, qd, v0, ContactMode::kDynamic, F, &jac, 2.0, 3.0, nullptr);
+  sys.contactForce(q, qd, v0, ContactMode::kDynamic, F, &jac, 2.0, 3.0);
   ContactContribution c;
   evaluateContact(m, 0, q, qd, 0.5, ContactMode::kDynamic, &c);
   EXPECT_TRUE(F.isApprox(Eigen::VectorXd(c.force)));

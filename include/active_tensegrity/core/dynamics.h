@@ -44,12 +44,11 @@ public:
   void residualAndJacobian(const State& start, double h, const ActuationValues& u, const Eigen::VectorXd& qdd_new,
                            const Eigen::VectorXd& lambda_new, Eigen::VectorXd& r, BlockSparseMatrix* jac);
 
-  /// Impact speeds v_0 the next step from `start` uses per checked pair: the remembered one of a live
-  /// contact, else the approach rate at `start` (floored at min_impact_speed) for pairs close enough
-  /// to touch within h.
-  const std::vector<double>& prepareContact(const State& start, double h);
-
 private:
+  /// Impact speeds v_0 the next step from `start` uses per checked pair (into step_speeds_): the
+  /// remembered one of a live contact, else the approach rate at `start` (floored at min_impact_speed)
+  /// for pairs close enough to touch within h.
+  void prepareContact(const State& start, double h);
   void residual(const State& start, double h, const ActuationValues& u, const Eigen::VectorXd& qdd_new,
                 const Eigen::VectorXd& lambda_new, Eigen::VectorXd& r, BlockSparseMatrix* jac);
   /// After a converged step: remember v_0 of pairs in contact at `end`, forget separated ones.

@@ -7,6 +7,7 @@
 /// tangents K = -dF/dq (stiffness) and C = -dF/dqd (damping).
 #pragma once
 
+#include <string>
 #include <vector>
 
 #include <Eigen/Core>
@@ -91,15 +92,17 @@ public:
   /// Strut contact (contact.h) at (q, qd), when the model's contact is enabled: adds the generalized
   /// contact forces into F (not cleared) and k_weight K + c_weight C into jac (when not null). Only the
   /// broad phase's candidates reach the narrow phase. impact_speeds: v_0 per checked pair (dynamics;
-  /// may be empty in statics). Active pairs are appended to `active` when it is not null.
+  /// may be empty in statics). The pairs' states for output come from activeContacts() (analysis.h).
   void contactForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const std::vector<double>& impact_speeds,
-                    ContactMode mode, Eigen::VectorXd& F, BlockSparseMatrix* jac, double k_weight, double c_weight,
-                    std::vector<ContactPairState>* active) const;
+                    ContactMode mode, Eigen::VectorXd& F, BlockSparseMatrix* jac, double k_weight,
+                    double c_weight) const;
   /// The first checked pair whose struts passed through each other between q0 and q1 (contact.h,
   /// passedThrough), or -1. Only pairs within reach of each other at q1 (the broad phase with boxes grown
   /// by the largest motion of a strut point between q0 and q1) are judged: a pair that crossed was in
   /// touch at the crossing, so it is never further apart than that motion at q1.
   int firstPassedThrough(const Eigen::VectorXd& q0, const Eigen::VectorXd& q1) const;
+  /// "struts 'A' and 'B' passed through each other": the message of status kPassedThrough.
+  std::string passedThroughMessage(int pair) const;
   /// Checked pairs that can touch at q with boxes grown by margin (m).
   void contactCandidates(const Eigen::VectorXd& q, double margin, std::vector<int>& out) const
   {
