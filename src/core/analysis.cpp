@@ -23,6 +23,10 @@ double actuationForce(const Model& model, const State& state, int actuator)
   }
   for (int c : model.actuators[actuator].constraints)
     force -= state.lambda(rows[c]);
+  for (int c : model.actuators[actuator].cables)
+    force += evaluateCable(model, model.cables[c], state.q, state.qd, state.u, model.damping_enabled, nullptr, nullptr,
+                           0.0, 0.0)
+                 .tension;
   return force;
 }
 
@@ -66,7 +70,7 @@ int slackCables(const Model& model, const State& state)
 {
   int n = 0;
   for (const Cable& c : model.cables)
-    n += evaluateCable(model, c, state.q, state.qd, model.damping_enabled, nullptr, nullptr, 0.0, 0.0).slack ? 1 : 0;
+    n += evaluateCable(model, c, state.q, state.qd, state.u, model.damping_enabled, nullptr, nullptr, 0.0, 0.0).slack ? 1 : 0;
   return n;
 }
 

@@ -86,7 +86,7 @@ void DynamicsSolver::residual(const State& s, double h, const ActuationValues& u
   if (jac)
     jac->setZero();
   system_.inertialForce(q_, qd_, qdd_new, inertial_, jac, 1.0, bh2, gh);
-  system_.appliedForce(q_, qd_, applied_, jac, bh2, gh);
+  system_.appliedForce(q_, qd_, u, applied_, jac, bh2, gh);
   system_.contactForce(q_, qd_, step_speeds_, ContactMode::kDynamic, applied_, jac, bh2, gh);
   system_.constraintForce(q_, lambda_new, cforce_);
   system_.constraintValue(q_, u, phi_);
@@ -234,7 +234,7 @@ Summary DynamicsSolver::initialize(State& s, const ActuationLaw& law)
   // accelerations and multipliers: M qdd + Phi_q^T lambda = F - Qv,  Phi_q qdd = gamma
   Eigen::VectorXd zero = Eigen::VectorXd::Zero(nq);
   system_.inertialForce(s.q, s.qd, zero, inertial_, nullptr, 0.0, 0.0, 0.0);
-  system_.appliedForce(s.q, s.qd, applied_, nullptr, 0.0, 0.0);
+  system_.appliedForce(s.q, s.qd, s.u, applied_, nullptr, 0.0, 0.0);
   if (s.contact_speed.size() != system_.model().checked_pairs.size())
     s.contact_speed.assign(system_.model().checked_pairs.size(), 0.0);
   system_.contactForce(s.q, s.qd, s.contact_speed, ContactMode::kDynamic, applied_, nullptr, 0.0, 0.0);

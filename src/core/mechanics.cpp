@@ -1,6 +1,7 @@
 #include "active_tensegrity/core/mechanics.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <stdexcept>
 
@@ -55,67 +56,125 @@ Mat4 rotationalMass(const Body& body, const Vec4& theta)
 }
 
 CableState evaluateCable(const Model& model, const Cable& cable, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
-                         bool damping, Eigen::VectorXd* F, BlockSparseMatrix* jac, double k_weight, double c_weight)
+                         const ActuationValues& u, bool damping, Eigen::VectorXd* F, BlockSparseMatrix* jac,
+                         double k_weight, double c_weight)
 {
-  const PointKinematics ka = pointKinematics(model, cable.a, q, qd);
-  const PointKinematics kb = pointKinematics(model, cable.b, q, qd);
-  const Vec3 d = kb.p - ka.p;
-  const Vec3 dd = kb.v - ka.v;
+  // l = sum_k |p_{k+1} - p_k|; dl/dp_j = w_j = n_{j-1} - n_j (n_k the unit vector of segment k)
+  const int m = static_cast<int>(cable.points.size());
+  // per-thread scratch: no allocation once a thread has seen its longest cable
+  thread_local std::vector<PointKinematics> kin;
+  if (static_cast<int>(kin.size()) < m)
+    kin.resize(m);
+  std::array<Vec3, Cable::kMaxPoints> n, dd, w, e;
+  std::array<double, Cable::kMaxPoints> seg;
   CableState s;
-  s.length = d.norm();
-  if (s.length <= 0.0)
+  for (int j = 0; j < m; ++j)
+    kin[j] = pointKinematics(model, cable.points[j], q, qd);
+  for (int k = 0; k + 1 < m; ++k)
   {
-    s.slack = true;
-    return s;
+    const Vec3 d = kin[k + 1].p - kin[k].p;
+    seg[k] = d.norm();
+    dd[k] = kin[k + 1].v - kin[k].v;
+    // a zero-length segment has no direction and no length to contribute
+    n[k] = seg[k] > 0.0 ? Vec3(d / seg[k]) : Vec3::Zero();
+    s.length += seg[k];
+    s.rate += n[k].dot(dd[k]);
   }
-  const Vec3 n = d / s.length;
-  s.rate = n.dot(dd);
+  double pull_in = 0.0, pull_rate = 0.0;
+  if (cable.actuator >= 0 && cable.actuator < static_cast<int>(u.size()))
+  {
+    pull_in = u[cable.actuator].value;
+    pull_rate = u[cable.actuator].rate;
+  }
+  s.rest_length = cable.rest_length - pull_in;
+  // a material cable keeps EA when pulled in, so k = EA / l0 grows; a spring keeps k
+  const double k_axial = cable.area > 0.0 ? cable.stiffness * cable.rest_length / s.rest_length : cable.stiffness;
   const double c = damping ? cable.damping : 0.0;
-  const double stretch = s.length - cable.rest_length;
-  double tension = cable.stiffness * stretch + c * s.rate;
-  if (cable.tension_only && (stretch <= 0.0 || tension <= 0.0))
+  const double stretch = s.length - s.rest_length;
+  const double tension = k_axial * stretch + c * (s.rate + pull_rate);  // damping on the material stretch rate
+  if (s.length <= 0.0 || (cable.tension_only && (stretch <= 0.0 || tension <= 0.0)))
   {
     s.slack = true;
     return s;
   }
   s.tension = tension;
+  if (!F && !jac)
+    return s;
 
-  // the force on end a is f = T n, on end b it is -f
-  const Vec3 f = tension * n;
-  const Mat3 proj = Mat3::Identity() - n * n.transpose();
-  // S = df/dd, and df/d(d_dot) = c n n^T
-  const Mat3 S =
-      cable.stiffness * n * n.transpose() + (tension / s.length) * proj + (c / s.length) * n * (proj * dd).transpose();
-  const Mat3 Cn = c * n * n.transpose();
-
-  const PointKinematics* ends[2] = { &ka, &kb };
-  const double sigma[2] = { -1.0, 1.0 };  // d = p_b - p_a
-  for (int x = 0; x < 2; ++x)
+  // e_j: the part of dl_dot/dq through the turning of the segments, e_j^T B_j summed over points
+  for (int j = 0; j < m; ++j)
   {
-    const PointKinematics& kx = *ends[x];
-    if (kx.body < 0)
+    w[j] = (j > 0 ? n[j - 1] : Vec3::Zero()) - (j + 1 < m ? n[j] : Vec3::Zero());
+    e[j].setZero();
+    if (j > 0 && seg[j - 1] > 0.0)
+      e[j] += (dd[j - 1] - n[j - 1] * n[j - 1].dot(dd[j - 1])) / seg[j - 1];
+    if (j + 1 < m && seg[j] > 0.0)
+      e[j] -= (dd[j] - n[j] * n[j].dot(dd[j])) / seg[j];
+  }
+  // generalized force -T B_j^T w_j on the body of point j
+  if (F)
+    for (int j = 0; j < m; ++j)
+      if (kin[j].body >= 0)
+      {
+        const Body& b = model.bodies[kin[j].body];
+        F->segment(b.offset, b.nq) -= tension * kin[j].jac.leftCols(b.nq).transpose() * w[j];
+      }
+  if (!jac)
+    return s;
+
+  // K = -dF/dq = g^T (k g + c h) + T d2l/dq2 and C = -dF/dqd = c g^T g, with g = dl/dq = sum_j w_j^T B_j,
+  // h = dl_dot/dq = sum_j (w_j^T dv_dq_j + e_j^T B_j), and
+  // d2l/dq2 = sum_k (B_{k+1} - B_k)^T (I - n_k n_k^T)/l_k (B_{k+1} - B_k) + sum_j G(u_j, w_j)
+  using Row7 = Eigen::Matrix<double, 1, 7>;
+  using Col7 = Eigen::Matrix<double, 7, 1>;
+  Eigen::Matrix<double, 7, 7> blk;
+  for (int x = 0; x < m; ++x)
+  {
+    if (kin[x].body < 0)
       continue;
-    const Body& bx = model.bodies[kx.body];
-    const Vec3 fx = -sigma[x] * f;
-    if (F)
-      F->segment(bx.offset, bx.nq) += kx.jac.leftCols(bx.nq).transpose() * fx;
-    if (!jac)
-      continue;
-    for (int y = 0; y < 2; ++y)
+    const int nx = kin[x].nq;
+    const Col7 gx = kin[x].jac.transpose() * w[x];
+    for (int y = 0; y < m; ++y)
     {
-      const PointKinematics& ky = *ends[y];
-      if (ky.body < 0)
+      if (kin[y].body < 0)
         continue;
-      const Body& by = model.bodies[ky.body];
-      const double ss = sigma[x] * sigma[y];
-      Eigen::Matrix<double, 7, 7> kxy = Eigen::Matrix<double, 7, 7>::Zero();
-      kxy.topLeftCorner(bx.nq, by.nq) =
-          ss * kx.jac.leftCols(bx.nq).transpose() * (S * ky.jac.leftCols(by.nq) + Cn * ky.dv_dq.leftCols(by.nq));
-      if (x == y && bx.kind == BodyKind::kStrut)
-        kxy.bottomRightCorner<4, 4>() -= pointHessianTheta(x == 0 ? cable.a.local : cable.b.local, fx);
-      jac->add(kx.body, ky.body, kxy.topLeftCorner(bx.nq, by.nq), k_weight);
+      const int ny = kin[y].nq;
+      const Row7 dy = (k_axial * w[y] + c * e[y]).transpose() * kin[y].jac + c * w[y].transpose() * kin[y].dv_dq;
+      blk.noalias() = gx * dy;
+      jac->add(kin[x].body, kin[y].body, blk.topLeftCorner(nx, ny), k_weight);
       if (c != 0.0 && c_weight != 0.0)
-        jac->add(kx.body, ky.body, ss * kx.jac.leftCols(bx.nq).transpose() * Cn * ky.jac.leftCols(by.nq), c_weight);
+      {
+        blk.noalias() = c * gx * (kin[y].jac.transpose() * w[y]).transpose();
+        jac->add(kin[x].body, kin[y].body, blk.topLeftCorner(nx, ny), c_weight);
+      }
+    }
+    if (model.bodies[kin[x].body].kind == BodyKind::kStrut)
+    {
+      blk.setZero();
+      blk.bottomRightCorner<4, 4>() = tension * pointHessianTheta(cable.points[x].local, w[x]);
+      jac->add(kin[x].body, kin[x].body, blk, k_weight);
+    }
+  }
+  for (int k = 0; k + 1 < m; ++k)
+  {
+    if (!(seg[k] > 0.0))
+      continue;
+    const Mat3 D = (tension / seg[k]) * (Mat3::Identity() - n[k] * n[k].transpose());
+    const int ends[2] = { k, k + 1 };
+    const double sign[2] = { -1.0, 1.0 };
+    for (int a = 0; a < 2; ++a)
+    {
+      const PointKinematics& ka = kin[ends[a]];
+      if (ka.body < 0)
+        continue;
+      for (int b = 0; b < 2; ++b)
+      {
+        const PointKinematics& kb = kin[ends[b]];
+        if (kb.body < 0)
+          continue;
+        blk.noalias() = (sign[a] * sign[b]) * ka.jac.transpose() * D * kb.jac;
+        jac->add(ka.body, kb.body, blk.topLeftCorner(ka.nq, kb.nq), k_weight);
+      }
     }
   }
   return s;
@@ -146,8 +205,10 @@ System::System(const Model& model, std::vector<Constraint> extra_constraints) : 
     blocks.emplace_back(g2, g1);
   };
   for (const Cable& c : model.cables)
-    if (c.a.body >= 0 && c.b.body >= 0)
-      couple(c.a.body, c.b.body);
+    for (size_t i = 0; i < c.points.size(); ++i)
+      for (size_t j = i + 1; j < c.points.size(); ++j)
+        if (c.points[i].body >= 0 && c.points[j].body >= 0)
+          couple(c.points[i].body, c.points[j].body);
   for (const StrutPair& p : model.checked_pairs)
     couple(p.body_a, p.body_b);
   for (size_t i = 0; i < constraints_.size(); ++i)
@@ -169,15 +230,15 @@ System::System(const Model& model, std::vector<Constraint> extra_constraints) : 
   pattern_.init(sizes, blocks);
 }
 
-void System::appliedForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, Eigen::VectorXd& F,
-                          BlockSparseMatrix* jac, double k_weight, double c_weight) const
+void System::appliedForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const ActuationValues& u,
+                          Eigen::VectorXd& F, BlockSparseMatrix* jac, double k_weight, double c_weight) const
 {
   F.setZero(model_.nq);
   if (model_.gravity_enabled)
     for (const Body& b : model_.bodies)
       F.segment<3>(b.offset) += b.mass * model_.gravity;
   for (const Cable& c : model_.cables)
-    evaluateCable(model_, c, q, qd, model_.damping_enabled, &F, jac, k_weight, c_weight);
+    evaluateCable(model_, c, q, qd, u, model_.damping_enabled, &F, jac, k_weight, c_weight);
   for (const PointLoad& load : model_.loads)
   {
     if (load.point.body < 0)
@@ -509,7 +570,7 @@ double System::kineticEnergy(const Eigen::VectorXd& q, const Eigen::VectorXd& qd
   return e;
 }
 
-double System::potentialEnergy(const Eigen::VectorXd& q) const
+double System::potentialEnergy(const Eigen::VectorXd& q, const ActuationValues& u) const
 {
   double e = 0.0;
   const Eigen::VectorXd zero = Eigen::VectorXd::Zero(model_.nq);
@@ -528,10 +589,11 @@ double System::potentialEnergy(const Eigen::VectorXd& q) const
     }
   for (const Cable& c : model_.cables)
   {
-    const double l = (pointKinematics(model_, c.b, q, zero).p - pointKinematics(model_, c.a, q, zero).p).norm();
-    const double stretch = l - c.rest_length;
+    const CableState st = evaluateCable(model_, c, q, zero, u, false, nullptr, nullptr, 0.0, 0.0);
+    const double k_axial = c.area > 0.0 ? c.stiffness * c.rest_length / st.rest_length : c.stiffness;
+    const double stretch = st.length - st.rest_length;
     if (stretch > 0.0 || !c.tension_only)
-      e += 0.5 * c.stiffness * stretch * stretch;
+      e += 0.5 * k_axial * stretch * stretch;
   }
   return e;
 }

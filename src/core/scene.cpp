@@ -539,20 +539,27 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
       {
         const std::string key = members.key(name);
         const std::vector<std::string> ends = members.names(name);
-        if (ends.size() != 2)
-          members.fail(key, "expected two node names [a, b]");
-        if (ends[0] == ends[1])
-          members.fail(key, "a cable needs two different nodes, got '" + ends[0] + "' twice");
+        if (ends.size() < 2 || ends.size() > static_cast<size_t>(Cable::kMaxPoints))
+          members.fail(key, "expected two node names [a, b], or up to " + std::to_string(Cable::kMaxPoints) +
+                                " for a sliding cable [a, via..., b], got " + std::to_string(ends.size()));
         checkName(members, key, name, member_names, "member");
-        const NodeInfo& na = nodeRef(members, key, ends[0]);
-        const NodeInfo& nb = nodeRef(members, key, ends[1]);
-        const double l = (nb.position - na.position).norm();
-        if (!(l > 1e-9))
-          members.fail(key, "the two nodes coincide");
         Cable c;
         c.name = name;
-        c.a = model.nodes[model.findNode(ends[0])].point;
-        c.b = model.nodes[model.findNode(ends[1])].point;
+        double l = 0.0;
+        for (size_t k = 0; k < ends.size(); ++k)
+        {
+          const NodeInfo& nk = nodeRef(members, key, ends[k]);
+          if (k > 0)
+          {
+            if (ends[k] == ends[k - 1])
+              members.fail(key, "a cable needs two different nodes in a row, got '" + ends[k] + "' twice");
+            const double lk = (nk.position - nodes[ends[k - 1]].position).norm();
+            if (!(lk > 1e-9))
+              members.fail(key, "nodes '" + ends[k - 1] + "' and '" + ends[k] + "' coincide");
+            l += lk;
+          }
+          c.points.push_back(model.nodes[model.findNode(ends[k])].point);
+        }
         c.damping = damping;
         c.tension_only = tension_only;
         c.area = area;
@@ -611,9 +618,6 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
       checkName(acts, acts.key(name), name, actuator_names, "actuator");
       Actuator act;
       act.name = name;
-      const Vec3 dir = a.vec3("direction");
-      if (!(dir.norm() > 1e-12))
-        a.fail(a.key("direction"), "must not be the zero vector");
       const YAML::Node range = a.raw("range");
       if (!range.IsSequence() || range.size() != 2)
         a.fail(a.key("range"), "expected [min, max], got " + show(range));
@@ -622,20 +626,68 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
       if (!(act.min_value <= 0.0 && act.max_value > 0.0))
         a.fail(a.key("range"), "expected min <= 0 < max, got " + show(range));
       const int index = static_cast<int>(model.actuators.size());
-      for (const std::string& nn : a.names("nodes"))
+      if (a.has("nodes") == a.has("cables"))
+        a.fail(a.key(a.has("nodes") ? "cables" : "nodes"),
+               "give either nodes (driven along a direction) or cables (pulled in), not both or neither");
+      if (a.has("cables"))
       {
-        const NodeInfo& info = nodeRef(a, a.key("nodes"), nn);
-        if (info.fixed)
-          a.fail(a.key("nodes"), "node '" + nn + "' is fixed and cannot be actuated");
-        Constraint c;
-        c.name = name + "." + nn;
-        c.a = model.nodes[model.findNode(nn)].point;
-        c.b = PointRef{ -1, Vec3::Zero() };
-        c.directions = { dir.normalized() };
-        c.offsets = { dir.normalized().dot(info.position) };
-        c.actuator = index;
-        act.constraints.push_back(static_cast<int>(model.constraints.size()));
-        model.constraints.push_back(c);
+        // pull-in: each cable's rest length becomes l0 - s
+        for (const std::string& cn : a.names("cables"))
+        {
+          int ci = -1;
+          for (size_t k = 0; k < model.cables.size(); ++k)
+            if (model.cables[k].name == cn)
+              ci = static_cast<int>(k);
+          if (ci < 0)
+            a.fail(a.key("cables"), "unknown cable '" + cn + "'");
+          Cable& cable = model.cables[ci];
+          if (cable.actuator >= 0)
+            a.fail(a.key("cables"), "cable '" + cn + "' is already pulled by actuator '" +
+                                        model.actuators[cable.actuator].name + "'");
+          if (!(act.max_value < cable.rest_length))
+            a.fail(a.key("range"), "the largest pull-in " + show(range[1]) + " m would leave cable '" + cn +
+                                       "' (rest length " + std::to_string(cable.rest_length) + " m) no length");
+          cable.actuator = index;
+          act.cables.push_back(ci);
+        }
+        for (const char* k : { "direction", "guided" })
+          if (a.has(k))
+            a.fail(a.key(k), "an actuator that pulls cables in has no direction or guide (those are for nodes)");
+      }
+      else
+      {
+        const Vec3 dir = a.vec3("direction");
+        if (!(dir.norm() > 1e-12))
+          a.fail(a.key("direction"), "must not be the zero vector");
+        const Vec3 d = dir.normalized();
+        // guided: the node cannot move across the direction either (a slider), e.g. a driven body
+        const bool guided = a.boolean("guided", false);
+        const Vec3 any = std::abs(d.x()) < 0.9 ? Vec3::UnitX() : Vec3::UnitY();
+        const Vec3 across1 = d.cross(any).normalized();
+        const Vec3 across2 = d.cross(across1);
+        for (const std::string& nn : a.names("nodes"))
+        {
+          const NodeInfo& info = nodeRef(a, a.key("nodes"), nn);
+          if (info.fixed)
+            a.fail(a.key("nodes"), "node '" + nn + "' is fixed and cannot be actuated");
+          Constraint c;
+          c.name = name + "." + nn;
+          c.a = model.nodes[model.findNode(nn)].point;
+          c.b = PointRef{ -1, Vec3::Zero() };
+          c.directions = { d };
+          c.offsets = { d.dot(info.position) };
+          c.actuator = index;
+          act.constraints.push_back(static_cast<int>(model.constraints.size()));
+          model.constraints.push_back(c);
+          if (guided)
+          {
+            c.name = name + "." + nn + ".guide";
+            c.directions = { across1, across2 };
+            c.offsets = { across1.dot(info.position), across2.dot(info.position) };
+            c.actuator = -1;
+            model.constraints.push_back(c);
+          }
+        }
       }
       a.finish();
       model.actuators.push_back(act);
@@ -798,9 +850,9 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
     an.duration = a.positive("duration", 1.0);
     an.output_interval = a.nonNegative("output_interval", 0.0);
     an.schedule.final_value = an.max_actuation;
-    if (a.has("actuation"))
+    if (root.has("actuation"))
     {
-      Reader s = a.map("actuation");
+      Reader s = root.map("actuation");
       an.schedule.speed = s.positive("speed");
       an.schedule.start_time = s.nonNegative("start_time", 0.0);
       an.schedule.blend_time = s.nonNegative("blend_time", 0.0);
@@ -808,9 +860,9 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
     }
     else
     {
-      a.optional("actuation");
+      root.optional("actuation");
       if (an.type == AnalysisType::kDynamic)
-        a.fail(a.key("actuation"), "a dynamic analysis needs actuation.speed (m/s)");
+        root.fail("actuation", "a dynamic analysis needs actuation.speed (m/s)");
     }
     if (an.type == AnalysisType::kStatic && ground_count == 0)
       a.fail(a.key("type"), "a static analysis needs at least one fixed node (this structure floats freely)");

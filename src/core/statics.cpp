@@ -54,7 +54,7 @@ Summary StaticSolver::solve(State& s, const ActuationValues& u)
   for (int it = 0; it < options_.max_iterations; ++it)
   {
     jac_.setZero();
-    system_.appliedForce(q, zero, F_, &jac_, 1.0, 0.0);
+    system_.appliedForce(q, zero, u, F_, &jac_, 1.0, 0.0);
     system_.contactForce(q, zero, {}, ContactMode::kStatic, F_, &jac_, 1.0, 0.0);
     system_.constraintForce(q, lambda, cforce_);
     system_.constraintValue(q, u, phi_);
@@ -184,7 +184,7 @@ Summary StaticSolver::followPath(State& s, const ActuationValues& u_end, int ste
 double StaticSolver::forceResidual(const State& s)
 {
   const Eigen::VectorXd zero = Eigen::VectorXd::Zero(system_.nq());
-  system_.appliedForce(s.q, zero, F_, nullptr, 0.0, 0.0);
+  system_.appliedForce(s.q, zero, s.u, F_, nullptr, 0.0, 0.0);
   system_.contactForce(s.q, zero, {}, ContactMode::kStatic, F_, nullptr, 0.0, 0.0);
   Eigen::VectorXd lambda = s.lambda;
   if (lambda.size() != system_.nLambda())
@@ -193,11 +193,11 @@ double StaticSolver::forceResidual(const State& s)
   return (cforce_ - F_).lpNorm<Eigen::Infinity>();
 }
 
-Eigen::VectorXd leastSquaresMultipliers(const System& system, const Eigen::VectorXd& q)
+Eigen::VectorXd leastSquaresMultipliers(const System& system, const Eigen::VectorXd& q, const ActuationValues& u)
 {
   const Eigen::VectorXd zero = Eigen::VectorXd::Zero(system.nq());
   Eigen::VectorXd F;
-  system.appliedForce(q, zero, F, nullptr, 0.0, 0.0);
+  system.appliedForce(q, zero, u, F, nullptr, 0.0, 0.0);
   system.contactForce(q, zero, {}, ContactMode::kStatic, F, nullptr, 0.0, 0.0);
   const Eigen::MatrixXd jt = system.constraintJacobianDense(q).transpose();
   return jt.colPivHouseholderQr().solve(F);

@@ -310,8 +310,10 @@ TEST(ContactForce, FrictionNeverAddsEnergy)
     const ContactPairState st = evaluateContact(m, 0, q, qd, 0.5, ContactMode::kDynamic, nullptr);
     EXPECT_LE(p_all - p_normal, 1e-9 * std::max(1.0, std::abs(p_normal))) << k;
     if (st.slip_speed > m.contact.stick_velocity)
+    {
       EXPECT_NEAR(p_all - p_normal, -st.friction_force * st.slip_speed,
                   1e-6 * st.friction_force * st.slip_speed + 1e-12);
+    }
   }
 }
 

@@ -31,7 +31,7 @@ Eigen::MatrixXd appliedTangent(const System& sys, const Eigen::VectorXd& q, cons
 {
   BlockSparseMatrix m = sys.makeMatrix();
   Eigen::VectorXd F;
-  sys.appliedForce(q, qd, F, &m, kw, cw);
+  sys.appliedForce(q, qd, {}, F, &m, kw, cw);
   return denseBlock(m, sys.nq(), sys.nq());
 }
 }  // namespace
@@ -42,7 +42,7 @@ TEST(Cable, TautDampedTangentsMatchFiniteDifferences)
   const System sys(f.model);
   for (const Cable& c : f.model.cables)
   {
-    const CableState s = evaluateCable(f.model, c, f.q, f.qd, true, nullptr, nullptr, 0, 0);
+    const CableState s = evaluateCable(f.model, c, f.q, f.qd, {}, true, nullptr, nullptr, 0, 0);
     ASSERT_FALSE(s.slack) << c.name << " should be taut in this configuration";
     ASSERT_GT(s.length - c.rest_length, 0.05);  // away from the kink
   }
@@ -50,13 +50,13 @@ TEST(Cable, TautDampedTangentsMatchFiniteDifferences)
   const auto Fq = [&](const Eigen::VectorXd& x) -> Eigen::VectorXd
   {
     Eigen::VectorXd F;
-    sys.appliedForce(x, f.qd, F, nullptr, 0, 0);
+    sys.appliedForce(x, f.qd, {}, F, nullptr, 0, 0);
     return -F;
   };
   const auto Fqd = [&](const Eigen::VectorXd& x) -> Eigen::VectorXd
   {
     Eigen::VectorXd F;
-    sys.appliedForce(f.q, x, F, nullptr, 0, 0);
+    sys.appliedForce(f.q, x, {}, F, nullptr, 0, 0);
     return -F;
   };
   auto ck = compareJacobians(appliedTangent(sys, f.q, f.qd, 1, 0), fdJacobian(Fq, f.q), kTol, 1.0);
@@ -78,11 +78,11 @@ TEST(Cable, SlackCableHasNoForceNoTangent)
   f.model.gravity_enabled = false;
   Eigen::VectorXd F;
   BlockSparseMatrix m = sys.makeMatrix();
-  sys.appliedForce(f.q, f.qd, F, &m, 1, 1);
+  sys.appliedForce(f.q, f.qd, {}, F, &m, 1, 1);
   EXPECT_EQ(F.norm(), 0.0);
   EXPECT_EQ(Eigen::MatrixXd(m.matrix()).norm(), 0.0);
   for (const Cable& c : f.model.cables)
-    EXPECT_TRUE(evaluateCable(f.model, c, f.q, f.qd, true, nullptr, nullptr, 0, 0).slack);
+    EXPECT_TRUE(evaluateCable(f.model, c, f.q, f.qd, {}, true, nullptr, nullptr, 0, 0).slack);
 }
 
 TEST(Cable, DampingNeverPushes)
@@ -94,12 +94,12 @@ TEST(Cable, DampingNeverPushes)
   m.cables[0].rest_length = 0.99;
   Eigen::VectorXd qd = Eigen::VectorXd::Zero(m.nq);
   qd(14) = -1.0;  // l_dot = -1 m/s: T = 100 * 0.01 - 50 < 0
-  const CableState s = evaluateCable(m, m.cables[0], m.q0, qd, true, nullptr, nullptr, 0, 0);
+  const CableState s = evaluateCable(m, m.cables[0], m.q0, qd, {}, true, nullptr, nullptr, 0, 0);
   EXPECT_TRUE(s.slack);
   EXPECT_EQ(s.tension, 0.0);
   qd(14) = 0.01;  // lengthening: T = 1 + 0.5
-  EXPECT_NEAR(evaluateCable(m, m.cables[0], m.q0, qd, true, nullptr, nullptr, 0, 0).tension, 1.5, 1e-12);
-  EXPECT_NEAR(evaluateCable(m, m.cables[0], m.q0, qd, false, nullptr, nullptr, 0, 0).tension, 1.0, 1e-12);
+  EXPECT_NEAR(evaluateCable(m, m.cables[0], m.q0, qd, {}, true, nullptr, nullptr, 0, 0).tension, 1.5, 1e-12);
+  EXPECT_NEAR(evaluateCable(m, m.cables[0], m.q0, qd, {}, false, nullptr, nullptr, 0, 0).tension, 1.0, 1e-12);
 }
 
 TEST(Cable, ForceIsEqualAndOppositeAlongTheCable)
@@ -111,7 +111,7 @@ TEST(Cable, ForceIsEqualAndOppositeAlongTheCable)
   m.q0.segment<3>(14) = Vec3(0.0, 0.0, 1.5);
   const System sys(m);
   Eigen::VectorXd F;
-  sys.appliedForce(m.q0, Eigen::VectorXd::Zero(m.nq), F, nullptr, 0, 0);
+  sys.appliedForce(m.q0, Eigen::VectorXd::Zero(m.nq), {}, F, nullptr, 0, 0);
   // T = 1000 * 0.5 = 500 N pulling the mass down to the ground point
   EXPECT_NEAR(F(16), -500.0, 1e-9);
   EXPECT_NEAR(F.segment<2>(14).norm(), 0.0, 1e-12);
@@ -285,7 +285,7 @@ TEST(Energy, PotentialEnergyGradientIsMinusTheConservativeForces)
   f.model.damping_enabled = false;
   const System sys(f.model);
   Eigen::VectorXd F;
-  sys.appliedForce(f.q, f.qd, F, nullptr, 0, 0);
+  sys.appliedForce(f.q, f.qd, {}, F, nullptr, 0, 0);
   const Eigen::MatrixXd grad = fdJacobian([&](const Eigen::VectorXd& x) -> Eigen::VectorXd
                                           { return Eigen::VectorXd::Constant(1, sys.potentialEnergy(x)); },
                                           f.q);
@@ -302,7 +302,7 @@ TEST(Loads, ConstantLoadAddsItsForceAndAGeometricStiffness)
   const System sys(m);
   Eigen::VectorXd F;
   BlockSparseMatrix k = sys.makeMatrix();
-  sys.appliedForce(f.q, f.qd, F, &k, 1, 0);
+  sys.appliedForce(f.q, f.qd, {}, F, &k, 1, 0);
   // translational parts carry the loads themselves
   EXPECT_TRUE(F.segment<3>(0).isApprox(m.loads[0].force));
   EXPECT_TRUE(F.segment<3>(14).isApprox(m.loads[1].force));

@@ -42,8 +42,7 @@ inline Cable makeCable(const std::string& name, PointRef a, PointRef b, double k
 {
   Cable cable;
   cable.name = name;
-  cable.a = a;
-  cable.b = b;
+  cable.points = { a, b };
   cable.stiffness = k;
   cable.rest_length = l0;
   cable.damping = c;
@@ -90,7 +89,7 @@ inline Model mixedModel()
       makeCable("am", PointRef{ 0, Vec3(0.01, 0.02, 0.3) }, PointRef{ 2, Vec3::Zero() }, 900.0, 0.1, 3.0));
   m.loads.push_back(PointLoad{ "push", PointRef{ 0, Vec3(0.02, -0.01, 0.4) }, Vec3(30.0, -12.0, 45.0) });
   m.loads.push_back(PointLoad{ "weight", PointRef{ 2, Vec3::Zero() }, Vec3(0.0, 0.0, -20.0) });
-  m.actuators.push_back(Actuator{ "lift", -1.0, 1.0, {} });
+  m.actuators.push_back(Actuator{ "lift", -1.0, 1.0, {}, {} });
   m.constraints.push_back(pointConstraint("joint", PointRef{ 0, up }, PointRef{ 1, up_b }));
   m.constraints.push_back(pointConstraint("pin", PointRef{ 1, dn_b }, PointRef{ -1, Vec3(0.1, 0.2, 0.0) }));
   m.constraints.push_back(

@@ -224,7 +224,7 @@ TEST(QuadruplexScene, CableRestLengthsGiveTheTablePrestress)
     EXPECT_NEAR(c.area, M_PI * 1e-4, 1e-15);
     EXPECT_TRUE(c.tension_only);
     // physics: the cable carries exactly its prestress in the initial configuration
-    const CableState s = evaluateCable(m, c, m.q0, qd, false, nullptr, nullptr, 0.0, 0.0);
+    const CableState s = evaluateCable(m, c, m.q0, qd, {}, false, nullptr, nullptr, 0.0, 0.0);
     EXPECT_NEAR(s.length, l, 1e-12);
     EXPECT_NEAR(s.tension, tension, 1e-9 * tension);
   }
@@ -379,7 +379,7 @@ TEST(MiniScene, CablesAndSpringsCarryTheirPrestressInitially)
     const bool spring = name[0] == 'K';
     EXPECT_NEAR(c.rest_length, spring ? l - tension / 500.0 : l / (1.0 + tension / ea), 1e-12);
     EXPECT_NEAR(c.stiffness, spring ? 500.0 : ea / c.rest_length, 1e-9);
-    const CableState s = evaluateCable(m, c, m.q0, qd, false, nullptr, nullptr, 0.0, 0.0);
+    const CableState s = evaluateCable(m, c, m.q0, qd, {}, false, nullptr, nullptr, 0.0, 0.0);
     EXPECT_NEAR(s.length, l, 1e-12);
     EXPECT_NEAR(s.tension, tension, 1e-9 * tension);
   }
@@ -391,7 +391,8 @@ TEST(MiniScene, FreeFloatingSceneLoadsForADynamicAnalysisOnly)
   // at the lowest node
   const Model m = loadSceneFromString(edited({ { "[0.0, 0.0, 0.0], fixed: true}", "[0.0, 0.0, -0.2]}" },
                                                { "[1.0, 0.0, 0.0], fixed: true}", "[1.0, 0.0, 0.0]}" },
-                                               { "type: static", "type: dynamic\n  actuation: {speed: 0.1}" } }),
+                                               { "type: static", "type: dynamic" },
+                                               { "analysis:", "actuation: {speed: 0.1}\nanalysis:" } }),
                                       "floating.yaml");
   EXPECT_EQ(m.analysis.type, AnalysisType::kDynamic);
   EXPECT_DOUBLE_EQ(m.analysis.schedule.speed, 0.1);
@@ -476,7 +477,7 @@ const std::vector<BadScene> kBadScenes = {
     { "unknown key" } },
   { "UnknownAnalysisType", { { "type: static", "type: quasi_static" } }, "analysis.type", { "'quasi_static'" } },
   { "StepsNotAnInteger", { { "steps: 10", "steps: 2.5" } }, "analysis.steps", { "integer", "'2.5'" } },
-  { "DynamicWithoutSpeed", { { "type: static", "type: dynamic" } }, "analysis.actuation", { "speed" } },
+  { "DynamicWithoutSpeed", { { "type: static", "type: dynamic" } }, "actuation", { "speed" } },
   { "NewmarkGammaBelowHalf",
     { { kAnalysis, kAnalysis + "solver:\n  newmark: {gamma: 0.4}\n" } },
     "solver.newmark.gamma",

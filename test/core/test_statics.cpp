@@ -45,7 +45,7 @@ TEST(Quadruplex, PrestressedGeometryIsInEquilibrium)
   EXPECT_EQ(sys.nLambda(), model.n_lambda);
   const Eigen::VectorXd lambda = leastSquaresMultipliers(sys, model.q0);
   Eigen::VectorXd F, cf;
-  sys.appliedForce(model.q0, Eigen::VectorXd::Zero(model.nq), F, nullptr, 0, 0);
+  sys.appliedForce(model.q0, Eigen::VectorXd::Zero(model.nq), {}, F, nullptr, 0, 0);
   sys.constraintForce(model.q0, lambda, cf);
   EXPECT_LT((cf - F).lpNorm<Eigen::Infinity>() / 200.0, 1e-8);  // relative to the smallest prestress
 
@@ -60,14 +60,16 @@ TEST(Quadruplex, PrestressedGeometryIsInEquilibrium)
   Vec3 pull = Vec3::Zero();
   for (const Cable& c : model.cables)
   {
-    const bool at_a = c.a.body == strut && c.a.local == model.nodes[p5].point.local;
-    const bool at_b = c.b.body == strut && c.b.local == model.nodes[p5].point.local;
+    const PointRef& ca = c.points.front();
+    const PointRef& cb = c.points.back();
+    const bool at_a = ca.body == strut && ca.local == model.nodes[p5].point.local;
+    const bool at_b = cb.body == strut && cb.local == model.nodes[p5].point.local;
     if (!at_a && !at_b)
       continue;
     const CableState cs =
-        evaluateCable(model, c, model.q0, Eigen::VectorXd::Zero(model.nq), false, nullptr, nullptr, 0, 0);
-    const Vec3 pa = pointKinematics(model, c.a, model.q0, Eigen::VectorXd::Zero(model.nq)).p;
-    const Vec3 pb = pointKinematics(model, c.b, model.q0, Eigen::VectorXd::Zero(model.nq)).p;
+        evaluateCable(model, c, model.q0, Eigen::VectorXd::Zero(model.nq), {}, false, nullptr, nullptr, 0, 0);
+    const Vec3 pa = pointKinematics(model, ca, model.q0, Eigen::VectorXd::Zero(model.nq)).p;
+    const Vec3 pb = pointKinematics(model, cb, model.q0, Eigen::VectorXd::Zero(model.nq)).p;
     pull += cs.tension * (at_a ? (pb - pa) : (pa - pb)).normalized();
   }
   const Vec3 axis = rotationMatrix(model.q0.segment<4>(model.bodies[strut].offset + 3)).col(2);
@@ -234,9 +236,13 @@ TEST(QuadruplexContact, OnsetComesLaterForThinnerStrutsAndStiffensThePath)
     {
       // before contact the path is the no-contact one; 0.1 m after onset the force is far above it
       if (p.v[i] < p.onset - 1e-9)
+      {
         EXPECT_NEAR(p.force[i], free.force[i], 1e-6 * (1.0 + std::abs(free.force[i]))) << radius << " v " << p.v[i];
+      }
       if (p.v[i] > p.onset + 0.1)
+      {
         EXPECT_GT(p.force[i], 5.0 * free.force[i]) << radius << " v " << p.v[i];
+      }
       // Hertz keeps the overlap a tiny fraction of the radius (steel: tens of micrometres)
       EXPECT_GT(p.gap[i], -0.005 * radius) << radius << " v " << p.v[i];
     }

@@ -36,22 +36,25 @@ struct PointKinematics
 PointKinematics pointKinematics(const Model& model, const PointRef& point, const Eigen::VectorXd& q,
                                 const Eigen::VectorXd& qd);
 
+/// Actuation values of every actuator at one instant.
+using ActuationValues = std::vector<ActuationValue>;
+
 /// The state of a cable after evaluation.
 struct CableState
 {
-  double length = 0.0;   // m
-  double rate = 0.0;     // m/s
-  double tension = 0.0;  // N (>= 0 for tension-only elements)
+  double length = 0.0;       // m (sum over segments)
+  double rate = 0.0;         // m/s
+  double rest_length = 0.0;  // m, after pull-in
+  double tension = 0.0;      // N (>= 0 for tension-only elements)
   bool slack = false;
 };
 
-/// Evaluates one cable at (q, qd); adds its generalized force into F (if not null) and
-/// k_weight * K + c_weight * C into jac (if not null).
+/// Evaluates one cable (two points or sliding through several) at (q, qd) under actuation u (empty:
+/// no pull-in); adds its generalized force into F (if not null) and k_weight * K + c_weight * C into
+/// jac (if not null). K and C are exact (material, geometric and damping parts).
 CableState evaluateCable(const Model& model, const Cable& cable, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
-                         bool damping, Eigen::VectorXd* F, BlockSparseMatrix* jac, double k_weight, double c_weight);
-
-/// Actuation values of every actuator at one instant.
-using ActuationValues = std::vector<ActuationValue>;
+                         const ActuationValues& u, bool damping, Eigen::VectorXd* F, BlockSparseMatrix* jac,
+                         double k_weight, double c_weight);
 
 /// The equations of one model plus optional extra constraints (e.g. statics' spin locks), with a
 /// sparse Jacobian whose pattern is fixed at construction: rows and columns are [q; lambda], one
@@ -86,9 +89,10 @@ public:
     return constraint_rows_[c];
   }
 
-  /// F(q, qd): cables, springs, gravity. Adds k_weight K + c_weight C into jac when not null.
-  void appliedForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, Eigen::VectorXd& F, BlockSparseMatrix* jac,
-                    double k_weight, double c_weight) const;
+  /// F(q, qd, u): cables (pulled in by u), springs, gravity, loads. Adds k_weight K + c_weight C into
+  /// jac when not null.
+  void appliedForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const ActuationValues& u,
+                    Eigen::VectorXd& F, BlockSparseMatrix* jac, double k_weight, double c_weight) const;
   /// Strut contact (contact.h) at (q, qd), when the model's contact is enabled: adds the generalized
   /// contact forces into F (not cleared) and k_weight K + c_weight C into jac (when not null). Only the
   /// broad phase's candidates reach the narrow phase. impact_speeds: v_0 per checked pair (dynamics;
@@ -134,7 +138,7 @@ public:
   /// Kinetic and potential energy (J). The potential includes Hertz's (2/5) K zeta^(5/2) of every
   /// contact when contact is enabled (exact while the crossing angle, hence K, stays put).
   double kineticEnergy(const Eigen::VectorXd& q, const Eigen::VectorXd& qd) const;
-  double potentialEnergy(const Eigen::VectorXd& q) const;
+  double potentialEnergy(const Eigen::VectorXd& q, const ActuationValues& u = {}) const;
 
   /// A fresh matrix with this system's pattern (zero values).
   BlockSparseMatrix makeMatrix() const

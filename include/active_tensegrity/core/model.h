@@ -63,17 +63,29 @@ struct Node
   PointRef point;
 };
 
-/// Tension element between two points: T = k (l - l0) + c l_dot while l > l0 (never below zero
-/// when tension_only), else 0. A cable has k = EA / l0; a spring has a given k.
+/// Tension element through an ordered list of points (at least two): its length is the sum of the
+/// segment lengths and it carries one tension T = k (l - l0) + c l_dot while l > l0 (never below zero
+/// when tension_only), else 0, along every segment. Two points make a classical cable or spring; more
+/// make a clustered (sliding) cable running frictionlessly through the inner points (PHYSICS.md Sec. 2).
+/// A material cable has k = EA / l0 (area > 0; pulling it in keeps EA); a spring has a given k (area 0).
+/// When actuator >= 0 its rest length is l0 - s(t) (pulled in at one end by the actuation value s).
 struct Cable
 {
+  static constexpr int kMaxPoints = 32;
+
   std::string name;
-  PointRef a, b;
-  double stiffness = 0.0;    // k, N/m
-  double rest_length = 0.0;  // l0, m
+  std::vector<PointRef> points;
+  double stiffness = 0.0;    // k at rest_length, N/m
+  double rest_length = 0.0;  // l0 without actuation, m
   double damping = 0.0;      // c, N s/m
   bool tension_only = true;
   double area = 0.0;  // m^2, for stresses (0 when not a material cable)
+  int actuator = -1;  // index into Model::actuators that pulls this cable in, or -1
+
+  bool sliding() const
+  {
+    return points.size() > 2;
+  }
 };
 
 /// A constant force at a material point, fixed in the world frame (N). Its generalized force is
@@ -111,15 +123,18 @@ struct Constraint
   }
 };
 
-/// A group of node motions driven by one value s (m): each target point moves by s along its
-/// direction. The actuation force is the sum over targets of the force the actuator applies
-/// along its direction (positive when it pushes the way the node is driven).
+/// One actuation value s (m) drives either a group of node motions (each target point moves by s
+/// along its direction: constraints) or the pull-in of cables (each cable's rest length becomes
+/// l0 - s: cables). The actuation force is, for node targets, the sum over targets of the force
+/// the actuator applies along its direction (positive when it pushes the way the node is driven),
+/// and for cables the sum of their tensions (the force the winch pulls with).
 struct Actuator
 {
   std::string name;
   double min_value = 0.0;        // m
   double max_value = 0.0;        // m
-  std::vector<int> constraints;  // indices into Model::constraints
+  std::vector<int> constraints;  // indices into Model::constraints (node targets)
+  std::vector<int> cables;       // indices into Model::cables (pulled in)
 };
 
 /// A pair of struts whose surface gap is measured and, when contact is on, whose contact is computed.

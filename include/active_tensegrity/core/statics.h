@@ -43,6 +43,6 @@ private:
 
 /// Multipliers that best satisfy the force equations at a given q (least squares), for checks of
 /// equilibrium and initial actuation forces.
-Eigen::VectorXd leastSquaresMultipliers(const System& system, const Eigen::VectorXd& q);
+Eigen::VectorXd leastSquaresMultipliers(const System& system, const Eigen::VectorXd& q, const ActuationValues& u = {});
 
 }  // namespace active_tensegrity::core
