@@ -70,7 +70,9 @@ int slackCables(const Model& model, const State& state)
 {
   int n = 0;
   for (const Cable& c : model.cables)
-    n += evaluateCable(model, c, state.q, state.qd, state.u, model.damping_enabled, nullptr, nullptr, 0.0, 0.0).slack ? 1 : 0;
+    n += evaluateCable(model, c, state.q, state.qd, state.u, model.damping_enabled, nullptr, nullptr, 0.0, 0.0).slack ?
+             1 :
+             0;
   return n;
 }
 

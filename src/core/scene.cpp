@@ -642,8 +642,8 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
             a.fail(a.key("cables"), "unknown cable '" + cn + "'");
           Cable& cable = model.cables[ci];
           if (cable.actuator >= 0)
-            a.fail(a.key("cables"), "cable '" + cn + "' is already pulled by actuator '" +
-                                        model.actuators[cable.actuator].name + "'");
+            a.fail(a.key("cables"),
+                   "cable '" + cn + "' is already pulled by actuator '" + model.actuators[cable.actuator].name + "'");
           if (!(act.max_value < cable.rest_length))
             a.fail(a.key("range"), "the largest pull-in " + show(range[1]) + " m would leave cable '" + cn +
                                        "' (rest length " + std::to_string(cable.rest_length) + " m) no length");

@@ -91,8 +91,8 @@ public:
 
   /// F(q, qd, u): cables (pulled in by u), springs, gravity, loads. Adds k_weight K + c_weight C into
   /// jac when not null.
-  void appliedForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const ActuationValues& u,
-                    Eigen::VectorXd& F, BlockSparseMatrix* jac, double k_weight, double c_weight) const;
+  void appliedForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const ActuationValues& u, Eigen::VectorXd& F,
+                    BlockSparseMatrix* jac, double k_weight, double c_weight) const;
   /// Strut contact (contact.h) at (q, qd), when the model's contact is enabled: adds the generalized
   /// contact forces into F (not cleared) and k_weight K + c_weight C into jac (when not null). Only the
   /// broad phase's candidates reach the narrow phase. impact_speeds: v_0 per checked pair (dynamics;
