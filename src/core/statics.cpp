@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <sstream>
 
 #include <Eigen/Dense>
@@ -28,6 +29,16 @@ std::vector<Constraint> spinLocks(const Model& model)
   return locks;
 }
 
+void accept(State& s, const Eigen::VectorXd& q, const Eigen::VectorXd& lambda, const ActuationValues& u)
+{
+  s.q = q;
+  s.lambda = lambda;
+  s.u = u;
+  s.qd.setZero(q.size());
+  s.qdd.setZero(q.size());
+  s.acc.setZero(q.size());
+}
+
 ActuationValues blend(const ActuationValues& a, const ActuationValues& b, double w)
 {
   ActuationValues u = a;
@@ -42,32 +53,65 @@ StaticSolver::StaticSolver(const Model& model, const SolverOptions& options)
 {
 }
 
+void StaticSolver::assemble(const Eigen::VectorXd& q, const Eigen::VectorXd& lambda, const ActuationValues& u,
+                            bool with_jacobian)
+{
+  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(system_.nq());
+  BlockSparseMatrix* jac = with_jacobian ? &jac_ : nullptr;
+  if (jac)
+    jac_.setZero();
+  system_.appliedForce(q, zero, u, F_, jac, 1.0, 0.0);
+  system_.contactForce(q, zero, {}, ContactMode::kStatic, F_, jac, 1.0, 0.0);
+  system_.constraintForce(q, lambda, cforce_);
+  system_.constraintValue(q, u, phi_);
+  if (jac)
+  {
+    system_.addLambdaHessian(q, lambda, jac_, 1.0);
+    system_.addConstraintJacobian(q, jac_);
+  }
+  r_.resize(system_.size());
+  r_.head(system_.nq()) = cforce_ - F_;
+  r_.tail(system_.nLambda()) = phi_;
+}
+
 Summary StaticSolver::solve(State& s, const ActuationValues& u)
+{
+  if (s.lambda.size() != system_.nLambda())
+    s.lambda.conservativeResizeLike(Eigen::VectorXd::Zero(system_.nLambda()));
+  Summary plain = newton(s, u);
+  if (plain.ok() || plain.status == SolveStatus::kNonFinite)
+    return plain;
+  Summary damped = dampedNewton(s, u);
+  damped.iterations += plain.iterations;
+  if (!damped.ok() && plain.status == SolveStatus::kSingular)
+  {
+    // a mechanism that no load path stiffens: say so, not just "did not converge"
+    damped.status = plain.status;
+    damped.message = plain.message + "; damped Newton found no equilibrium either";
+  }
+  return damped;
+}
+
+Summary StaticSolver::newton(State& s, const ActuationValues& u)
 {
   Summary sum;
   const int nq = system_.nq();
   const int nl = system_.nLambda();
-  if (s.lambda.size() != nl)
-    s.lambda.conservativeResizeLike(Eigen::VectorXd::Zero(nl));
-  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(nq);
   Eigen::VectorXd q = s.q, lambda = s.lambda;
   for (int it = 0; it < options_.max_iterations; ++it)
   {
-    jac_.setZero();
-    system_.appliedForce(q, zero, u, F_, &jac_, 1.0, 0.0);
-    system_.contactForce(q, zero, {}, ContactMode::kStatic, F_, &jac_, 1.0, 0.0);
-    system_.constraintForce(q, lambda, cforce_);
-    system_.constraintValue(q, u, phi_);
-    system_.addLambdaHessian(q, lambda, jac_, 1.0);
-    system_.addConstraintJacobian(q, jac_);
-    r_.resize(nq + nl);
-    r_.head(nq) = cforce_ - F_;
-    r_.tail(nl) = phi_;
+    assemble(q, lambda, u, true);
     ++sum.iterations;
     if (!r_.allFinite())
     {
       sum.status = SolveStatus::kNonFinite;
       sum.message = "non-finite static residual";
+      return sum;
+    }
+    if (r_.lpNorm<Eigen::Infinity>() == 0.0)
+    {
+      // exactly in equilibrium (e.g. the unstressed start, where the tangent is singular): nothing to do
+      accept(s, q, lambda, u);
       return sum;
     }
     if (!linear_.factorize(jac_.matrix()))
@@ -89,12 +133,7 @@ Summary StaticSolver::solve(State& s, const ActuationValues& u)
     sum.residual = dx_.head(nq).lpNorm<Eigen::Infinity>();
     if (sum.residual <= options_.newton_tolerance)
     {
-      s.q = q;
-      s.lambda = lambda;
-      s.u = u;
-      s.qd.setZero(nq);
-      s.qdd.setZero(nq);
-      s.acc.setZero(nq);
+      accept(s, q, lambda, u);
       return sum;
     }
   }
@@ -102,6 +141,88 @@ Summary StaticSolver::solve(State& s, const ActuationValues& u)
   std::ostringstream msg;
   msg << "static Newton did not converge in " << options_.max_iterations << " iterations (last increment "
       << sum.residual << ")";
+  sum.message = msg.str();
+  return sum;
+}
+
+Summary StaticSolver::dampedNewton(State& s, const ActuationValues& u)
+{
+  // Levenberg-Marquardt with the mass matrix: (K + mu M) dq. A step is kept only when it lowers the
+  // residual (forces plus stiffness-scaled constraint violation); mu shrinks after a kept step and
+  // grows after a rejected one. Convergence is judged on plain Newton steps (mu = 0) only, so the
+  // equilibrium found is that of the exact equations. This finds equilibria that plain Newton misses:
+  // an unstressed structure that is a mechanism until its cables take load, a cable about to go taut.
+  Summary sum;
+  const int nq = system_.nq();
+  const int nl = system_.nLambda();
+  Eigen::VectorXd q = s.q, lambda = s.lambda;
+  double m_scale = 1e-12;
+  for (const Body& b : system_.model().bodies)
+    m_scale = std::max(m_scale, b.mass);
+  // the stiffest element's axial stiffness converts constraint violations to forces (the tangent at the
+  // start may miss it: slack cables)
+  double k_scale = 1.0;
+  for (const Cable& c : system_.model().cables)
+    k_scale = std::max(k_scale, c.stiffness);
+  const auto merit = [&]() { return r_.head(nq).lpNorm<Eigen::Infinity>() + k_scale * phi_.lpNorm<Eigen::Infinity>(); };
+  assemble(q, lambda, u, true);
+  k_scale = std::max(k_scale, jac_.matrix().diagonal().head(nq).cwiseAbs().maxCoeff());
+  const double mu_min = 1e-10 * k_scale / m_scale, mu_max = 1e6 * k_scale / m_scale;
+  double mu = mu_min, current = merit();
+  // a residual no larger than the force that the position tolerance makes through the stiffest element
+  const double merit_tolerance = options_.newton_tolerance * k_scale;
+  const int max_iterations = 4 * options_.max_iterations;
+  for (int it = 0; it < max_iterations; ++it)
+  {
+    if (current <= merit_tolerance)
+    {
+      accept(s, q, lambda, u);
+      return sum;
+    }
+    ++sum.iterations;
+    if (!r_.allFinite())
+      break;
+    if (mu > 0.0)
+      system_.addMass(q, jac_, mu);
+    const bool factorized = linear_.factorize(jac_.matrix());
+    if (factorized)
+      linear_.solve(-r_, dx_);
+    bool kept = false;
+    double step = 0.0;
+    if (factorized && dx_.allFinite())
+    {
+      const Eigen::VectorXd q_try = q + dx_.head(nq), lambda_try = lambda + dx_.tail(nl);
+      step = dx_.head(nq).lpNorm<Eigen::Infinity>();
+      assemble(q_try, lambda_try, u, false);
+      const double trial = r_.allFinite() ? merit() : std::numeric_limits<double>::infinity();
+      if (trial < current || (mu == 0.0 && step <= options_.newton_tolerance))
+      {
+        kept = true;
+        q = q_try;
+        lambda = lambda_try;
+        current = trial;
+      }
+    }
+    if (kept && mu == 0.0 && step <= options_.newton_tolerance)
+    {
+      sum.residual = step;
+      accept(s, q, lambda, u);
+      return sum;
+    }
+    if (kept)
+      mu = mu > mu_min ? mu / 10.0 : 0.0;
+    else
+    {
+      mu = mu == 0.0 ? mu_min : 10.0 * mu;
+      if (mu > mu_max)
+        break;
+    }
+    assemble(q, lambda, u, true);
+  }
+  sum.status = SolveStatus::kMaxIterations;
+  std::ostringstream msg;
+  msg << "static Newton did not converge, plain or damped (" << max_iterations << " damped iterations; residual "
+      << current << ")";
   sum.message = msg.str();
   return sum;
 }

@@ -156,7 +156,8 @@ TEST(Statics, LargeIncrementIsCutAndReachesTheSameEquilibrium)
   ASSERT_TRUE(solver.solve(coarse, coarse.u).ok());
   const Summary r = solver.followPath(coarse, { ActuationValue{ 0.9, 0, 0 } }, 1, {});
   ASSERT_TRUE(r.ok()) << r.message;
-  EXPECT_GT(r.step_cuts, 0);
+  // plain Newton cannot do it in 6 iterations: the increment was cut or the damped Newton took over
+  EXPECT_GT(r.iterations, few.max_iterations);
 
   State fine = initialState(model);
   ASSERT_TRUE(solver.solve(fine, fine.u).ok());
@@ -168,10 +169,20 @@ TEST(Statics, LargeIncrementIsCutAndReachesTheSameEquilibrium)
 
 TEST(Statics, MechanismIsReportedNotHidden)
 {
-  // every cable slack: nothing holds the top nodes sideways
-  Model model = quadruplex();
-  for (Cable& c : model.cables)
-    c.rest_length *= 2.0;
+  // a mass on a frictionless rail (held in y and z), pushed along the rail: no equilibrium exists.
+  // (Unloaded, a loose structure is in a neutral equilibrium wherever it is: that is accepted, as for the
+  // unstressed tower at its start; slack cables that a load makes taut are found by the damped Newton.)
+  Model model;
+  model.name = "rail";
+  model.bodies.push_back(makePointMass("M", 1.0));
+  finalizeModel(model);
+  Constraint rail = pointConstraint("rail", PointRef{ 0, Vec3::Zero() }, PointRef{ -1, Vec3::Zero() });
+  rail.directions = { Vec3::UnitY(), Vec3::UnitZ() };
+  rail.offsets = { 0.0, 0.0 };
+  model.constraints.push_back(rail);
+  model.loads.push_back(PointLoad{ "push", PointRef{ 0, Vec3::Zero() }, Vec3(10.0, 0.0, 0.0) });
+  finalizeModel(model);
+  model.q0 = Eigen::Vector3d::Zero();
   StaticSolver solver(model, model.solver);
   State s = initialState(model);
   const Summary r = solver.solve(s, s.u);

@@ -16,7 +16,8 @@ class StaticSolver
 public:
   StaticSolver(const Model& model, const SolverOptions& options);
 
-  /// Newton from state (q, lambda) to the equilibrium under actuation values u (no step cutting).
+  /// Newton from state (q, lambda) to the equilibrium under actuation values u (no step cutting); when
+  /// plain Newton fails, a damped (Levenberg-Marquardt) Newton from the same start.
   Summary solve(State& state, const ActuationValues& u);
 
   /// Follows the path from state's actuation to u_end in `steps` equal increments, warm-started
@@ -34,6 +35,11 @@ public:
   }
 
 private:
+  Summary newton(State& state, const ActuationValues& u);
+  Summary dampedNewton(State& state, const ActuationValues& u);
+  /// r_ (and jac_ when asked) at (q, lambda) under u.
+  void assemble(const Eigen::VectorXd& q, const Eigen::VectorXd& lambda, const ActuationValues& u, bool with_jacobian);
+
   System system_;
   SolverOptions options_;
   BlockSparseMatrix jac_;
