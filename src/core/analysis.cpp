@@ -1,5 +1,6 @@
 #include "active_tensegrity/core/analysis.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -30,13 +31,72 @@ double actuationForce(const Model& model, const State& state, int actuator)
   return force;
 }
 
-double structureHeight(const Model& model, const Eigen::VectorXd& q)
+double nodesHeight(const Model& model, const std::vector<int>& nodes, const Eigen::VectorXd& q)
 {
   const Eigen::VectorXd zero = Eigen::VectorXd::Zero(model.nq);
   double top = -std::numeric_limits<double>::infinity();
-  for (int n : model.height_nodes)
+  for (int n : nodes)
     top = std::max(top, pointKinematics(model, model.nodes[n].point, q, zero).p.z());
   return top - model.ground_level;
+}
+
+double structureHeight(const Model& model, const Eigen::VectorXd& q)
+{
+  return nodesHeight(model, model.height_nodes, q);
+}
+
+double maxStrutBendingStress(const Model& model, const Eigen::VectorXd& q, const std::vector<ContactPairState>& contacts)
+{
+  // loads per strut: (position along the axis from the lower end, force across the axis)
+  std::vector<std::vector<std::pair<double, Vec3>>> loads(model.bodies.size());
+  for (const ContactPairState& c : contacts)
+  {
+    const StrutPair& p = model.checked_pairs[c.pair];
+    const int bodies[2] = { p.body_a, p.body_b };
+    const Vec3 points[2] = { c.point_a, c.point_b };
+    for (int k = 0; k < 2; ++k)
+    {
+      const Body& b = model.bodies[bodies[k]];
+      const Vec3 axis = rotationMatrix(q.segment<4>(b.offset + 3)).col(2);
+      const double s = std::clamp(axis.dot(points[k] - q.segment<3>(b.offset)) + 0.5 * b.length, 0.0, b.length);
+      const Vec3 f = k == 0 ? c.force_on_a : Vec3(-c.force_on_a);
+      loads[bodies[k]].emplace_back(s, f - axis * axis.dot(f));
+    }
+  }
+  double sigma = 0.0;
+  for (size_t i = 0; i < loads.size(); ++i)
+  {
+    if (loads[i].empty())
+      continue;
+    const Body& b = model.bodies[i];
+    const double len = b.length;
+    Vec3 reaction = Vec3::Zero();  // at the lower end
+    for (const auto& [s, f] : loads[i])
+      reaction += f * (len - s) / len;
+    // the moment is piecewise linear: its largest magnitude is at a load point
+    for (const auto& [x, unused] : loads[i])
+    {
+      Vec3 moment = reaction * x;
+      for (const auto& [s, f] : loads[i])
+        if (s < x)
+          moment -= f * (x - s);
+      const double r = b.layers.front().outer_radius;
+      sigma = std::max(sigma, 4.0 * moment.norm() / (M_PI * r * r * r));
+    }
+  }
+  return sigma;
+}
+
+double maxCableStress(const Model& model, const State& state)
+{
+  double sigma = 0.0;
+  for (const Cable& c : model.cables)
+    if (c.area > 0.0)
+      sigma = std::max(
+          sigma,
+          evaluateCable(model, c, state.q, state.qd, state.u, model.damping_enabled, nullptr, nullptr, 0.0, 0.0).tension /
+              c.area);
+  return sigma;
 }
 
 double minimumGap(const Model& model, const Eigen::VectorXd& q)
@@ -78,10 +138,19 @@ int slackCables(const Model& model, const State& state)
 
 std::vector<std::string> csvColumns(const Model& model)
 {
-  std::vector<std::string> cols = {
-    "t",       "actuation",        "actuation_force",    "height",      "active_contacts",
-    "min_gap", "max_normal_force", "max_friction_force", "slack_cables"
-  };
+  std::vector<std::string> cols = { "t",
+                                    "actuation",
+                                    "actuation_force",
+                                    "height",
+                                    "active_contacts",
+                                    "min_gap",
+                                    "max_normal_force",
+                                    "max_friction_force",
+                                    "slack_cables",
+                                    "max_strut_bending_stress",
+                                    "max_cable_stress" };
+  for (const OutputLayer& layer : model.layers)
+    cols.push_back("height_" + layer.name);
   if (model.actuators.size() > 1)
     for (const Actuator& a : model.actuators)
     {
@@ -109,7 +178,11 @@ std::vector<double> csvRow(const Model& model, const State& state)
                               minimumGap(model, state.q),
                               max_normal,
                               max_friction,
-                              static_cast<double>(slackCables(model, state)) };
+                              static_cast<double>(slackCables(model, state)),
+                              maxStrutBendingStress(model, state.q, contacts),
+                              maxCableStress(model, state) };
+  for (const OutputLayer& layer : model.layers)
+    row.push_back(nodesHeight(model, layer.nodes, state.q));
   if (model.actuators.size() > 1)
     for (size_t i = 0; i < model.actuators.size(); ++i)
     {
@@ -120,7 +193,7 @@ std::vector<double> csvRow(const Model& model, const State& state)
 }
 
 RunResult runAnalysis(const Model& model, const std::function<void(const State&)>& on_output,
-                      const std::function<void(double)>& on_progress)
+                      const std::function<void(double)>& on_progress, const std::function<void(const State&)>& on_step)
 {
   const auto start = std::chrono::steady_clock::now();
   RunResult result;
@@ -148,6 +221,8 @@ RunResult runAnalysis(const Model& model, const std::function<void(const State&)
     Summary path = solver.followPath(state, u_end, an.steps,
                                      [&](const State& s, const Summary&)
                                      {
+                                       if (on_step)
+                                         on_step(s);
                                        on_output(s);
                                        ++result.steps;
                                        if (on_progress)
@@ -190,6 +265,8 @@ RunResult runAnalysis(const Model& model, const std::function<void(const State&)
         break;
       }
       state.t = t_target;  // no drift from summing steps
+      if (on_step)
+        on_step(state);
       if (state.t >= next_output - 1e-9 * dt || k == n_steps)
       {
         on_output(state);

@@ -886,6 +886,26 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
       }
     else
       o.optional("height_nodes");
+    if (o.has("layers"))
+    {
+      Reader layers = o.map("layers");
+      for (const std::string& name : layers.keys())
+      {
+        OutputLayer layer;
+        layer.name = name;
+        for (const std::string& n : layers.names(name))
+        {
+          nodeRef(layers, layers.key(name), n);
+          layer.nodes.push_back(model.findNode(n));
+        }
+        if (layer.nodes.empty())
+          layers.fail(layers.key(name), "expected a list of node names");
+        model.layers.push_back(layer);
+      }
+      layers.finish();
+    }
+    else
+      o.optional("layers");
     o.finish();
   }
   else

@@ -1,4 +1,5 @@
 // tensegrity_run: runs a scene's analysis without a ROS master and writes CSV rows and a summary.
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -114,6 +115,24 @@ int main(int argc, char** argv)
     csv << (i ? "," : "") << cols[i];
   csv << "\n";
 
+  // peaks over every time step (or load step), not only the output steps
+  const std::vector<std::string> peak_names = { "actuation_force", "max_normal_force", "max_friction_force",
+                                                "max_strut_bending_stress", "max_cable_stress" };
+  std::vector<int> peak_cols;
+  for (const std::string& n : peak_names)
+    peak_cols.push_back(static_cast<int>(std::find(cols.begin(), cols.end(), n) - cols.begin()));
+  std::vector<double> peak_value(peak_cols.size(), 0.0), peak_time(peak_cols.size(), 0.0);
+  const auto track_peaks = [&](const at::State& s)
+  {
+    const std::vector<double> row = at::csvRow(model, s);
+    for (size_t k = 0; k < peak_cols.size(); ++k)
+      if (std::abs(row[peak_cols[k]]) > std::abs(peak_value[k]))
+      {
+        peak_value[k] = row[peak_cols[k]];
+        peak_time[k] = s.t;
+      }
+  };
+
   at::State last;
   const auto wall_start = std::chrono::steady_clock::now();
   auto last_report = wall_start;
@@ -150,7 +169,8 @@ int main(int argc, char** argv)
         reported = true;
         std::fprintf(stderr, "\rtensegrity_run: %5.1f %%  (%.0f s wall)", 100.0 * fraction,
                      std::chrono::duration<double>(now - wall_start).count());
-      });
+      },
+      track_peaks);
   if (reported)
     std::fprintf(stderr, "\n");
   csv.flush();
@@ -168,10 +188,16 @@ int main(int argc, char** argv)
           << "solver_steps: " << result.solver_steps << "\n"
           << "newton_iterations: " << result.summary.iterations << "\n"
           << "step_cuts: " << result.summary.step_cuts << "\n"
-          << "wall_time: " << result.wall_time << "\n"
-          << "final:\n";
+          << "wall_time: " << result.wall_time << "\n";
+  if (model.analysis.type == at::AnalysisType::kDynamic && result.wall_time > 0.0)
+    summary << "real_time_factor: " << fin.t / result.wall_time << "\n";
+  summary << "final:\n";
   for (size_t i = 0; i < cols.size(); ++i)
     summary << "  " << cols[i] << ": " << csvNumber(final_row[i]) << "\n";
+  summary << "peaks:  # largest magnitude over every step, and when (t: time, or path parameter in statics)\n";
+  for (size_t k = 0; k < peak_cols.size(); ++k)
+    summary << "  " << peak_names[k] << ": {value: " << csvNumber(peak_value[k]) << ", t: " << csvNumber(peak_time[k])
+            << "}\n";
   if (!summary_path.empty())
   {
     std::ofstream s(summary_path);

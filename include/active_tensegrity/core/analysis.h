@@ -26,12 +26,26 @@ double minimumGap(const Model& model, const Eigen::VectorXd& q);
 /// (Hertz in statics; Lankarani-Nikravesh and friction with the state's impact speeds in dynamics).
 std::vector<ContactPairState> activeContacts(const Model& model, const State& state);
 
+/// Highest z of the given nodes above the ground level (m).
+double nodesHeight(const Model& model, const std::vector<int>& nodes, const Eigen::VectorXd& q);
+
+/// Largest bending stress in a strut from its contact forces (Pa): each strut is a beam pinned at its
+/// ends (PHYSICS.md Sec. 8), loaded by the components of its contact forces across its axis at the
+/// contact points' axial positions; the bending is carried by the innermost layer (the steel core of a
+/// sleeved strut, the whole section of a solid one): sigma = M r / I = 4 M / (pi r^3). 0 without contact.
+double maxStrutBendingStress(const Model& model, const Eigen::VectorXd& q,
+                             const std::vector<ContactPairState>& contacts);
+
+/// Largest stress T / A in a material cable (springs have no section and are left out), Pa.
+double maxCableStress(const Model& model, const State& state);
+
 /// Number of slack cables (tension-only elements carrying no tension) in a state.
 int slackCables(const Model& model, const State& state);
 
 /// Column names of the CSV: t, actuation, actuation_force, height, active_contacts, min_gap,
-/// max_normal_force, max_friction_force, slack_cables, then actuation_<name> and
-/// actuation_force_<name> per actuator when there are several.
+/// max_normal_force, max_friction_force, slack_cables, max_strut_bending_stress, max_cable_stress,
+/// height_<layer> per output layer, then actuation_<name> and actuation_force_<name> per actuator when
+/// there are several.
 std::vector<std::string> csvColumns(const Model& model);
 std::vector<double> csvRow(const Model& model, const State& state);
 
@@ -44,8 +58,10 @@ struct RunResult
   State final_state;
 };
 
-/// Runs model.analysis; calls on_output for every output step (the initial state included).
+/// Runs model.analysis; calls on_output for every output step (the initial state included) and
+/// on_step, when given, after every time step or load step (for peaks between output steps).
 RunResult runAnalysis(const Model& model, const std::function<void(const State&)>& on_output,
-                      const std::function<void(double fraction)>& on_progress = {});
+                      const std::function<void(double fraction)>& on_progress = {},
+                      const std::function<void(const State&)>& on_step = {});
 
 }  // namespace active_tensegrity::core

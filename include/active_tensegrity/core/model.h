@@ -192,6 +192,14 @@ struct AnalysisSettings
   RampSchedule schedule;         // dynamic actuation law for every actuator
 };
 
+/// A named group of nodes whose highest z above the ground is written as the CSV column height_<name>
+/// (e.g. the top level of each stage of a tower).
+struct OutputLayer
+{
+  std::string name;
+  std::vector<int> nodes;  // node indices
+};
+
 struct Model
 {
   std::string name;
@@ -204,7 +212,8 @@ struct Model
   std::vector<Actuator> actuators;
   std::vector<StrutPair> checked_pairs;
   std::vector<int> height_nodes;  // node indices whose highest z gives the height
-  double ground_level = 0.0;      // z of the ground points, m
+  std::vector<OutputLayer> layers;
+  double ground_level = 0.0;  // z of the ground points, m
   bool gravity_enabled = false;
   Vec3 gravity = Vec3(0.0, 0.0, -9.81);
   bool damping_enabled = true;

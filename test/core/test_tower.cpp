@@ -1,0 +1,192 @@
+// The four-stage clustered tower (paper Sec. 6.2, PHYSICS.md Sec. 8): its layout, the quasi-static fold
+// with and without contact against the paper's contact onset, and short dynamic folds.
+#include <cmath>
+
+#include <gtest/gtest.h>
+
+#include "active_tensegrity/core/analysis.h"
+#include "active_tensegrity/core/scene.h"
+
+using namespace active_tensegrity::core;
+
+namespace
+{
+Model tower(const std::vector<Override>& overrides = {})
+{
+  return loadScene(std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) + "/config/scenes/tower.yaml", overrides);
+}
+
+struct Path
+{
+  std::vector<double> actuation, height, gap, normal;
+  std::vector<int> contacts;
+  RunResult result;
+};
+
+Path run(const Model& model)
+{
+  Path p;
+  p.result = runAnalysis(model,
+                         [&](const State& s)
+                         {
+                           p.actuation.push_back(s.u[0].value);
+                           p.height.push_back(structureHeight(model, s.q));
+                           p.gap.push_back(minimumGap(model, s.q));
+                           const std::vector<ContactPairState> c = activeContacts(model, s);
+                           p.contacts.push_back(static_cast<int>(c.size()));
+                           double fn = 0.0;
+                           for (const ContactPairState& x : c)
+                             fn = std::max(fn, x.normal_force);
+                           p.normal.push_back(fn);
+                           EXPECT_TRUE(s.q.allFinite() && s.qd.allFinite() && s.lambda.allFinite()) << s.t;
+                         });
+  return p;
+}
+
+/// x where y first falls below level (linear interpolation), or NaN.
+double firstBelow(const std::vector<double>& x, const std::vector<double>& y, double level)
+{
+  for (size_t i = 1; i < x.size(); ++i)
+    if (y[i - 1] >= level && y[i] < level)
+      return x[i - 1] + (x[i] - x[i - 1]) * (y[i - 1] - level) / (y[i - 1] - y[i]);
+  return std::nan("");
+}
+}  // namespace
+
+TEST(Tower, LayoutIsThatOfThePhysicsNotes)
+{
+  const Model m = tower();
+  int struts = 0, sliding = 0, springs = 0, joints = 0, pins = 0;
+  for (const Body& b : m.bodies)
+    if (b.kind == BodyKind::kStrut)
+    {
+      ++struts;
+      EXPECT_NEAR(b.length, std::sqrt(1.5), 1e-12) << b.name;
+      EXPECT_NEAR(b.mass, 9.86, 0.01) << b.name << ": steel core plus rubber sleeve";
+      EXPECT_DOUBLE_EQ(b.radius(), 0.04);
+    }
+  for (const Cable& c : m.cables)
+  {
+    sliding += c.sliding() ? 1 : 0;
+    springs += c.area == 0.0 ? 1 : 0;
+    if (c.sliding())
+    {
+      EXPECT_EQ(c.points.size(), 6u) << c.name << ": top, small, big, small, ground pulley, driven body";
+    }
+  }
+  for (const Constraint& c : m.constraints)
+  {
+    joints += c.name.find(".joint") != std::string::npos ? 1 : 0;
+    pins += c.name.find(".pin") != std::string::npos ? 1 : 0;
+  }
+  EXPECT_EQ(struts, 16);
+  EXPECT_EQ(sliding, 4);
+  EXPECT_EQ(springs, 8);
+  EXPECT_EQ(joints, 12);
+  EXPECT_EQ(pins, 4);
+  EXPECT_EQ(m.checked_pairs.size(), 16u);
+  EXPECT_EQ(m.actuators.size(), 4u);
+  EXPECT_EQ(m.layers.size(), 4u);
+  EXPECT_DOUBLE_EQ(structureHeight(m, m.q0), 2.0);
+  // unstressed at the start: every member at its free length
+  const State s = initialState(m);
+  EXPECT_EQ(slackCables(m, s), static_cast<int>(m.cables.size()));
+}
+
+TEST(Tower, QuasiStaticFoldMeetsThePapersContactOnsetAndContactHoldsTheStruts)
+{
+  // 5 mm load steps; the study (scripts/tower_study) uses 1 mm
+  const Path free = run(tower({ { "contact.enabled", "false" }, { "analysis.steps", "300" } }));
+  ASSERT_TRUE(free.result.summary.ok()) << free.result.summary.message;
+  const double onset = firstBelow(free.actuation, free.gap, 0.0);
+  const double onset_height = [&]
+  {
+    for (size_t i = 1; i < free.actuation.size(); ++i)
+      if (free.actuation[i] >= onset)
+        return free.height[i - 1] + (free.height[i] - free.height[i - 1]) * (onset - free.actuation[i - 1]) /
+                                        (free.actuation[i] - free.actuation[i - 1]);
+    return std::nan("");
+  }();
+  std::cout << "[ measured ] tower contact onset: actuation " << onset << " m, height " << onset_height
+            << " m (paper 0.638 m, 0.799 m)\n";
+  EXPECT_NEAR(onset, 0.638, 0.002);
+  EXPECT_NEAR(onset_height, 0.799, 0.003);
+  // without contact the struts pass through each other and the tower collapses soon after
+  EXPECT_LT(firstBelow(free.actuation, free.height, 0.05), onset + 0.2);
+
+  const Path touch = run(tower({ { "analysis.steps", "300" } }));
+  ASSERT_TRUE(touch.result.summary.ok()) << touch.result.summary.message;
+  const double radius = 0.04;
+  for (size_t i = 0; i < touch.actuation.size(); ++i)
+  {
+    EXPECT_GT(touch.gap[i], -0.1 * radius) << "overlap above a tenth of the radius at " << touch.actuation[i];
+    if (touch.actuation[i] < onset - 0.005)
+    {
+      EXPECT_EQ(touch.contacts[i], 0) << touch.actuation[i];
+    }
+    if (touch.actuation[i] > onset + 0.005)
+    {
+      EXPECT_EQ(touch.contacts[i], 16) << "the symmetric fold touches every checked pair at once";
+    }
+  }
+  const double half = firstBelow(touch.actuation, touch.height, 0.5);
+  std::cout << "[ measured ] tower with contact: height 0.5 m at actuation " << half << " m (paper 1.448 m)\n";
+  EXPECT_NEAR(half, 1.448, 0.03);
+  EXPECT_LT(touch.height.back(), 0.5);
+}
+
+TEST(Tower, FastDynamicFoldMakesFiniteContactForces)
+{
+  // V = 5 m/s: the struts first meet at about 0.35 s
+  const Path p = run(tower({ { "analysis.type", "dynamic" },
+                             { "actuation.speed", "5" },
+                             { "analysis.duration", "0.45" },
+                             { "analysis.output_interval", "0.005" } }));
+  ASSERT_TRUE(p.result.summary.ok()) << p.result.summary.message;
+  int most = 0;
+  double peak = 0.0;
+  for (size_t i = 0; i < p.contacts.size(); ++i)
+  {
+    most = std::max(most, p.contacts[i]);
+    peak = std::max(peak, p.normal[i]);
+    ASSERT_TRUE(std::isfinite(p.normal[i]));
+  }
+  std::cout << "[ measured ] tower V = 5 m/s, 0.45 s: up to " << most << " pairs in contact, largest normal force "
+            << peak << " N (output steps)\n";
+  EXPECT_GT(most, 0);
+  EXPECT_GT(peak, 1000.0) << "a fast fold hits far harder than the quasi-static contact (about 100 N)";
+  EXPECT_LT(peak, 1e6);
+}
+
+TEST(Tower, SlowDynamicFoldFollowsTheQuasiStaticHeights)
+{
+  // The unstressed tower folds along a soft mode (period of seconds, held by the 2000 N/m springs): at
+  // V = 0.5 m/s the dynamic heights run up to 0.37 m above the quasi-static ones; at V = 0.02 m/s the
+  // start excites only a small oscillation about them (undamped: no cable damping in the scene).
+  const Model statics =
+      tower({ { "contact.enabled", "false" }, { "analysis.steps", "40" }, { "analysis.max_actuation", "0.2" } });
+  const Path qs = run(statics);
+  ASSERT_TRUE(qs.result.summary.ok()) << qs.result.summary.message;
+  // V = 0.02 m/s to 0.2 m (before contact): 10 s, at dt = 1e-3 s (slow enough for that step)
+  const Path dyn = run(tower({ { "analysis.type", "dynamic" },
+                               { "actuation.speed", "0.02" },
+                               { "solver.dt", "1e-3" },
+                               { "analysis.max_actuation", "0.2" },
+                               { "analysis.duration", "10.0" },
+                               { "analysis.output_interval", "0.1" } }));
+  ASSERT_TRUE(dyn.result.summary.ok()) << dyn.result.summary.message;
+  double worst = 0.0;
+  for (size_t i = 0; i < dyn.actuation.size(); ++i)
+  {
+    const double a = dyn.actuation[i];
+    size_t k = 1;
+    while (k + 1 < qs.actuation.size() && qs.actuation[k] < a)
+      ++k;
+    const double w = (a - qs.actuation[k - 1]) / (qs.actuation[k] - qs.actuation[k - 1]);
+    const double h = qs.height[k - 1] + w * (qs.height[k] - qs.height[k - 1]);
+    worst = std::max(worst, std::abs(dyn.height[i] - h));
+  }
+  std::cout << "[ measured ] tower V = 0.02 m/s: largest height difference to the quasi-static fold " << worst
+            << " m (the fold lowers it by 0.3 m)\n";
+  EXPECT_LT(worst, 0.06);
+}
