@@ -2,6 +2,7 @@
 """Figures and findings of the tower study (scripts/tower_study; paper Sec. 6.2, Fig. 14-27).
 
 usage: plot_tower.py RESULTS_DIR FIGURES_DIR
+       plot_tower.py --demo DYNAMIC.csv STATIC.csv OUT.png   (one run: layer heights and contact force)
 
 RESULTS_DIR holds static_contact.csv, static_no_contact.csv and, per speed V, dynamic_vV.csv,
 dynamic_vV.yaml and contacts_vV.csv as tensegrity_run writes them. Writes
@@ -68,7 +69,35 @@ def stage_of(strut):
     return int(strut[1])  # S<stage><k>
 
 
+def demo(dynamic_csv, static_csv, out_png):
+    d, s = read_csv(dynamic_csv), read_csv(static_csv)
+    fig, ax = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
+    for k, col in enumerate(LAYERS):
+        ax[0].plot(d["t"], d[col], color=f"C{k}", label=f"layer {k + 1}")
+        # quasi-static height at the same actuation
+        qs = []
+        for a in d["actuation"]:
+            i = min(range(len(s["actuation"])), key=lambda j: abs(s["actuation"][j] - a))
+            qs.append(s[col][i])
+        ax[0].plot(d["t"], qs, "--", color=f"C{k}", lw=0.7)
+    ax[0].set_ylabel("height, m (dashed: quasi-static)")
+    ax[0].legend(fontsize=8, ncol=4)
+    ax[0].grid(alpha=0.3)
+    ax[1].plot(d["t"], d["max_normal_force"], label="largest normal contact force")
+    ax[1].plot(d["t"], d["max_friction_force"], label="largest friction force")
+    ax[1].set_yscale("symlog", linthresh=10.0)
+    ax[1].set_xlabel("t, s")
+    ax[1].set_ylabel("N")
+    ax[1].legend(fontsize=8)
+    ax[1].grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(out_png, dpi=100)
+
+
 def main():
+    if len(sys.argv) == 5 and sys.argv[1] == "--demo":
+        demo(*sys.argv[2:])
+        return
     if len(sys.argv) != 3:
         sys.exit(__doc__)
     res, figs = sys.argv[1], sys.argv[2]
