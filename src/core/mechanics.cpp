@@ -88,7 +88,8 @@ CableState evaluateCable(const Model& model, const Cable& cable, const Eigen::Ve
   }
   s.rest_length = cable.rest_length - pull_in;
   // a material cable keeps EA when pulled in, so k = EA / l0 grows; a spring keeps k
-  const double k_axial = cable.area > 0.0 ? cable.stiffness * cable.rest_length / s.rest_length : cable.stiffness;
+  s.stiffness = cable.area > 0.0 ? cable.stiffness * cable.rest_length / s.rest_length : cable.stiffness;
+  const double k_axial = s.stiffness;
   const double c = damping ? cable.damping : 0.0;
   const double stretch = s.length - s.rest_length;
   const double tension = k_axial * stretch + c * (s.rate + pull_rate);  // damping on the material stretch rate
@@ -590,10 +591,9 @@ double System::potentialEnergy(const Eigen::VectorXd& q, const ActuationValues& 
   for (const Cable& c : model_.cables)
   {
     const CableState st = evaluateCable(model_, c, q, zero, u, false, nullptr, nullptr, 0.0, 0.0);
-    const double k_axial = c.area > 0.0 ? c.stiffness * c.rest_length / st.rest_length : c.stiffness;
     const double stretch = st.length - st.rest_length;
     if (stretch > 0.0 || !c.tension_only)
-      e += 0.5 * k_axial * stretch * stretch;
+      e += 0.5 * st.stiffness * stretch * stretch;
   }
   return e;
 }

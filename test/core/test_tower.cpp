@@ -43,6 +43,15 @@ Path run(const Model& model)
   return p;
 }
 
+/// y at x = at, interpolated linearly in a table with increasing x (clamped at its ends).
+double interpolate(const std::vector<double>& x, const std::vector<double>& y, double at)
+{
+  size_t k = 1;
+  while (k + 1 < x.size() && x[k] < at)
+    ++k;
+  return y[k - 1] + (y[k] - y[k - 1]) * (at - x[k - 1]) / (x[k] - x[k - 1]);
+}
+
 /// x where y first falls below level (linear interpolation), or NaN.
 double firstBelow(const std::vector<double>& x, const std::vector<double>& y, double level)
 {
@@ -99,14 +108,7 @@ TEST(Tower, QuasiStaticFoldMeetsThePapersContactOnsetAndContactHoldsTheStruts)
   const Path free = run(tower({ { "contact.enabled", "false" }, { "analysis.steps", "300" } }));
   ASSERT_TRUE(free.result.summary.ok()) << free.result.summary.message;
   const double onset = firstBelow(free.actuation, free.gap, 0.0);
-  const double onset_height = [&]
-  {
-    for (size_t i = 1; i < free.actuation.size(); ++i)
-      if (free.actuation[i] >= onset)
-        return free.height[i - 1] + (free.height[i] - free.height[i - 1]) * (onset - free.actuation[i - 1]) /
-                                        (free.actuation[i] - free.actuation[i - 1]);
-    return std::nan("");
-  }();
+  const double onset_height = interpolate(free.actuation, free.height, onset);
   std::cout << "[ measured ] tower contact onset: actuation " << onset << " m, height " << onset_height
             << " m (paper 0.638 m, 0.799 m)\n";
   EXPECT_NEAR(onset, 0.638, 0.002);
@@ -178,12 +180,7 @@ TEST(Tower, SlowDynamicFoldFollowsTheQuasiStaticHeights)
   double worst = 0.0;
   for (size_t i = 0; i < dyn.actuation.size(); ++i)
   {
-    const double a = dyn.actuation[i];
-    size_t k = 1;
-    while (k + 1 < qs.actuation.size() && qs.actuation[k] < a)
-      ++k;
-    const double w = (a - qs.actuation[k - 1]) / (qs.actuation[k] - qs.actuation[k - 1]);
-    const double h = qs.height[k - 1] + w * (qs.height[k] - qs.height[k - 1]);
+    const double h = interpolate(qs.actuation, qs.height, dyn.actuation[i]);
     worst = std::max(worst, std::abs(dyn.height[i] - h));
   }
   std::cout << "[ measured ] tower V = 0.02 m/s: largest height difference to the quasi-static fold " << worst

@@ -45,6 +45,7 @@ struct CableState
   double length = 0.0;       // m (sum over segments)
   double rate = 0.0;         // m/s
   double rest_length = 0.0;  // m, after pull-in
+  double stiffness = 0.0;    // k after pull-in, N/m (EA / l0 for a material cable)
   double tension = 0.0;      // N (>= 0 for tension-only elements)
   bool slack = false;
 };
