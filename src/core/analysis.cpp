@@ -192,6 +192,20 @@ std::vector<double> csvRow(const Model& model, const State& state)
   return row;
 }
 
+std::vector<std::pair<std::string, double>> timeBreakdown(const RunResult& result)
+{
+  const StepTimings& t = result.timings;
+  const double parts = t.forces + t.contact + t.constraints + t.factorization + t.solve;
+  return { { "forces", t.forces },
+           { "contact", t.contact },
+           { "constraints", t.constraints },
+           { "factorization", t.factorization },
+           { "solve", t.solve },
+           { "solver_other", std::max(0.0, t.total - parts) },
+           { "callbacks", result.callback_time },
+           { "rest", std::max(0.0, result.wall_time - t.total - result.callback_time) } };
+}
+
 RunResult runAnalysis(const Model& model, const std::function<void(const State&)>& on_output,
                       const std::function<void(double)>& on_progress, const std::function<void(const State&)>& on_step)
 {
@@ -218,16 +232,20 @@ RunResult runAnalysis(const Model& model, const std::function<void(const State&)
     ActuationValues u_end = state.u;
     for (auto& v : u_end)
       v.value = an.max_actuation;
-    Summary path = solver.followPath(state, u_end, an.steps,
-                                     [&](const State& s, const Summary&)
-                                     {
-                                       if (on_step)
-                                         on_step(s);
-                                       on_output(s);
-                                       ++result.steps;
-                                       if (on_progress)
-                                         on_progress(s.t);
-                                     });
+    Summary path =
+        solver.followPath(state, u_end, an.steps,
+                          [&](const State& s, const Summary&)
+                          {
+                            const auto callbacks = std::chrono::steady_clock::now();
+                            if (on_step)
+                              on_step(s);
+                            on_output(s);
+                            result.callback_time +=
+                                std::chrono::duration<double>(std::chrono::steady_clock::now() - callbacks).count();
+                            ++result.steps;
+                            if (on_progress)
+                              on_progress(s.t);
+                          });
     path.iterations += first.iterations;
     result.summary = path;
     result.solver_steps = an.steps + path.step_cuts;
@@ -265,6 +283,7 @@ RunResult runAnalysis(const Model& model, const std::function<void(const State&)
         break;
       }
       state.t = t_target;  // no drift from summing steps
+      const auto callbacks = std::chrono::steady_clock::now();
       if (on_step)
         on_step(state);
       if (state.t >= next_output - 1e-9 * dt || k == n_steps)
@@ -273,9 +292,11 @@ RunResult runAnalysis(const Model& model, const std::function<void(const State&)
         ++result.steps;
         next_output += interval;
       }
+      result.callback_time += std::chrono::duration<double>(std::chrono::steady_clock::now() - callbacks).count();
       if (on_progress && k % 256 == 0)
         on_progress(state.t / an.duration);
     }
+    result.timings = solver.timings();
   }
   result.final_state = state;
   result.wall_time = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

@@ -1,11 +1,32 @@
 #include "active_tensegrity/core/dynamics.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <sstream>
 
 namespace active_tensegrity::core
 {
+namespace
+{
+/// Adds the wall time of its scope to `sum` (s).
+class ScopeTimer
+{
+public:
+  explicit ScopeTimer(double& sum) : sum_(sum), start_(std::chrono::steady_clock::now()) {}
+  ~ScopeTimer()
+  {
+    sum_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+  }
+  ScopeTimer(const ScopeTimer&) = delete;
+  ScopeTimer& operator=(const ScopeTimer&) = delete;
+
+private:
+  double& sum_;
+  std::chrono::steady_clock::time_point start_;
+};
+}  // namespace
+
 DynamicsSolver::DynamicsSolver(const Model& model, const SolverOptions& options)
   : system_(model), options_(options), jac_(system_.makeMatrix())
 {
@@ -41,6 +62,7 @@ void DynamicsSolver::residualAndJacobian(const State& s, double h, const Actuati
 
 void DynamicsSolver::prepareContact(const State& s, double h)
 {
+  const ScopeTimer timer(timings_.contact);
   const Model& model = system_.model();
   step_speeds_.assign(model.checked_pairs.size(), model.contact.min_impact_speed);
   if (!model.contact.enabled)
@@ -66,6 +88,7 @@ void DynamicsSolver::prepareContact(const State& s, double h)
 
 void DynamicsSolver::updateContactMemory(State& s)
 {
+  const ScopeTimer timer(timings_.contact);
   const Model& model = system_.model();
   s.contact_speed.assign(model.checked_pairs.size(), 0.0);
   if (!model.contact.enabled)
@@ -83,17 +106,26 @@ void DynamicsSolver::residual(const State& s, double h, const ActuationValues& u
   const double bh2 = coef_.beta * h * h * da;                       // d q / d qdd
   const double gh = coef_.gamma * h * da;                           // d qd / d qdd
   predict(s, h, qdd_new, q_, qd_, acc_);
-  if (jac)
-    jac->setZero();
-  system_.inertialForce(q_, qd_, qdd_new, inertial_, jac, 1.0, bh2, gh);
-  system_.appliedForce(q_, qd_, u, applied_, jac, bh2, gh);
-  system_.contactForce(q_, qd_, step_speeds_, ContactMode::kDynamic, applied_, jac, bh2, gh);
-  system_.constraintForce(q_, lambda_new, cforce_);
-  system_.constraintValue(q_, u, phi_);
-  if (jac)
   {
-    system_.addLambdaHessian(q_, lambda_new, *jac, bh2);
-    system_.addConstraintJacobian(q_, *jac);
+    const ScopeTimer timer(timings_.forces);
+    if (jac)
+      jac->setZero();
+    system_.inertialForce(q_, qd_, qdd_new, inertial_, jac, 1.0, bh2, gh);
+    system_.appliedForce(q_, qd_, u, applied_, jac, bh2, gh);
+  }
+  {
+    const ScopeTimer timer(timings_.contact);
+    system_.contactForce(q_, qd_, step_speeds_, ContactMode::kDynamic, applied_, jac, bh2, gh);
+  }
+  {
+    const ScopeTimer timer(timings_.constraints);
+    system_.constraintForce(q_, lambda_new, cforce_);
+    system_.constraintValue(q_, u, phi_);
+    if (jac)
+    {
+      system_.addLambdaHessian(q_, lambda_new, *jac, bh2);
+      system_.addConstraintJacobian(q_, *jac);
+    }
   }
   r.resize(system_.size());
   r.head(system_.nq()) = inertial_ - applied_ + cforce_;
@@ -113,19 +145,28 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law)
   {
     residual(s, h, u, qdd, lambda, r_, &jac_);
     ++sum.iterations;
+    ++timings_.newton_iterations;
     if (!r_.allFinite())
     {
       sum.status = SolveStatus::kNonFinite;
       sum.message = "non-finite residual";
       return sum;
     }
-    if (!linear_.factorize(jac_.matrix()))
+    bool factorized = false;
+    {
+      const ScopeTimer timer(timings_.factorization);
+      factorized = linear_.factorize(jac_.matrix());
+    }
+    if (!factorized)
     {
       sum.status = SolveStatus::kSingular;
       sum.message = "singular Newton matrix";
       return sum;
     }
-    linear_.solve(-r_, dx_);
+    {
+      const ScopeTimer timer(timings_.solve);
+      linear_.solve(-r_, dx_);
+    }
     if (!dx_.allFinite())
     {
       sum.status = SolveStatus::kNonFinite;
@@ -138,7 +179,12 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law)
     if (sum.residual <= options_.newton_tolerance)
     {
       predict(s, h, qdd, q_, qd_, acc_);
-      const int crossed = system_.model().contact.enabled ? system_.firstPassedThrough(s.q, q_) : -1;
+      int crossed = -1;
+      if (system_.model().contact.enabled)
+      {
+        const ScopeTimer timer(timings_.contact);
+        crossed = system_.firstPassedThrough(s.q, q_);
+      }
       if (crossed >= 0)
       {
         // a step that jumps a strut through another is refused (and cut), never accepted silently
@@ -202,6 +248,7 @@ Summary DynamicsSolver::advance(State& s, double h, const ActuationLaw& law, int
 
 Summary DynamicsSolver::step(State& s, double h, const ActuationLaw& law)
 {
+  const ScopeTimer timer(timings_.total);
   return advance(s, h, law, 0);
 }
 

@@ -1,7 +1,10 @@
 // tensegrity_bench: measurements that print numbers (never timed tests).
-//   tensegrity_bench steps SCENE [--set key=value]... [--repeat N]
+//   tensegrity_bench steps SCENE [--set key=value]... [--repeat N] [--peaks]
 // runs the scene's analysis N times and prints the wall time per solver step (median and minimum
-// over the runs), Newton iterations per step, and for dynamic runs the real-time factor.
+// over the runs), Newton iterations per step, for dynamic runs the real-time factor, and where the
+// time of the last run went (forces, contact, constraints, factorization, solve, the rest); with
+// --peaks the run also evaluates a full output row after every step, as tensegrity_run does for
+// its summary peaks, so that the cost of that tracking shows under "callbacks".
 //   tensegrity_bench contact-pair [--repeat N]
 // times one strut pair's contact evaluation (evaluateContact, contactGeometry) in dynamics with
 // friction, with and without the tangents, and in statics: ns per call, the median over N loops of
@@ -29,8 +32,10 @@ namespace at = active_tensegrity::core;
 namespace
 {
 const char* kUsage =
-    "usage: tensegrity_bench steps SCENE.yaml [--set key=value]... [--repeat N]\n"
-    "  Runs the scene's analysis N times (default 5) and prints wall time and Newton iterations per step.\n"
+    "usage: tensegrity_bench steps SCENE.yaml [--set key=value]... [--repeat N] [--peaks]\n"
+    "  Runs the scene's analysis N times (default 5) and prints wall time and Newton iterations per step\n"
+    "  and where the time goes; --peaks also evaluates a full output row after every step (as\n"
+    "  tensegrity_run's summary peaks do).\n"
     "       tensegrity_bench contact-pair [--repeat N]\n"
     "  Times one strut pair's contact evaluation (dynamic with friction, with and without tangents;\n"
     "  static): ns per call, median over N (default 5) loops of 100000 calls.\n"
@@ -275,14 +280,17 @@ int broadPhase(int repeat)
   return 0;
 }
 
-int steps(const std::string& scene, const std::vector<at::Override>& overrides, int repeat)
+int steps(const std::string& scene, const std::vector<at::Override>& overrides, int repeat, bool peaks)
 {
   const at::Model model = at::loadScene(scene, overrides);
   std::vector<double> per_step;
   at::RunResult last;
   for (int r = 0; r < repeat; ++r)
   {
-    last = at::runAnalysis(model, [](const at::State&) {});
+    const auto per_step_row = [&model](const at::State& s) { g_sink = g_sink + at::csvRow(model, s).back(); };
+    last = peaks ? at::runAnalysis(
+                       model, [](const at::State&) {}, {}, per_step_row) :
+                   at::runAnalysis(model, [](const at::State&) {});
     if (!last.summary.ok())
     {
       std::cerr << "tensegrity_bench: the analysis failed: " << last.summary.message << "\n";
@@ -306,6 +314,11 @@ int steps(const std::string& scene, const std::vector<at::Override>& overrides, 
               static_cast<double>(last.summary.iterations) / std::max(1, last.solver_steps));
   std::printf("wall time per step: median %.3f us, min %.3f us over %d runs\n", 1e6 * median, 1e6 * per_step.front(),
               repeat);
+  std::printf("where the time goes (last run, us per step, share of its wall time):\n");
+  const int n = std::max(1, last.solver_steps);
+  for (const auto& [part, seconds] : at::timeBreakdown(last))
+    std::printf("  %-14s %10.2f us %6.1f %%\n", part.c_str(), 1e6 * seconds / n,
+                last.wall_time > 0.0 ? 100.0 * seconds / last.wall_time : 0.0);
   if (dynamic)
     std::printf("real-time factor (simulated / wall, median): %.1f\n", model.solver.dt / median);
   return 0;
@@ -323,6 +336,7 @@ int main(int argc, char** argv)
   }
   std::vector<at::Override> overrides;
   int repeat = 5;
+  bool peaks = false;
   const std::string scene = needs_scene ? argv[2] : "";
   try
   {
@@ -331,6 +345,8 @@ int main(int argc, char** argv)
       const std::string arg = argv[i];
       if (needs_scene && arg == "--set" && i + 1 < argc)
         overrides.push_back(at::parseOverride(argv[++i]));
+      else if (needs_scene && arg == "--peaks")
+        peaks = true;
       else if (arg == "--repeat" && i + 1 < argc)
         repeat = std::max(1, std::stoi(argv[++i]));
       else
@@ -343,7 +359,7 @@ int main(int argc, char** argv)
       return contactPair(repeat);
     if (command == "broad-phase")
       return broadPhase(repeat);
-    return steps(scene, overrides, repeat);
+    return steps(scene, overrides, repeat, peaks);
   }
   catch (const std::exception& e)
   {

@@ -191,6 +191,10 @@ int main(int argc, char** argv)
           << "wall_time: " << result.wall_time << "\n";
   if (model.analysis.type == at::AnalysisType::kDynamic && result.wall_time > 0.0)
     summary << "real_time_factor: " << fin.t / result.wall_time << "\n";
+  summary << "time_breakdown:  # wall seconds (share); callbacks = output rows, per-step peaks, writing\n";
+  for (const auto& [part, seconds] : at::timeBreakdown(result))
+    summary << "  " << part << ": {seconds: " << csvNumber(seconds)
+            << ", share: " << csvNumber(result.wall_time > 0.0 ? seconds / result.wall_time : 0.0) << "}\n";
   summary << "final:\n";
   for (size_t i = 0; i < cols.size(); ++i)
     summary << "  " << cols[i] << ": " << csvNumber(final_row[i]) << "\n";

@@ -4,8 +4,10 @@
 
 #include <functional>
 #include <string>
+#include <utility>
 #include <vector>
 
+#include "active_tensegrity/core/dynamics.h"
 #include "active_tensegrity/core/state.h"
 
 namespace active_tensegrity::core
@@ -55,8 +57,17 @@ struct RunResult
   int steps = 0;           // output steps written
   int solver_steps = 0;    // time steps or load increments taken
   double wall_time = 0.0;  // s
+  /// Dynamic runs: where the solver's time went. Both: wall time spent in on_step and on_output (s).
+  StepTimings timings;
+  double callback_time = 0.0;
   State final_state;
 };
+
+/// Where a run's wall time went, in order: forces, contact, constraints, factorization, solve,
+/// solver_other (the rest of step(): vector work, step bookkeeping), callbacks (on_step and on_output:
+/// output rows, peak tracking, writing), rest (setup, initialization, the loop itself); seconds that
+/// sum to wall_time. Static runs have only callbacks and rest (the step split is dynamic only).
+std::vector<std::pair<std::string, double>> timeBreakdown(const RunResult& result);
 
 /// Runs model.analysis; calls on_output for every output step (the initial state included) and
 /// on_step, when given, after every time step or load step (for peaks between output steps).
