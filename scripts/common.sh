@@ -1,9 +1,10 @@
 # shellcheck shell=bash
 # Shared by scripts/test and scripts/demo: environment and the catkin workspace in build/ws.
 #
-# The workspace is <repo>/build/ws with src/active_tensegrity a symlink to the repo root (build/ is
-# git-ignored). The symlink makes a loop (repo/build/ws/src/active_tensegrity -> repo): never walk the
-# package root recursively (no GLOB_RECURSE, no find over the repo); catkin stops at package.xml.
+# The workspace is <repo>/build/ws (build/ is git-ignored). Its src/active_tensegrity is a directory
+# of symlinks, one per top-level entry of the repo except build/ and .git: a symlink to the repo root
+# itself would contain build/ws/src/... again, a loop that rosrun's `find -L` over the package walks
+# (and warns about) on every call. at_workspace keeps the links in step with the repo's top level.
 
 AT_ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd -P)"
 AT_BUILD="$AT_ROOT/build"
@@ -28,14 +29,28 @@ at_log() { echo "== $*"; }
 # Create build/ws with the package symlinked in, and drop a stale build tree (moved repo, other python).
 at_workspace() {
   mkdir -p "$AT_WS/src" "$ROS_LOG_DIR"
-  local link="$AT_WS/src/active_tensegrity"
-  if [[ -e "$link" && ! -L "$link" ]]; then
-    echo "error: $link exists and is not a symlink; remove $AT_WS" >&2
-    return 1
-  fi
-  if [[ "$(readlink "$link" 2>/dev/null || true)" != "$AT_ROOT" ]]; then
-    ln -sfn "$AT_ROOT" "$link"
-  fi
+  local pkg="$AT_WS/src/active_tensegrity"
+  # the old layout: one symlink to the repo root
+  [[ -L "$pkg" ]] && rm -f "$pkg"
+  mkdir -p "$pkg"
+  local entry name
+  for entry in "$AT_ROOT"/* "$AT_ROOT"/.clang-format; do
+    [[ -e "$entry" ]] || continue
+    name="$(basename "$entry")"
+    [[ "$name" == build ]] && continue
+    if [[ "$(readlink "$pkg/$name" 2>/dev/null || true)" != "$entry" ]]; then
+      ln -sfn "$entry" "$pkg/$name"
+    fi
+  done
+  # links to entries the repo no longer has
+  for entry in "$pkg"/* "$pkg"/.[!.]*; do
+    if [[ -L "$entry" && ! -e "$entry" ]]; then
+      rm -f "$entry"
+    elif [[ -e "$entry" && ! -L "$entry" ]]; then
+      echo "error: $entry is not a symlink; remove $AT_WS" >&2
+      return 1
+    fi
+  done
   local cache="$AT_CATKIN_BUILD/CMakeCache.txt"
   if [[ -f "$cache" ]]; then
     local home python

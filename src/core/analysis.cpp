@@ -87,15 +87,23 @@ double maxStrutBendingStress(const Model& model, const Eigen::VectorXd& q, const
   return sigma;
 }
 
+std::vector<CableState> cableStates(const Model& model, const State& state)
+{
+  std::vector<CableState> out;
+  out.reserve(model.cables.size());
+  for (const Cable& c : model.cables)
+    out.push_back(
+        evaluateCable(model, c, state.q, state.qd, state.u, model.damping_enabled, nullptr, nullptr, 0.0, 0.0));
+  return out;
+}
+
 double maxCableStress(const Model& model, const State& state)
 {
   double sigma = 0.0;
-  for (const Cable& c : model.cables)
-    if (c.area > 0.0)
-      sigma = std::max(
-          sigma,
-          evaluateCable(model, c, state.q, state.qd, state.u, model.damping_enabled, nullptr, nullptr, 0.0, 0.0).tension /
-              c.area);
+  const std::vector<CableState> cables = cableStates(model, state);
+  for (size_t i = 0; i < cables.size(); ++i)
+    if (model.cables[i].area > 0.0)
+      sigma = std::max(sigma, cables[i].tension / model.cables[i].area);
   return sigma;
 }
 
@@ -129,10 +137,8 @@ std::vector<ContactPairState> activeContacts(const Model& model, const State& st
 int slackCables(const Model& model, const State& state)
 {
   int n = 0;
-  for (const Cable& c : model.cables)
-    n += evaluateCable(model, c, state.q, state.qd, state.u, model.damping_enabled, nullptr, nullptr, 0.0, 0.0).slack ?
-             1 :
-             0;
+  for (const CableState& c : cableStates(model, state))
+    n += c.slack ? 1 : 0;
   return n;
 }
 

@@ -7,11 +7,13 @@
 #include <iomanip>
 #include <iostream>
 #include <limits>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/scene.h"
+#include "active_tensegrity/ros/bag_writer.h"
 
 namespace at = active_tensegrity::core;
 
@@ -19,11 +21,15 @@ namespace
 {
 const char* kUsage =
     "usage: tensegrity_run SCENE.yaml [--set key=value]... [--out FILE.csv] [--summary FILE.yaml]\n"
-    "                     [--contacts FILE.csv]\n"
+    "                     [--contacts FILE.csv] [--bag FILE.bag] [--bag-ns /NAME]\n"
     "  Runs the scene's analysis (static path or dynamic run) and writes one CSV row per output step\n"
     "  (stdout when --out is not given) and a YAML summary. Any scene key can be overridden with\n"
     "  --set, e.g. --set struts.radius=0.06 --set analysis.max_actuation=1.0\n"
-    "  --contacts writes one row per strut pair in contact per output step (points, normal, forces).\n";
+    "  --contacts writes one row per strut pair in contact per output step (points, normal, forces).\n"
+    "  --bag writes, per output step, what the tensegrity_sim node publishes (/tf, NS/contacts, NS/cables,\n"
+    "  NS/actuators, NS/markers with NS = --bag-ns, default /tensegrity_sim), stamped in simulated time\n"
+    "  from the wall time of the start; no master needed. Watch it with\n"
+    "  roslaunch active_tensegrity playback.launch bag:=$PWD/FILE.bag\n";
 
 const char* kContactColumns = "t,strut_a,strut_b,point_a_x,point_a_y,point_a_z,point_b_x,point_b_y,point_b_z,"
                               "normal_x,normal_y,normal_z,penetration,penetration_rate,normal_force,friction_x,"
@@ -41,7 +47,7 @@ std::string csvNumber(double v)
 
 int main(int argc, char** argv)
 {
-  std::string scene, out_path, summary_path, contacts_path;
+  std::string scene, out_path, summary_path, contacts_path, bag_path, bag_ns = "/tensegrity_sim";
   std::vector<at::Override> overrides;
   try
   {
@@ -67,6 +73,10 @@ int main(int argc, char** argv)
         summary_path = value("--summary");
       else if (arg == "--contacts")
         contacts_path = value("--contacts");
+      else if (arg == "--bag")
+        bag_path = value("--bag");
+      else if (arg == "--bag-ns")
+        bag_ns = value("--bag-ns");
       else if (!arg.empty() && arg[0] == '-')
         throw std::invalid_argument("unknown option '" + arg + "'");
       else if (scene.empty())
@@ -107,6 +117,19 @@ int main(int argc, char** argv)
   std::ofstream file, contacts;
   if (!open(out_path, file) || !open(contacts_path, contacts))
     return 1;
+  std::unique_ptr<active_tensegrity::ros_layer::BagWriter> bag;
+  if (!bag_path.empty())
+  {
+    try
+    {
+      bag = std::make_unique<active_tensegrity::ros_layer::BagWriter>(bag_path, model, bag_ns);
+    }
+    catch (const std::exception& e)
+    {
+      std::cerr << "tensegrity_run: cannot write the bag '" << bag_path << "': " << e.what() << "\n";
+      return 1;
+    }
+  }
   std::ostream& csv = out_path.empty() ? std::cout : file;
   if (contacts.is_open())
     contacts << kContactColumns;
@@ -145,6 +168,8 @@ int main(int argc, char** argv)
         for (size_t i = 0; i < row.size(); ++i)
           csv << (i ? "," : "") << csvNumber(row[i]);
         csv << "\n";
+        if (bag)
+          bag->write(s);
         if (!contacts.is_open())
           return;
         for (const at::ContactPairState& c : at::activeContacts(model, s))
@@ -174,6 +199,11 @@ int main(int argc, char** argv)
   if (reported)
     std::fprintf(stderr, "\n");
   csv.flush();
+  if (bag)
+  {
+    bag->close();
+    std::cerr << "tensegrity_run: wrote " << bag->written() << " states to " << bag_path << "\n";
+  }
 
   const at::State& fin = result.final_state;
   const std::vector<double> final_row = at::csvRow(model, fin);

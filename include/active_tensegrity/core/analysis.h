@@ -38,6 +38,9 @@ double nodesHeight(const Model& model, const std::vector<int>& nodes, const Eige
 double maxStrutBendingStress(const Model& model, const Eigen::VectorXd& q,
                              const std::vector<ContactPairState>& contacts);
 
+/// Length, rate, rest length, stiffness, tension and slackness of every cable (Model::cables order).
+std::vector<CableState> cableStates(const Model& model, const State& state);
+
 /// Largest stress T / A in a material cable (springs have no section and are left out), Pa.
 double maxCableStress(const Model& model, const State& state);
 

@@ -1,0 +1,73 @@
+/// Core state -> ROS messages: the one conversion the node (live topics) and tensegrity_run --bag
+/// (a bag written without a master) share, so that both carry the same frames, topics and markers.
+/// No physics here: everything is read from the core (contacts, cable states, actuation forces).
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include <geometry_msgs/TransformStamped.h>
+#include <ros/time.h>
+#include <sensor_msgs/JointState.h>
+#include <visualization_msgs/MarkerArray.h>
+
+#include "active_tensegrity/CableArray.h"
+#include "active_tensegrity/ContactArray.h"
+#include "active_tensegrity/core/model.h"
+#include "active_tensegrity/core/state.h"
+
+namespace active_tensegrity::ros_layer
+{
+/// How markers are drawn (docs/ros.md explains each).
+struct MarkerOptions
+{
+  /// contact arrows: length = force * scale (m per N); normal force along the contact normal from
+  /// the contact point on each strut, friction at the same point
+  double contact_force_scale = 1e-3;
+  /// cable colour: blue (0 N) to red (>= this tension, N); 0 = the largest tension of the moment
+  double cable_tension_scale = 0.0;
+  double cable_width = 0.01;  // m (line width of taut cables; slack ones are drawn thinner, grey)
+};
+
+/// Everything published for one state at one stamp.
+struct Snapshot
+{
+  std::vector<geometry_msgs::TransformStamped> transforms;
+  active_tensegrity::ContactArray contacts;
+  active_tensegrity::CableArray cables;
+  sensor_msgs::JointState actuators;
+  visualization_msgs::MarkerArray markers;
+};
+
+class MessageBuilder
+{
+public:
+  MessageBuilder(const core::Model& model, std::string frame_id, MarkerOptions options);
+
+  /// All messages for `state` stamped `stamp`. Markers of contacts that ended since the previous
+  /// call are deleted (the builder remembers which arrows it drew).
+  Snapshot build(const core::State& state, const ros::Time& stamp);
+  /// Forget the drawn arrows (after a reset) and delete every marker on the next build.
+  void clearMarkers();
+
+  const std::string& frameId() const
+  {
+    return frame_id_;
+  }
+
+private:
+  void addMarkers(const core::State& state, const std::vector<core::ContactPairState>& contacts,
+                  const std::vector<core::CableState>& cables, const ros::Time& stamp,
+                  visualization_msgs::MarkerArray& out);
+
+  const core::Model& model_;
+  std::string frame_id_;
+  MarkerOptions options_;
+  std::vector<bool> arrow_shown_;  // per checked pair: normal and friction arrows drawn last time
+  bool clear_all_ = true;
+};
+
+/// The scene's frame name of a body (its name, as given in the scene).
+std::string bodyFrame(const core::Model& model, int body);
+
+}  // namespace active_tensegrity::ros_layer

@@ -1,0 +1,89 @@
+/// The tensegrity_sim node: steps the core's DynamicsSolver on a scene in simulated time, paced to a
+/// real-time factor, drives the actuators from ~actuation and ~trajectory through the core's
+/// ActuationController, and publishes tf, ~contacts, ~cables, ~actuators, ~markers, ~status and
+/// (optionally) /clock. No physics here: only conversion, pacing and delegation (docs/ros.md).
+#pragma once
+
+#include <atomic>
+#include <chrono>
+#include <memory>
+#include <mutex>
+#include <string>
+
+#include <ros/ros.h>
+#include <std_srvs/SetBool.h>
+#include <std_srvs/Trigger.h>
+#include <tf2_ros/transform_broadcaster.h>
+#include <trajectory_msgs/JointTrajectory.h>
+
+#include "active_tensegrity/ActuationCommand.h"
+#include "active_tensegrity/SimStatus.h"
+#include "active_tensegrity/core/actuation_control.h"
+#include "active_tensegrity/core/dynamics.h"
+#include "active_tensegrity/ros/messages.h"
+#include "active_tensegrity/ros/sim_params.h"
+
+namespace active_tensegrity::ros_layer
+{
+class SimNode
+{
+public:
+  /// Loads nothing itself: the model comes loaded (and validated) from the scene. Throws
+  /// std::runtime_error when the initial state cannot be made consistent.
+  SimNode(ros::NodeHandle& nh, ros::NodeHandle& private_nh, SimParams params, core::Model model);
+
+  /// Steps and publishes until ROS shuts down (callbacks run on another thread meanwhile).
+  void run();
+
+private:
+  using WallClock = std::chrono::steady_clock;
+
+  void onActuation(const active_tensegrity::ActuationCommand::ConstPtr& msg);
+  void onTrajectory(const trajectory_msgs::JointTrajectory::ConstPtr& msg);
+  bool onReset(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
+  bool onPause(std_srvs::SetBool::Request& req, std_srvs::SetBool::Response& res);
+
+  /// Logs and counts a rejected command (mutex held).
+  void reject(const std::string& what, const std::string& reason);
+  /// Builds and publishes every topic for `state` (loop thread only).
+  void publishState(const core::State& state, const ros::Time& stamp);
+  /// Fills and publishes ~status (mutex held).
+  void publishStatus();
+  ros::Time stamp(double t) const;
+  bool running() const
+  {
+    return !paused_by_user_ && !failed_;
+  }
+
+  SimParams params_;
+  core::Model model_;
+  core::DynamicsSolver solver_;
+  core::ActuationController controller_;
+  MessageBuilder builder_;
+
+  std::mutex mutex_;  // guards everything below that callbacks touch
+  core::State state_;
+  bool paused_by_user_ = false;
+  bool failed_ = false;
+  bool clear_markers_ = false;
+  // with publish_clock, stamps are stamp_origin_ + state.t: the wall time of the start, then simulated time
+  // (monotonic across resets)
+  double stamp_origin_ = 0.0;
+  std::string solver_status_ = "running";
+  std::string message_;
+  uint32_t accepted_ = 0, rejected_ = 0;
+  std::string last_rejection_;
+  uint64_t steps_ = 0, step_cuts_ = 0;
+  double rtf_ = 0.0, publish_share_ = 0.0;
+
+  ros::Publisher contacts_pub_, cables_pub_, actuators_pub_, markers_pub_, status_pub_, clock_pub_;
+  ros::Subscriber actuation_sub_, trajectory_sub_;
+  ros::ServiceServer reset_srv_, pause_srv_;
+  tf2_ros::TransformBroadcaster tf_;
+};
+
+/// The whole node for main(): parameters, scene, SimNode, spinner. Returns the exit code (1 when the
+/// parameters or the scene are refused, with the reason logged).
+int runSimNode();
+
+}  // namespace active_tensegrity::ros_layer

@@ -1,0 +1,47 @@
+/// The tensegrity_sim node's parameters: read from its private namespace, validated and logged in
+/// one place (docs/ros.md lists them). A bad value is refused with the parameter's name and value.
+#pragma once
+
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include <ros/node_handle.h>
+
+#include "active_tensegrity/core/scene.h"
+#include "active_tensegrity/ros/messages.h"
+
+namespace active_tensegrity::ros_layer
+{
+/// A parameter that cannot be used: what() names it and its value.
+class ParamError : public std::runtime_error
+{
+public:
+  using std::runtime_error::runtime_error;
+};
+
+struct SimParams
+{
+  std::string scene;                      // resolved file path
+  std::vector<core::Override> overrides;  // from ~overrides, applied to the scene
+  double real_time_factor = 1.0;          // simulated s per wall s; 0 = as fast as possible
+  double publish_rate = 50.0;             // Hz of simulated time
+  bool publish_clock = false;             // /clock from the simulation (stamps in simulated time)
+  std::string frame_id = "world";
+  double default_speed = 0.0;         // m/s for commands without max_speeds (0: the scene's actuation.speed)
+  double default_acceleration = 0.0;  // m/s^2 for commands without max_accelerations (0: derived)
+  bool start_paused = false;
+  MarkerOptions markers;
+
+  /// One line per parameter with its effective value.
+  std::string describe() const;
+};
+
+/// `package://pkg/rest` -> the package's path + rest (rospack); anything else is returned as is.
+/// Throws ParamError when the package is unknown.
+std::string resolvePackageUrl(const std::string& url);
+
+/// Reads and checks every parameter (throws ParamError).
+SimParams loadSimParams(const ros::NodeHandle& private_nh);
+
+}  // namespace active_tensegrity::ros_layer

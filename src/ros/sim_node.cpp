@@ -1,0 +1,362 @@
+#include "active_tensegrity/ros/sim_node.h"
+
+#include <cmath>
+#include <sstream>
+#include <thread>
+#include <utility>
+
+#include <rosgraph_msgs/Clock.h>
+
+#include "active_tensegrity/core/scene.h"
+
+namespace active_tensegrity::ros_layer
+{
+namespace
+{
+double seconds(std::chrono::steady_clock::duration d)
+{
+  return std::chrono::duration<double>(d).count();
+}
+
+bool finite(const core::State& s)
+{
+  if (!s.q.allFinite() || !s.qd.allFinite() || !s.lambda.allFinite())
+    return false;
+  for (const core::ActuationValue& u : s.u)
+    if (!std::isfinite(u.value) || !std::isfinite(u.rate))
+      return false;
+  return true;
+}
+}  // namespace
+
+SimNode::SimNode(ros::NodeHandle& nh, ros::NodeHandle& pnh, SimParams params, core::Model model)
+  : params_(std::move(params))
+  , model_(std::move(model))
+  , solver_(model_, model_.solver)
+  , controller_(model_, core::initialState(model_).u)
+  , builder_(model_, params_.frame_id, params_.markers)
+{
+  state_ = core::initialState(model_);
+  controller_.reset(state_.u);
+  const core::Summary init = solver_.initialize(state_, [this](double t) { return controller_.values(t); });
+  if (!init.ok() || !finite(state_))
+    throw std::runtime_error("the initial state of scene '" + params_.scene + "' is not consistent: " + init.message);
+  paused_by_user_ = params_.start_paused;
+  // simulated stamps start at the wall time of the start (a date in bags and tools, never time 0)
+  stamp_origin_ = ros::WallTime::now().toSec();
+
+  contacts_pub_ = pnh.advertise<active_tensegrity::ContactArray>("contacts", 10);
+  cables_pub_ = pnh.advertise<active_tensegrity::CableArray>("cables", 10);
+  actuators_pub_ = pnh.advertise<sensor_msgs::JointState>("actuators", 10);
+  markers_pub_ = pnh.advertise<visualization_msgs::MarkerArray>("markers", 10);
+  status_pub_ = pnh.advertise<active_tensegrity::SimStatus>("status", 10, true);
+  if (params_.publish_clock)
+    clock_pub_ = nh.advertise<rosgraph_msgs::Clock>("/clock", 10);
+  actuation_sub_ = pnh.subscribe("actuation", 10, &SimNode::onActuation, this);
+  trajectory_sub_ = pnh.subscribe("trajectory", 10, &SimNode::onTrajectory, this);
+  reset_srv_ = pnh.advertiseService("reset", &SimNode::onReset, this);
+  pause_srv_ = pnh.advertiseService("pause", &SimNode::onPause, this);
+}
+
+ros::Time SimNode::stamp(double t) const
+{
+  if (params_.publish_clock)
+    return ros::Time(stamp_origin_ + t);
+  return ros::Time::now();
+}
+
+void SimNode::reject(const std::string& what, const std::string& reason)
+{
+  ++rejected_;
+  last_rejection_ = what + ": " + reason;
+  ROS_WARN_STREAM("tensegrity_sim: rejected " << last_rejection_ << " (nothing applied; " << rejected_
+                                              << " rejected so far)");
+  publishStatus();
+}
+
+void SimNode::onActuation(const active_tensegrity::ActuationCommand::ConstPtr& msg)
+{
+  const std::lock_guard<std::mutex> lock(mutex_);
+  const std::string err =
+      controller_.setTargets(state_.t, msg->names, msg->targets, msg->max_speeds, msg->max_accelerations,
+                             params_.default_speed, params_.default_acceleration);
+  if (!err.empty())
+  {
+    reject("~actuation command", err);
+    return;
+  }
+  ++accepted_;
+  std::ostringstream s;
+  for (size_t i = 0; i < msg->names.size(); ++i)
+    s << (i ? ", " : "") << msg->names[i] << " -> " << msg->targets[i] << " m";
+  ROS_INFO_STREAM("tensegrity_sim: actuation at t = " << state_.t << " s: " << s.str());
+  publishStatus();
+}
+
+void SimNode::onTrajectory(const trajectory_msgs::JointTrajectory::ConstPtr& msg)
+{
+  const std::lock_guard<std::mutex> lock(mutex_);
+  std::vector<double> times;
+  std::vector<std::vector<double>> positions, velocities;
+  bool any_velocity = false;
+  for (const trajectory_msgs::JointTrajectoryPoint& p : msg->points)
+  {
+    times.push_back(p.time_from_start.toSec());
+    positions.push_back(p.positions);
+    velocities.push_back(p.velocities);
+    any_velocity = any_velocity || !p.velocities.empty();
+  }
+  if (!any_velocity)
+    velocities.clear();
+  const std::string err = controller_.setTrajectory(state_.t, msg->joint_names, times, positions, velocities);
+  if (!err.empty())
+  {
+    reject("~trajectory", err);
+    return;
+  }
+  ++accepted_;
+  ROS_INFO_STREAM("tensegrity_sim: trajectory of " << msg->points.size() << " points for " << msg->joint_names.size()
+                                                   << " actuators from t = " << state_.t << " s, " << times.back()
+                                                   << " s long");
+  publishStatus();
+}
+
+bool SimNode::onReset(std_srvs::Trigger::Request& /*req*/, std_srvs::Trigger::Response& res)
+{
+  const std::lock_guard<std::mutex> lock(mutex_);
+  // stamps keep increasing across a reset (tf and bags never see time go back)
+  stamp_origin_ += state_.t + 1.0 / params_.publish_rate;
+  core::State fresh = core::initialState(model_);
+  controller_.reset(fresh.u);
+  const core::Summary init = solver_.initialize(fresh, [this](double t) { return controller_.values(t); });
+  if (!init.ok() || !finite(fresh))
+  {
+    res.success = false;
+    res.message = "the initial state is not consistent: " + init.message;
+    return true;
+  }
+  state_ = std::move(fresh);
+  failed_ = false;
+  solver_status_ = running() ? "running" : "paused";
+  message_ = "reset";
+  steps_ = step_cuts_ = 0;
+  clear_markers_ = true;
+  res.success = true;
+  res.message = "reset to the scene's initial state";
+  ROS_INFO("tensegrity_sim: reset");
+  publishStatus();
+  return true;
+}
+
+bool SimNode::onPause(std_srvs::SetBool::Request& req, std_srvs::SetBool::Response& res)
+{
+  const std::lock_guard<std::mutex> lock(mutex_);
+  if (!req.data && failed_)
+  {
+    res.success = false;
+    res.message = "the solver failed (" + message_ + "); call ~reset first";
+    return true;
+  }
+  paused_by_user_ = req.data;
+  solver_status_ = running() ? "running" : "paused";
+  res.success = true;
+  res.message = req.data ? "paused" : "running";
+  ROS_INFO_STREAM("tensegrity_sim: " << res.message << " at t = " << state_.t << " s");
+  publishStatus();
+  return true;
+}
+
+void SimNode::publishStatus()
+{
+  active_tensegrity::SimStatus s;
+  s.header.stamp = stamp(state_.t);
+  s.header.frame_id = params_.frame_id;
+  s.sim_time = state_.t;
+  s.steps = steps_;
+  s.step_cuts = step_cuts_;
+  s.real_time_factor = running() ? rtf_ : 0.0;
+  s.publish_share = publish_share_;
+  s.paused = !running();
+  s.solver_status = solver_status_;
+  s.message = message_;
+  s.commands_accepted = accepted_;
+  s.commands_rejected = rejected_;
+  s.last_rejection = last_rejection_;
+  status_pub_.publish(s);
+}
+
+void SimNode::publishState(const core::State& state, const ros::Time& stamp)
+{
+  if (params_.publish_clock)
+  {
+    rosgraph_msgs::Clock c;
+    c.clock = stamp;
+    clock_pub_.publish(c);
+  }
+  const Snapshot snap = builder_.build(state, stamp);
+  tf_.sendTransform(snap.transforms);
+  contacts_pub_.publish(snap.contacts);
+  cables_pub_.publish(snap.cables);
+  actuators_pub_.publish(snap.actuators);
+  markers_pub_.publish(snap.markers);
+}
+
+void SimNode::run()
+{
+  const double dt = model_.solver.dt;
+  const double period = 1.0 / params_.publish_rate;
+  const core::ActuationLaw law = [this](double t) { return controller_.values(t); };
+
+  // pacing: simulated time since (pace_wall, pace_sim) runs at real_time_factor
+  WallClock::time_point pace_wall = WallClock::now();
+  double pace_sim = 0.0;
+  // real-time factor and publishing share over windows of about a second
+  WallClock::time_point window_wall = pace_wall;
+  double window_sim = 0.0, window_publish = 0.0;
+  double next_publish = 0.0;
+  bool was_running = false;
+
+  while (ros::ok())
+  {
+    core::State to_publish;
+    ros::Time to_stamp;
+    bool publish_now = false;
+    {
+      std::unique_lock<std::mutex> lock(mutex_);
+      if (clear_markers_)
+      {
+        // after a reset: fresh markers, publish at once, pace from the new start
+        builder_.clearMarkers();
+        clear_markers_ = false;
+        next_publish = state_.t;
+        was_running = false;
+      }
+      if (!running())
+      {
+        was_running = false;
+        lock.unlock();
+        std::this_thread::sleep_for(std::chrono::milliseconds(20));
+        continue;
+      }
+      if (!was_running)
+      {
+        // (re)start: pace from here, publish at once
+        pace_wall = window_wall = WallClock::now();
+        pace_sim = window_sim = state_.t;
+        window_publish = 0.0;
+        next_publish = std::min(next_publish, state_.t);
+        was_running = true;
+      }
+      if (state_.t >= next_publish - 1e-9 * dt)
+      {
+        to_publish = state_;
+        to_stamp = stamp(state_.t);
+        publish_now = true;
+        next_publish = state_.t + period;
+      }
+      else
+      {
+        const core::State before = state_;
+        // t = k dt exactly (no drift from summing steps)
+        const double t_next = static_cast<double>(steps_ + 1) * dt;
+        const core::Summary s = solver_.step(state_, t_next - state_.t, law);
+        ++steps_;
+        step_cuts_ += s.step_cuts;
+        if (s.ok())
+          state_.t = t_next;
+        if (!s.ok() || !finite(state_))
+        {
+          // the solver keeps the last good state when a step fails; never publish a non-finite one
+          if (!finite(state_))
+            state_ = before;
+          failed_ = true;
+          solver_status_ = s.ok() ? "non_finite" : core::toString(s.status);
+          message_ = s.ok() ? "non-finite state" : s.message;
+          ROS_ERROR_STREAM("tensegrity_sim: the solver failed at t = " << state_.t << " s (" << solver_status_ << ": "
+                                                                       << message_
+                                                                       << "); paused at the last good step, call "
+                                                                          "~reset to start again");
+          publishStatus();
+          continue;
+        }
+      }
+    }
+
+    if (publish_now)
+    {
+      const WallClock::time_point t0 = WallClock::now();
+      publishState(to_publish, to_stamp);
+      window_publish += seconds(WallClock::now() - t0);
+      const double wall = seconds(WallClock::now() - window_wall);
+      if (wall >= 1.0)
+      {
+        const std::lock_guard<std::mutex> lock(mutex_);
+        rtf_ = (to_publish.t - window_sim) / wall;
+        publish_share_ = window_publish / wall;
+        window_wall = WallClock::now();
+        window_sim = to_publish.t;
+        window_publish = 0.0;
+        publishStatus();
+      }
+      continue;
+    }
+
+    if (params_.real_time_factor > 0.0)
+    {
+      double t_now = 0.0;
+      {
+        const std::lock_guard<std::mutex> lock(mutex_);
+        t_now = state_.t;
+      }
+      const WallClock::time_point due =
+          pace_wall + std::chrono::duration_cast<WallClock::duration>(
+                          std::chrono::duration<double>((t_now - pace_sim) / params_.real_time_factor));
+      if (due > WallClock::now())
+        std::this_thread::sleep_until(due);
+    }
+  }
+}
+
+int runSimNode()
+{
+  ros::NodeHandle nh, pnh("~");
+  SimParams params;
+  core::Model model;
+  try
+  {
+    params = loadSimParams(pnh);
+    model = core::loadScene(params.scene, params.overrides);
+  }
+  catch (const std::exception& e)
+  {
+    ROS_FATAL_STREAM("tensegrity_sim: " << e.what());
+    return 1;
+  }
+  // command defaults from the scene when not given
+  if (params.default_speed <= 0.0)
+    params.default_speed = model.analysis.schedule.speed > 0.0 ? model.analysis.schedule.speed : 0.1;
+  if (params.default_acceleration <= 0.0)
+    params.default_acceleration =
+        params.default_speed / (model.analysis.schedule.blend_time > 0.0 ? model.analysis.schedule.blend_time : 0.1);
+  ROS_INFO_STREAM("tensegrity_sim: scene '" << model.name << "': " << model.bodies.size() << " bodies, "
+                                            << model.cables.size() << " cables, " << model.actuators.size()
+                                            << " actuators, " << model.checked_pairs.size()
+                                            << " checked strut pairs, dt = " << model.solver.dt << " s\n"
+                                            << params.describe());
+  try
+  {
+    SimNode node(nh, pnh, params, std::move(model));
+    ros::AsyncSpinner spinner(1);
+    spinner.start();
+    node.run();
+    spinner.stop();
+  }
+  catch (const std::exception& e)
+  {
+    ROS_FATAL_STREAM("tensegrity_sim: " << e.what());
+    return 1;
+  }
+  return 0;
+}
+
+}  // namespace active_tensegrity::ros_layer

@@ -1,0 +1,280 @@
+#!/usr/bin/env python3
+"""rostest of tensegrity_sim on the prism scene (sim_node.test): frames, topics, rate, services,
+actuation ramps, trajectories, bad commands, bad scenes and parameters, solver failure."""
+import math
+import os
+import subprocess
+import threading
+import time
+import unittest
+
+import rospy
+import rostest
+from sensor_msgs.msg import JointState
+from std_srvs.srv import SetBool, Trigger
+from tf2_msgs.msg import TFMessage
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+from visualization_msgs.msg import MarkerArray
+
+from active_tensegrity.msg import ActuationCommand, CableArray, ContactArray, SimStatus
+
+NS = "/tensegrity_sim"
+STRUTS = ["S1", "S2", "S3"]
+CABLES = ["R1", "R2", "R3", "R4", "R5", "R6", "V1", "V2", "V3"]
+RATE = 50.0  # the launch file's publish_rate (real time factor 1)
+
+
+def finite(*values):
+    return all(math.isfinite(v) for v in values)
+
+
+class Recorder:
+    """Keeps the latest message of every topic, counts them and records the actuator trace."""
+
+    def __init__(self, ns):
+        self.lock = threading.Lock()
+        self.latest = {}
+        self.counts = {}
+        self.frames = set()
+        self.trace = []  # (wall time, position, velocity) of the first actuator
+        self.nonfinite = []
+        self.subs = [
+            rospy.Subscriber(ns + "/contacts", ContactArray, self.on, "contacts"),
+            rospy.Subscriber(ns + "/cables", CableArray, self.on, "cables"),
+            rospy.Subscriber(ns + "/actuators", JointState, self.on, "actuators"),
+            rospy.Subscriber(ns + "/markers", MarkerArray, self.on, "markers"),
+            rospy.Subscriber(ns + "/status", SimStatus, self.on, "status"),
+        ]
+
+    def on(self, msg, name):
+        with self.lock:
+            self.latest[name] = msg
+            self.counts[name] = self.counts.get(name, 0) + 1
+            if name == "actuators":
+                self.trace.append((time.time(), msg.position[0], msg.velocity[0]))
+                if not finite(*msg.position, *msg.velocity, *msg.effort):
+                    self.nonfinite.append(("actuators", msg))
+            elif name == "cables":
+                for c in msg.cables:
+                    if not finite(c.length, c.rest_length, c.tension):
+                        self.nonfinite.append(("cables", c))
+
+    def get(self, name):
+        with self.lock:
+            return self.latest.get(name)
+
+    def count(self, name):
+        with self.lock:
+            return self.counts.get(name, 0)
+
+
+def wait_for(predicate, timeout, step=0.02):
+    end = time.time() + timeout
+    while time.time() < end:
+        if predicate():
+            return True
+        time.sleep(step)
+    return predicate()
+
+
+class TestSimNode(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        rospy.init_node("test_sim_node")
+        cls.rec = Recorder(NS)
+        cls.frames = set()
+        cls.frames_lock = threading.Lock()
+        cls.tf_sub = rospy.Subscriber("/tf", TFMessage, cls.on_tf)
+        cls.actuation = rospy.Publisher(NS + "/actuation", ActuationCommand, queue_size=10)
+        cls.trajectory = rospy.Publisher(NS + "/trajectory", JointTrajectory, queue_size=10)
+        rospy.wait_for_service(NS + "/reset", timeout=30)
+        rospy.wait_for_service(NS + "/pause", timeout=30)
+        cls.reset = rospy.ServiceProxy(NS + "/reset", Trigger)
+        cls.pause = rospy.ServiceProxy(NS + "/pause", SetBool)
+        assert wait_for(lambda: cls.actuation.get_num_connections() > 0, 20)
+        assert wait_for(lambda: cls.trajectory.get_num_connections() > 0, 20)
+
+    @classmethod
+    def on_tf(cls, msg):
+        with cls.frames_lock:
+            for t in msg.transforms:
+                cls.frames.add((t.header.frame_id, t.child_frame_id))
+
+    def position(self):
+        return self.rec.get("actuators").position[0]
+
+    def status(self):
+        return self.rec.get("status")
+
+    def settle(self):
+        """Back to the scene's start, running."""
+        self.pause(False)
+        self.assertTrue(self.reset().success)
+        self.assertTrue(wait_for(lambda: self.position() == 0.0, 5))
+
+    def test_01_frames_topics_and_rate(self):
+        self.assertTrue(wait_for(lambda: all(self.rec.get(n) is not None for n in
+                                             ("contacts", "cables", "actuators", "markers", "status")), 10))
+        self.assertTrue(wait_for(lambda: all(("world", s) in self.frames for s in STRUTS), 10), self.frames)
+        cables = self.rec.get("cables")
+        self.assertEqual([c.name for c in cables.cables], CABLES)
+        self.assertTrue(all(c.tension > 0 and not c.slack for c in cables.cables))
+        self.assertEqual(cables.header.frame_id, "world")
+        act = self.rec.get("actuators")
+        self.assertEqual(act.name, ["lift"])
+        markers = self.rec.get("markers").markers
+        struts = [m for m in markers if m.ns == "struts"]
+        self.assertEqual(len(struts), 3)
+        for m in struts:
+            self.assertAlmostEqual(m.scale.x, 2 * 0.012)  # the real radius
+            self.assertGreater(m.scale.z, 0.8)
+        self.assertTrue(any(m.ns == "cables" and len(m.points) == 18 for m in markers))
+        self.assertEqual(self.rec.get("contacts").contacts, [])  # contact is off in this scene
+        # the rate: 50 Hz of simulated time at real time
+        n0, t0 = self.rec.count("markers"), time.time()
+        time.sleep(3.0)
+        rate = (self.rec.count("markers") - n0) / (time.time() - t0)
+        self.assertGreater(rate, 0.7 * RATE)
+        self.assertLess(rate, 1.3 * RATE)
+        st = self.status()
+        self.assertEqual(st.solver_status, "running")
+        self.assertGreater(st.real_time_factor, 0.7)
+        self.assertLess(st.real_time_factor, 1.3)
+
+    def test_02_actuation_ramps_at_the_set_speed(self):
+        self.settle()
+        accepted = self.status().commands_accepted
+        with self.rec.lock:
+            self.rec.trace = []
+        self.actuation.publish(ActuationCommand(names=["lift"], targets=[0.03], max_speeds=[0.01],
+                                                max_accelerations=[0.1]))
+        # 0.03 m at 0.01 m/s with 0.1 m/s^2: 3.1 s
+        self.assertTrue(wait_for(lambda: abs(self.position() - 0.03) < 1e-12, 8), self.position())
+        self.assertEqual(self.status().commands_accepted, accepted + 1)
+        with self.rec.lock:
+            trace = list(self.rec.trace)
+        velocities = [v for _, _, v in trace]
+        self.assertLessEqual(max(velocities), 0.01 + 1e-12)
+        self.assertGreater(max(velocities), 0.01 - 1e-12)  # cruises at the limit
+        positions = [p for _, p, _ in trace]
+        self.assertTrue(all(b >= a - 1e-15 for a, b in zip(positions, positions[1:])))  # monotone
+        moving = [(t, p) for t, p, _ in trace if 0.005 < p < 0.025]
+        speed = (moving[-1][1] - moving[0][1]) / (moving[-1][0] - moving[0][0])
+        self.assertAlmostEqual(speed, 0.01, delta=0.002)  # in wall time at real time
+
+    def test_03_trajectory_is_followed(self):
+        self.settle()
+        self.actuation.publish(ActuationCommand(names=["lift"], targets=[0.03]))
+        self.assertTrue(wait_for(lambda: abs(self.position() - 0.03) < 1e-12, 8))
+        with self.rec.lock:
+            self.rec.trace = []
+        start = time.time()
+        traj = JointTrajectory(joint_names=["lift"])
+        traj.points = [JointTrajectoryPoint(positions=[0.01], time_from_start=rospy.Duration(1.0)),
+                       JointTrajectoryPoint(positions=[0.04], time_from_start=rospy.Duration(2.0))]
+        self.trajectory.publish(traj)
+        self.assertTrue(wait_for(lambda: abs(self.position() - 0.04) < 1e-12, 6))
+        with self.rec.lock:
+            trace = list(self.rec.trace)
+        # monotone cubic: the lowest point is the first point, reached at its time
+        t_min, p_min, _ = min(trace, key=lambda x: x[1])
+        self.assertAlmostEqual(p_min, 0.01, delta=2e-4)  # sampled at 50 Hz around a flat minimum
+        self.assertAlmostEqual(t_min - start, 1.0, delta=0.2)
+        self.assertTrue(all(0.01 - 1e-9 <= p <= 0.04 + 1e-9 for _, p, _ in trace))
+
+    def test_04_bad_commands_are_rejected_and_nothing_breaks(self):
+        self.settle()
+        self.actuation.publish(ActuationCommand(names=["lift"], targets=[0.02]))
+        self.assertTrue(wait_for(lambda: abs(self.position() - 0.02) < 1e-12, 8))
+        nan, inf = float("nan"), float("inf")
+
+        def traj(names, points):
+            t = JointTrajectory(joint_names=names)
+            t.points = [JointTrajectoryPoint(positions=p, time_from_start=rospy.Duration(s)) for s, p in points]
+            return t
+
+        bad = [
+            (self.actuation, ActuationCommand(names=["nope"], targets=[0.01]), "unknown actuator 'nope'"),
+            (self.actuation, ActuationCommand(names=["lift"], targets=[nan]), "target of 'lift' is nan"),
+            (self.actuation, ActuationCommand(names=["lift"], targets=[inf]), "target of 'lift' is inf"),
+            (self.actuation, ActuationCommand(names=["lift"], targets=[0.2]), "outside its range [0, 0.05]"),
+            (self.actuation, ActuationCommand(names=["lift"], targets=[-0.01]), "outside its range"),
+            (self.actuation, ActuationCommand(names=["lift"], targets=[0.01], max_speeds=[-1.0]),
+             "max_speeds of 'lift' is -1"),
+            (self.actuation, ActuationCommand(names=["lift"], targets=[0.01], max_speeds=[0.0]),
+             "max_speeds of 'lift' is 0"),
+            (self.actuation, ActuationCommand(names=["lift"], targets=[0.01, 0.02]), "2 targets for 1"),
+            (self.actuation, ActuationCommand(names=[], targets=[]), "no actuator names"),
+            (self.trajectory, traj(["lift"], [(1.0, [0.01]), (0.5, [0.02])]), "strictly increasing"),
+            (self.trajectory, traj(["nope"], [(1.0, [0.01])]), "unknown actuator 'nope'"),
+            (self.trajectory, traj(["lift"], [(1.0, [nan])]), "position of 'lift' is nan"),
+            (self.trajectory, traj(["lift"], [(1.0, [0.5])]), "outside its range"),
+            (self.trajectory, traj(["lift"], []), "no points"),
+        ]
+        for pub, msg, reason in bad:
+            before = self.status().commands_rejected
+            pub.publish(msg)
+            self.assertTrue(wait_for(lambda: self.status().commands_rejected == before + 1, 5), reason)
+            self.assertIn(reason, self.status().last_rejection)
+        # nothing applied, still running and publishing finite numbers
+        time.sleep(0.5)
+        self.assertAlmostEqual(self.position(), 0.02, delta=1e-12)
+        st = self.status()
+        self.assertEqual(st.solver_status, "running")
+        self.assertFalse(st.paused)
+        n0 = self.rec.count("cables")
+        self.assertTrue(wait_for(lambda: self.rec.count("cables") > n0 + 10, 3))
+        self.assertEqual(self.rec.nonfinite, [])
+
+    def test_05_pause_and_reset(self):
+        self.settle()
+        self.actuation.publish(ActuationCommand(names=["lift"], targets=[0.01]))
+        time.sleep(0.5)
+        res = self.pause(True)
+        self.assertTrue(res.success)
+        self.assertTrue(wait_for(lambda: self.status().paused, 2))
+        t0 = self.status().sim_time
+        time.sleep(0.5)
+        self.assertEqual(self.status().sim_time, t0)
+        self.assertEqual(self.status().solver_status, "paused")
+        self.assertTrue(self.pause(False).success)
+        self.assertTrue(wait_for(lambda: self.status().sim_time > t0 + 0.2, 3))
+        self.assertGreater(self.status().sim_time, 1.0)
+        res = self.reset()
+        self.assertTrue(res.success, res.message)
+        self.assertTrue(wait_for(lambda: self.status().sim_time < 0.5, 2))
+        self.assertTrue(wait_for(lambda: self.position() == 0.0, 2))
+
+    def test_06_solver_failure_pauses_at_the_last_good_state(self):
+        rec = Recorder("/failing_sim")
+        self.assertTrue(wait_for(lambda: rec.get("status") is not None and rec.get("status").paused, 20))
+        st = rec.get("status")
+        self.assertEqual(st.solver_status, "max_iterations")
+        self.assertIn("did not converge", st.message)
+        t0 = st.sim_time
+        time.sleep(0.5)
+        self.assertEqual(rec.get("status").sim_time, t0)
+        resume = rospy.ServiceProxy("/failing_sim/pause", SetBool)(False)
+        self.assertFalse(resume.success)
+        self.assertIn("reset", resume.message)
+        self.assertEqual(rec.nonfinite, [])
+
+    def test_07_bad_scene_or_parameter_exits_with_code_1(self):
+        cases = [
+            (["_scene:=/no/such/scene.yaml"], "/no/such/scene.yaml"),
+            (["_scene:=package://no_such_package/x.yaml"], "no_such_package"),
+            (["_publish_rate:=-5.0"], "~publish_rate must be > 0"),
+            (["_real_time_factor:=fast"], "~real_time_factor must be a number"),
+            (["_scene:=package://active_tensegrity/config/scenes/prism.yaml", "_overrides:={solver.dt: -1}"],
+             "dt"),
+        ]
+        for i, (args, expect) in enumerate(cases):
+            proc = subprocess.run(["rosrun", "active_tensegrity", "tensegrity_sim", "__name:=bad_%d" % i] + args,
+                                  stdout=subprocess.PIPE, stderr=subprocess.STDOUT, timeout=60,
+                                  env=dict(os.environ), universal_newlines=True)
+            self.assertEqual(proc.returncode, 1, proc.stdout)
+            self.assertIn(expect, proc.stdout)
+
+
+if __name__ == "__main__":
+    rostest.rosrun("active_tensegrity", "sim_node", TestSimNode)
