@@ -1,0 +1,146 @@
+#!/usr/bin/env python3
+"""rostest of tensegrity_sim on the tower (sim_tower.test): folding by an actuation command produces
+contacts; a bag recorded from the node plays back with tf and contacts intact."""
+import math
+import os
+import shutil
+import signal
+import subprocess
+import tempfile
+import threading
+import time
+import unittest
+
+import rosbag
+import rospy
+import rostest
+from tf2_msgs.msg import TFMessage
+from visualization_msgs.msg import MarkerArray
+
+from active_tensegrity.msg import ActuationCommand, ContactArray
+
+NS = "/tensegrity_sim"
+STRUTS = ["S%d%d" % (s, k) for s in range(1, 5) for k in range(1, 5)]
+BODIES = STRUTS + ["B1", "B2", "B3", "B4"]
+TOPICS = ["/tf", NS + "/contacts", NS + "/markers", NS + "/actuators"]
+
+
+def wait_for(predicate, timeout, step=0.05):
+    end = time.time() + timeout
+    while time.time() < end:
+        if predicate():
+            return True
+        time.sleep(step)
+    return predicate()
+
+
+def contact_key(msg):
+    """Everything in a ContactArray, as plain numbers and names (for comparing recorded and replayed)."""
+    rows = []
+    for c in msg.contacts:
+        rows.append((c.strut_a, c.strut_b, c.point_a.x, c.point_a.y, c.point_a.z, c.normal.x, c.normal.y,
+                     c.normal.z, c.penetration, c.penetration_rate, c.normal_force, c.friction_force.x,
+                     c.friction_force.y, c.friction_force.z))
+    return (msg.header.stamp.to_nsec(), msg.header.frame_id, tuple(rows))
+
+
+class TestSimTower(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        rospy.init_node("test_sim_tower")
+        cls.tmp = tempfile.mkdtemp(prefix="sim_tower_")
+        cls.lock = threading.Lock()
+        cls.contacts = None
+        cls.markers = None
+        rospy.Subscriber(NS + "/contacts", ContactArray, cls.on_contacts)
+        rospy.Subscriber(NS + "/markers", MarkerArray, cls.on_markers)
+        cls.actuation = rospy.Publisher(NS + "/actuation", ActuationCommand, queue_size=10)
+        assert wait_for(lambda: cls.actuation.get_num_connections() > 0, 30)
+
+    @classmethod
+    def tearDownClass(cls):
+        shutil.rmtree(cls.tmp, ignore_errors=True)
+
+    @classmethod
+    def on_contacts(cls, msg):
+        with cls.lock:
+            if msg.contacts:
+                cls.contacts = msg
+
+    @classmethod
+    def on_markers(cls, msg):
+        with cls.lock:
+            if any(m.ns == "contact_forces" and m.action == m.ADD for m in msg.markers):
+                cls.markers = msg
+
+    def test_fold_into_contact_record_and_play_back(self):
+        bag_path = os.path.join(self.tmp, "tower.bag")
+        record = subprocess.Popen(["rosbag", "record", "-O", bag_path] + TOPICS, stdout=subprocess.DEVNULL,
+                                  stderr=subprocess.DEVNULL)
+        try:
+            time.sleep(2.0)  # the recorder subscribes
+            names = ["pull1", "pull2", "pull3", "pull4"]
+            self.actuation.publish(ActuationCommand(names=names, targets=[0.8] * 4, max_speeds=[0.5]))
+            # contact starts at an actuation of 0.638 m (paper and quasi-static study)
+            self.assertTrue(wait_for(lambda: self.contacts is not None, 150), "no contact on ~contacts")
+            with self.lock:
+                msg = self.contacts
+            self.assertEqual(msg.header.frame_id, "world")
+            for c in msg.contacts:
+                self.assertIn(c.strut_a, STRUTS)
+                self.assertIn(c.strut_b, STRUTS)
+                self.assertEqual(c.strut_a[1], c.strut_b[1])  # adjacent struts of one stage
+                n = math.sqrt(c.normal.x ** 2 + c.normal.y ** 2 + c.normal.z ** 2)
+                self.assertAlmostEqual(n, 1.0, places=9)
+                self.assertGreater(c.penetration, 0.0)
+                self.assertGreater(c.normal_force, 0.0)
+                self.assertTrue(all(math.isfinite(v) for v in (c.normal_force, c.penetration, c.penetration_rate,
+                                                                c.friction_force.x, c.friction_force.y,
+                                                                c.friction_force.z)))
+            self.assertTrue(wait_for(lambda: self.markers is not None, 10), "no contact arrows on ~markers")
+            time.sleep(1.0)
+        finally:
+            record.send_signal(signal.SIGINT)
+            record.wait(timeout=30)
+
+        # the bag: every body frame on /tf, contacts with forces
+        frames, recorded = set(), []
+        with rosbag.Bag(bag_path) as bag:
+            for topic, m, _ in bag.read_messages(topics=["/tf", NS + "/contacts"]):
+                if topic == "/tf":
+                    frames.update(t.child_frame_id for t in m.transforms)
+                elif m.contacts:
+                    recorded.append(contact_key(m))
+        self.assertTrue(set(BODIES) <= frames, sorted(frames))
+        self.assertGreater(len(recorded), 0)
+
+        # play it back on other names; the replayed contacts and frames are the recorded ones
+        replayed, replay_frames = [], set()
+        lock = threading.Lock()
+
+        def on_replay(m):
+            with lock:
+                if m.contacts:
+                    replayed.append(contact_key(m))
+
+        def on_replay_tf(m):
+            with lock:
+                replay_frames.update(t.child_frame_id for t in m.transforms)
+
+        subs = [rospy.Subscriber("/replay/contacts", ContactArray, on_replay),
+                rospy.Subscriber("/replay/tf", TFMessage, on_replay_tf)]
+        time.sleep(0.5)
+        play = subprocess.run(["rosbag", "play", "--quiet", "--rate", "4", bag_path,
+                               NS + "/contacts:=/replay/contacts", "/tf:=/replay/tf"],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=120)
+        self.assertEqual(play.returncode, 0)
+        self.assertTrue(wait_for(lambda: len(replayed) >= len(recorded), 5), (len(replayed), len(recorded)))
+        for s in subs:
+            s.unregister()
+        with lock:
+            self.assertEqual(replayed, recorded)
+            self.assertTrue(set(BODIES) <= replay_frames)
+
+
+if __name__ == "__main__":
+    rostest.rosrun("active_tensegrity", "sim_tower", TestSimTower)
