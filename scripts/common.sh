@@ -84,3 +84,39 @@ at_source_devel() {
   ((had_u)) && set -u
   return 0
 }
+
+# Processes a script started (stopped by at_stop_started, e.g. from `trap at_stop_started EXIT`).
+AT_PIDS=()
+
+# A master of the script's own on a free port (ROS_MASTER_URI exported); waits until it answers.
+at_start_master() {
+  local name="${1:-master}" port
+  port="$("$AT_PYTHON" -c "import socket; s=socket.socket(); s.bind(('localhost', 0)); print(s.getsockname()[1])")"
+  export ROS_MASTER_URI="http://localhost:$port"
+  mkdir -p "$ROS_LOG_DIR"
+  roscore -p "$port" >"$ROS_LOG_DIR/${name}_roscore.log" 2>&1 &
+  AT_PIDS+=($!)
+  local _
+  for _ in $(seq 100); do
+    rosparam list >/dev/null 2>&1 && return 0
+    sleep 0.2
+  done
+  echo "error: roscore on port $port did not answer (see $ROS_LOG_DIR/${name}_roscore.log)" >&2
+  return 1
+}
+
+# SIGINT to everything in AT_PIDS (roslaunch and rosbag record close their files on it), then SIGKILL.
+at_stop_started() {
+  local pid
+  for pid in "${AT_PIDS[@]+"${AT_PIDS[@]}"}"; do
+    kill -INT "$pid" 2>/dev/null || true
+  done
+  for pid in "${AT_PIDS[@]+"${AT_PIDS[@]}"}"; do
+    for _ in $(seq 50); do
+      kill -0 "$pid" 2>/dev/null || break
+      sleep 0.2
+    done
+    kill -KILL "$pid" 2>/dev/null || true
+  done
+  AT_PIDS=()
+}

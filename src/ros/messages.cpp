@@ -187,7 +187,7 @@ void MessageBuilder::addMarkers(const core::State& state, const std::vector<core
     {
       m.scale.x = m.scale.y = 2.0 * b.radius();
       m.scale.z = b.length;
-      m.color = rgba(0.55f, 0.57f, 0.6f);
+      m.color = rgba(0.55f, 0.57f, 0.6f, static_cast<float>(options_.strut_alpha));
     }
     else
     {
@@ -243,18 +243,18 @@ void MessageBuilder::addMarkers(const core::State& state, const std::vector<core
       Marker m = marker(frame_id_, stamp, "contact_forces", 4 * c.pair + k, Marker::ARROW);
       m.points.push_back(point(from));
       m.points.push_back(point(from + options_.contact_force_scale * force));
-      m.scale.x = 0.01;  // shaft diameter
-      m.scale.y = 0.02;  // head diameter
-      m.scale.z = 0.0;   // default head length
+      m.scale.x = 0.015;  // shaft diameter
+      m.scale.y = 0.03;   // head diameter
+      m.scale.z = 0.0;    // default head length
       m.color = colour;
       if (force.norm() * options_.contact_force_scale < 1e-6)
         m.action = Marker::DELETE;
       out.markers.push_back(m);
     };
-    arrow(0, c.point_a, c.normal_force * c.normal, rgba(1.0f, 0.1f, 0.1f));
-    arrow(1, c.point_b, -c.normal_force * c.normal, rgba(1.0f, 0.1f, 0.1f));
-    arrow(2, c.point_a, c.friction_on_a, rgba(0.1f, 0.8f, 1.0f));
-    arrow(3, c.point_b, -c.friction_on_a, rgba(0.1f, 0.8f, 1.0f));
+    arrow(0, c.point_a, c.normal_force * c.normal, rgba(1.0f, 0.85f, 0.0f));
+    arrow(1, c.point_b, -c.normal_force * c.normal, rgba(1.0f, 0.85f, 0.0f));
+    arrow(2, c.point_a, c.friction_on_a, rgba(0.0f, 0.9f, 1.0f));
+    arrow(3, c.point_b, -c.friction_on_a, rgba(0.0f, 0.9f, 1.0f));
   }
   for (size_t p = 0; p < shown.size(); ++p)
     if (arrow_shown_[p] && !shown[p])

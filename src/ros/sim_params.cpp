@@ -161,6 +161,9 @@ SimParams loadSimParams(const ros::NodeHandle& nh)
   if (p.markers.cable_tension_scale < 0.0)
     throw ParamError("~cable_tension_scale must be >= 0 N (0 = the largest tension of the moment), got " +
                      std::to_string(p.markers.cable_tension_scale));
+  p.markers.strut_alpha = number(nh, "strut_alpha", p.markers.strut_alpha);
+  if (p.markers.strut_alpha <= 0.0 || p.markers.strut_alpha > 1.0)
+    throw ParamError("~strut_alpha must be in (0, 1], got " + std::to_string(p.markers.strut_alpha));
   p.markers.cable_width = number(nh, "cable_width", p.markers.cable_width);
   if (p.markers.cable_width <= 0.0)
     throw ParamError("~cable_width must be > 0 m, got " + std::to_string(p.markers.cable_width));
@@ -182,7 +185,8 @@ std::string SimParams::describe() const
     << "start_paused: " << (start_paused ? "true" : "false") << "\n"
     << "contact_force_scale: " << markers.contact_force_scale << " m/N\n"
     << "cable_tension_scale: " << markers.cable_tension_scale << " N\n"
-    << "cable_width: " << markers.cable_width << " m";
+    << "cable_width: " << markers.cable_width << " m\n"
+    << "strut_alpha: " << markers.strut_alpha;
   return s.str();
 }
 

@@ -21,12 +21,13 @@ namespace active_tensegrity::ros_layer
 /// How markers are drawn (docs/ros.md explains each).
 struct MarkerOptions
 {
-  /// contact arrows: length = force * scale (m per N); normal force along the contact normal from
-  /// the contact point on each strut, friction at the same point
-  double contact_force_scale = 1e-3;
+  /// contact arrows: length = force * scale (m per N; 4e-3: 250 N per metre), tail at the contact
+  /// point of the strut the force acts on. Normal forces yellow, friction forces cyan, on both struts.
+  double contact_force_scale = 4e-3;
   /// cable colour: blue (0 N) to red (>= this tension, N); 0 = the largest tension of the moment
   double cable_tension_scale = 0.0;
   double cable_width = 0.01;  // m (line width of taut cables; slack ones are drawn thinner, grey)
+  double strut_alpha = 0.7;   // strut opacity (arrows at contacts start inside the struts' surfaces)
 };
 
 /// Everything published for one state at one stamp.
