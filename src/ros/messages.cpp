@@ -12,22 +12,25 @@ namespace active_tensegrity::ros_layer
 {
 namespace
 {
+// geometry_msgs Point or Vector3 from a vector
+template <typename Msg>
+Msg xyz(const core::Vec3& v)
+{
+  Msg m;
+  m.x = v.x();
+  m.y = v.y();
+  m.z = v.z();
+  return m;
+}
+
 geometry_msgs::Point point(const core::Vec3& v)
 {
-  geometry_msgs::Point p;
-  p.x = v.x();
-  p.y = v.y();
-  p.z = v.z();
-  return p;
+  return xyz<geometry_msgs::Point>(v);
 }
 
 geometry_msgs::Vector3 vector(const core::Vec3& v)
 {
-  geometry_msgs::Vector3 p;
-  p.x = v.x();
-  p.y = v.y();
-  p.z = v.z();
-  return p;
+  return xyz<geometry_msgs::Vector3>(v);
 }
 
 std_msgs::ColorRGBA rgba(float r, float g, float b, float a = 1.0f)

@@ -16,6 +16,7 @@ from tf2_msgs.msg import TFMessage
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from visualization_msgs.msg import MarkerArray
 
+from sim_test_util import wait_for
 from active_tensegrity.msg import ActuationCommand, CableArray, ContactArray, SimStatus
 
 NS = "/tensegrity_sim"
@@ -66,15 +67,6 @@ class Recorder:
     def count(self, name):
         with self.lock:
             return self.counts.get(name, 0)
-
-
-def wait_for(predicate, timeout, step=0.02):
-    end = time.time() + timeout
-    while time.time() < end:
-        if predicate():
-            return True
-        time.sleep(step)
-    return predicate()
 
 
 class TestSimNode(unittest.TestCase):

@@ -17,21 +17,13 @@ import rostest
 from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import MarkerArray
 
+from sim_test_util import wait_for
 from active_tensegrity.msg import ActuationCommand, ContactArray
 
 NS = "/tensegrity_sim"
 STRUTS = ["S%d%d" % (s, k) for s in range(1, 5) for k in range(1, 5)]
 BODIES = STRUTS + ["B1", "B2", "B3", "B4"]
 TOPICS = ["/tf", NS + "/contacts", NS + "/markers", NS + "/actuators"]
-
-
-def wait_for(predicate, timeout, step=0.05):
-    end = time.time() + timeout
-    while time.time() < end:
-        if predicate():
-            return True
-        time.sleep(step)
-    return predicate()
 
 
 def contact_key(msg):
