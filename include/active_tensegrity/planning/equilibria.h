@@ -1,0 +1,102 @@
+/// Quasi-static equilibria as functions of the actuation values of chosen actuators, for planning
+/// (docs/planning.md). Equilibria of a tensegrity depend on the path: every equilibrium here is reached
+/// by continuation (the core's StaticSolver::followPath, warm-started) along a straight line in
+/// actuation space from a known one, the nearest in a cache that starts with the start state. ROS-free
+/// and thread-safe: solvers come from a pool, the cache is guarded.
+#pragma once
+
+#include <functional>
+#include <limits>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include "active_tensegrity/core/model.h"
+#include "active_tensegrity/core/state.h"
+#include "active_tensegrity/core/statics.h"
+
+namespace active_tensegrity::planning
+{
+/// What makes an equilibrium acceptable.
+struct ValidityLimits
+{
+  /// every checked strut pair keeps a surface gap >= min_clearance (m) unless allow_contact
+  double min_clearance = 0.0;
+  /// when true, touching is allowed as long as every (Hertz, quasi-static) contact force <= max_contact_force
+  bool allow_contact = false;
+  double max_contact_force = std::numeric_limits<double>::infinity();  // N
+  /// no material cable above this stress (Pa)
+  double max_cable_stress = std::numeric_limits<double>::infinity();
+};
+
+/// One quasi-static equilibrium and the figures validity needs.
+struct Equilibrium
+{
+  bool converged = false;
+  std::string message;            // why not, when not converged
+  core::State state;              // q, lambda, u (all actuators)
+  double min_gap = 0.0;           // m (+inf without checked pairs)
+  double max_contact = 0.0;       // N, largest quasi-static contact force
+  double max_cable_stress = 0.0;  // Pa
+  double height = 0.0;            // m (the scene's height nodes)
+};
+
+class EquilibriumOracle
+{
+public:
+  /// model: the scene (its contact settings decide whether statics computes contact forces);
+  /// actuators: indices of the actuators the values refer to (the others keep start's values);
+  /// start: a converged equilibrium; step: largest continuation increment (m, max norm).
+  EquilibriumOracle(const core::Model& model, std::vector<int> actuators, const core::State& start,
+                    ValidityLimits limits, double step);
+  ~EquilibriumOracle();
+
+  /// The equilibrium at actuation values u, by continuation from the nearest cached one (cached too).
+  Equilibrium at(const std::vector<double>& u) const;
+  /// Follows the straight line from `from` (an equilibrium) to u in increments <= step; every
+  /// intermediate equilibrium goes to visit (when given); stops at the first one that fails to converge
+  /// or, when check is true, is not valid (returns false). `end` receives the last equilibrium reached.
+  bool follow(const Equilibrium& from, const std::vector<double>& u, Equilibrium& end, bool check = true,
+              const std::function<void(const Equilibrium&)>& visit = {}) const;
+  /// Converged and within the limits; `why` (when given) says which limit is broken.
+  bool valid(const Equilibrium& e, std::string* why = nullptr) const;
+
+  /// The chosen actuators' values in a state.
+  std::vector<double> values(const core::State& s) const;
+  const Equilibrium& start() const
+  {
+    return start_;
+  }
+  const ValidityLimits& limits() const
+  {
+    return limits_;
+  }
+  double step() const
+  {
+    return step_;
+  }
+  /// Static solves (continuation increments) done so far.
+  long solves() const;
+
+private:
+  class SolverLease;
+  Equilibrium measure(const core::State& s, const core::Summary& sum) const;
+  void remember(const Equilibrium& e) const;
+
+  core::Model model_;  // a copy, set to static analysis (Hertz contact in the measurements)
+  std::vector<int> actuators_;
+  ValidityLimits limits_;
+  double step_;
+  Equilibrium start_;
+
+  mutable std::mutex mutex_;
+  mutable std::vector<std::unique_ptr<core::StaticSolver>> pool_;
+  mutable std::vector<Equilibrium> cache_;
+  mutable long solves_ = 0;
+};
+
+/// Max-norm distance between two actuation vectors.
+double actuationDistance(const std::vector<double>& a, const std::vector<double>& b);
+
+}  // namespace active_tensegrity::planning
