@@ -691,7 +691,7 @@ PlanResult planFolding(const core::Model& model, const core::State& start, const
     DynamicPeaks peaks = run(scale);
     if (r.find_speed_limit && !within(peaks))
     {
-      // double the time scale until within, then bisect (geometric) to 5 %
+      // double the time scale until within, then bisect (geometric) to the tolerance
       double lo = 1.0, hi = 2.0;
       DynamicPeaks at_hi = run(hi);
       while (!within(at_hi) && hi < 64.0)
@@ -701,7 +701,7 @@ PlanResult planFolding(const core::Model& model, const core::State& start, const
         at_hi = run(hi);
       }
       if (within(at_hi))
-        while (hi / lo > 1.05)
+        while (hi / lo > 1.0 + r.speed_limit_tolerance)
         {
           const double mid = std::sqrt(lo * hi);
           const DynamicPeaks p = run(mid);

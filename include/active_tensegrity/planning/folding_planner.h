@@ -55,6 +55,7 @@ struct PlanRequest
   bool find_speed_limit = false;
   double max_bending_stress = std::numeric_limits<double>::infinity();  // Pa
   double settle_time = 0.5;                                             // s simulated after the trajectory ends
+  double speed_limit_tolerance = 0.05;  // relative width of the final time-scale bracket (> 0)
 };
 
 struct PlanResult
