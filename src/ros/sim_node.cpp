@@ -8,6 +8,8 @@
 #include <rosgraph_msgs/Clock.h>
 
 #include "active_tensegrity/core/scene.h"
+#include "active_tensegrity/core/statics.h"
+#include "active_tensegrity/planning/folding_planner.h"
 
 namespace active_tensegrity::ros_layer
 {
@@ -56,6 +58,7 @@ SimNode::SimNode(ros::NodeHandle& nh, ros::NodeHandle& pnh, SimParams params, co
   trajectory_sub_ = pnh.subscribe("trajectory", 10, &SimNode::onTrajectory, this);
   reset_srv_ = pnh.advertiseService("reset", &SimNode::onReset, this);
   pause_srv_ = pnh.advertiseService("pause", &SimNode::onPause, this);
+  plan_srv_ = pnh.advertiseService("plan_folding", &SimNode::onPlan, this);
 }
 
 ros::Time SimNode::stamp(double t) const
@@ -163,6 +166,104 @@ bool SimNode::onPause(std_srvs::SetBool::Request& req, std_srvs::SetBool::Respon
   res.message = req.data ? "paused" : "running";
   ROS_INFO_STREAM("tensegrity_sim: " << res.message << " at t = " << state_.t << " s");
   publishStatus();
+  return true;
+}
+
+bool SimNode::onPlan(active_tensegrity::PlanFolding::Request& req, active_tensegrity::PlanFolding::Response& res)
+{
+  namespace ap = active_tensegrity::planning;
+  ap::PlanRequest r;
+  r.actuators = req.actuators;
+  r.target_height = req.target_values.empty() ? req.target_height : std::nan("");
+  r.target_values = req.target_values;
+  r.limits.min_clearance = req.min_clearance;
+  r.limits.allow_contact = req.allow_contact;
+  r.limits.max_contact_force = req.allow_contact ? req.max_contact_force : INFINITY;
+  r.limits.max_cable_stress = req.max_cable_stress > 0.0 ? req.max_cable_stress : INFINITY;
+  r.max_speeds = req.max_speeds.empty() ? std::vector<double>{ params_.default_speed } : req.max_speeds;
+  r.max_accelerations =
+      req.max_accelerations.empty() ? std::vector<double>{ params_.default_acceleration } : req.max_accelerations;
+  r.planner = req.planner.empty() ? "RRTConnect" : req.planner;
+  r.time_limit = req.time_limit == 0.0 ? 10.0 : req.time_limit;
+  r.seed = req.seed;
+  r.verify_dynamics = req.verify_dynamics;
+  r.find_speed_limit = req.find_speed_limit;
+  r.max_bending_stress = req.max_bending_stress > 0.0 ? req.max_bending_stress : INFINITY;
+  res.executed = false;
+  if (req.allow_contact && !(req.max_contact_force > 0.0))
+  {
+    res.status = res.INVALID_REQUEST;
+    res.message =
+        "max_contact_force must be > 0 N when allow_contact is set, got " + std::to_string(req.max_contact_force);
+    ROS_WARN_STREAM("tensegrity_sim: ~plan_folding refused: " << res.message);
+    return true;
+  }
+
+  // the start: the quasi-static equilibrium at the current actuation, from the current configuration
+  core::State start;
+  {
+    const std::lock_guard<std::mutex> lock(mutex_);
+    start = state_;
+  }
+  core::Model statics = model_;
+  statics.analysis.type = core::AnalysisType::kStatic;
+  for (core::ActuationValue& u : start.u)
+    u.rate = u.accel = 0.0;
+  start.qd.setZero();
+  core::StaticSolver solver(statics, statics.solver);
+  const core::Summary eq = solver.solve(start, start.u);
+  ap::PlanResult plan;
+  if (!eq.ok())
+  {
+    plan.status = ap::PlanStatus::kInvalidStart;
+    plan.message = "no quasi-static equilibrium at the current actuation: " + eq.message;
+  }
+  else
+    plan = ap::planFolding(model_, start, r);
+
+  res.status = static_cast<uint8_t>(plan.status);
+  res.message = plan.message;
+  res.trajectory.header.stamp = ros::Time(0);
+  res.trajectory.joint_names = plan.names;
+  for (size_t k = 0; k < plan.times.size(); ++k)
+  {
+    trajectory_msgs::JointTrajectoryPoint p;
+    p.positions = plan.positions[k];
+    p.velocities = plan.velocities[k];
+    p.accelerations = plan.accelerations[k];
+    p.time_from_start = ros::Duration(plan.times[k]);
+    res.trajectory.points.push_back(p);
+  }
+  res.min_gap = std::isfinite(plan.min_gap) ? plan.min_gap : 0.0;
+  res.peak_contact_force = plan.peak_contact_force;
+  res.final_height = plan.final_height;
+  res.equilibrium_solves = static_cast<uint32_t>(plan.equilibrium_solves);
+  res.planning_time = plan.planning_time;
+  res.dynamics_verified = plan.dynamics_verified;
+  res.dynamics_within_limits = plan.dynamics_within_limits;
+  res.dynamic_peak_contact_force = plan.dynamic_peak_contact_force;
+  res.dynamic_peak_bending_stress = plan.dynamic_peak_bending_stress;
+  res.time_scale = plan.time_scale;
+  ROS_INFO_STREAM("tensegrity_sim: ~plan_folding: " << planning::toString(plan.status) << " (" << plan.message << "), "
+                                                    << plan.waypoints.size() << " waypoints, "
+                                                    << plan.equilibrium_solves << " equilibrium solves, "
+                                                    << plan.planning_time << " s");
+  if (req.execute && plan.status == ap::PlanStatus::kExactSolution)
+  {
+    const std::lock_guard<std::mutex> lock(mutex_);
+    std::vector<std::vector<double>> vel = plan.velocities;
+    const std::string err = controller_.setTrajectory(state_.t, plan.names, plan.times, plan.positions, vel);
+    if (err.empty())
+    {
+      res.executed = true;
+      ++accepted_;
+    }
+    else
+    {
+      res.message += "; not executed: " + err;
+      reject("~plan_folding execution", err);
+    }
+  }
   return true;
 }
 
@@ -346,7 +447,8 @@ int runSimNode()
   try
   {
     SimNode node(nh, pnh, params, std::move(model));
-    ros::AsyncSpinner spinner(1);
+    // two threads: a long ~plan_folding call does not hold up commands and the other services
+    ros::AsyncSpinner spinner(2);
     spinner.start();
     node.run();
     spinner.stop();

@@ -17,6 +17,7 @@
 #include <trajectory_msgs/JointTrajectory.h>
 
 #include "active_tensegrity/ActuationCommand.h"
+#include "active_tensegrity/PlanFolding.h"
 #include "active_tensegrity/SimStatus.h"
 #include "active_tensegrity/core/actuation_control.h"
 #include "active_tensegrity/core/dynamics.h"
@@ -42,6 +43,9 @@ private:
   void onTrajectory(const trajectory_msgs::JointTrajectory::ConstPtr& msg);
   bool onReset(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
   bool onPause(std_srvs::SetBool::Request& req, std_srvs::SetBool::Response& res);
+  /// Plans from the quasi-static equilibrium at the current actuation (the simulation keeps running);
+  /// executes the trajectory when asked.
+  bool onPlan(active_tensegrity::PlanFolding::Request& req, active_tensegrity::PlanFolding::Response& res);
 
   /// Logs and counts a rejected command (mutex held).
   void reject(const std::string& what, const std::string& reason);
@@ -78,7 +82,7 @@ private:
 
   ros::Publisher contacts_pub_, cables_pub_, actuators_pub_, markers_pub_, status_pub_, clock_pub_;
   ros::Subscriber actuation_sub_, trajectory_sub_;
-  ros::ServiceServer reset_srv_, pause_srv_;
+  ros::ServiceServer reset_srv_, pause_srv_, plan_srv_;
   tf2_ros::TransformBroadcaster tf_;
 };
 

@@ -1,0 +1,95 @@
+#!/usr/bin/env python3
+"""rostest of tensegrity_sim's ~plan_folding on the tower (sim_plan.test)."""
+import math
+import threading
+import time
+import unittest
+
+import rospy
+import rostest
+from sensor_msgs.msg import JointState
+
+from sim_test_util import wait_for
+from active_tensegrity.msg import ContactArray
+from active_tensegrity.srv import PlanFolding, PlanFoldingRequest, PlanFoldingResponse
+
+NS = "/tensegrity_sim"
+PULLS = ["pull1", "pull2", "pull3", "pull4"]
+LIMIT = 1000.0  # N
+
+
+class TestSimPlan(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        rospy.init_node("test_sim_plan")
+        cls.lock = threading.Lock()
+        cls.peak = 0.0
+        cls.contact_messages = 0
+        cls.actuators = None
+        rospy.Subscriber(NS + "/contacts", ContactArray, cls.on_contacts)
+        rospy.Subscriber(NS + "/actuators", JointState, cls.on_actuators)
+        rospy.wait_for_service(NS + "/plan_folding", timeout=60)
+        cls.plan = rospy.ServiceProxy(NS + "/plan_folding", PlanFolding)
+
+    @classmethod
+    def on_contacts(cls, msg):
+        with cls.lock:
+            for c in msg.contacts:
+                cls.peak = max(cls.peak, c.normal_force)
+                cls.contact_messages += 1
+
+    @classmethod
+    def on_actuators(cls, msg):
+        with cls.lock:
+            cls.actuators = msg
+
+    def test_1_invalid_requests_get_a_message_and_no_plan(self):
+        for req, reason in [
+            (PlanFoldingRequest(actuators=["nope"], target_height=0.7), "unknown actuator 'nope'"),
+            (PlanFoldingRequest(actuators=PULLS, target_height=float("nan")), "finite target_height"),
+            (PlanFoldingRequest(actuators=PULLS, target_height=0.7, min_clearance=-1.0), "min_clearance must be"),
+            (PlanFoldingRequest(actuators=PULLS, target_height=0.7, allow_contact=True, max_contact_force=0.0),
+             "max_contact_force must be > 0"),
+            (PlanFoldingRequest(actuators=PULLS, target_values=[0.1, 0.1]), "2 target_values for 4"),
+            (PlanFoldingRequest(actuators=PULLS, target_height=0.7, planner="Magic"), "unknown planner"),
+        ]:
+            res = self.plan(req)
+            self.assertEqual(res.status, PlanFoldingResponse.INVALID_REQUEST, res.message)
+            self.assertIn(reason, res.message)
+            self.assertEqual(len(res.trajectory.points), 0)
+            self.assertFalse(res.executed)
+
+    def test_2_planned_fold_keeps_published_contact_forces_under_the_limit(self):
+        req = PlanFoldingRequest(actuators=PULLS, target_height=0.7, allow_contact=True, max_contact_force=LIMIT,
+                                 max_speeds=[0.2], max_accelerations=[1.0], time_limit=60.0, seed=1,
+                                 verify_dynamics=True, execute=True)
+        res = self.plan(req)
+        self.assertEqual(res.status, PlanFoldingResponse.EXACT_SOLUTION, res.message)
+        self.assertTrue(res.executed, res.message)
+        self.assertLessEqual(res.final_height, 0.7)
+        self.assertLessEqual(res.peak_contact_force, LIMIT)
+        self.assertTrue(res.dynamics_verified)
+        self.assertTrue(res.dynamics_within_limits)
+        self.assertEqual(res.trajectory.joint_names, PULLS)
+        final = res.trajectory.points[-1].positions
+        duration = res.trajectory.points[-1].time_from_start.to_sec()
+        rospy.loginfo("plan: %d points, %.2f s, quasi-static peak %.1f N, dynamic peak %.1f N",
+                      len(res.trajectory.points), duration, res.peak_contact_force, res.dynamic_peak_contact_force)
+
+        def arrived():
+            with self.lock:
+                a = self.actuators
+            return a is not None and all(abs(p - f) < 1e-9 for p, f in zip(a.position, final))
+
+        self.assertTrue(wait_for(arrived, 240), "the node did not reach the planned values")
+        time.sleep(2.0)  # a little settling
+        with self.lock:
+            self.assertGreater(self.contact_messages, 0)  # the fold went into contact
+            self.assertLessEqual(self.peak, LIMIT)
+            self.assertTrue(math.isfinite(self.peak))
+            # what the node published agrees with the planner's dynamic check to within sampling
+            self.assertLessEqual(self.peak, 1.2 * res.dynamic_peak_contact_force + 1.0)
+
+
+if __name__ == "__main__":
+    rostest.rosrun("active_tensegrity", "sim_plan", TestSimPlan)
