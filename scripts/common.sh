@@ -64,8 +64,13 @@ at_workspace() {
 }
 
 # catkin_make in build/ws; extra arguments are make targets, e.g. run_tests. Incremental when re-run.
+# run_tests runs each test through build/catkin_generated/env_cached.sh, whose PYTHONPATH catkin computes
+# when cmake first configures: on a fresh clone devel/lib/python3/dist-packages does not exist yet and is
+# left out, and the rostest nodes cannot import this package's messages. It is put on PYTHONPATH here,
+# before that first configure.
 at_catkin_make() {
-  catkin_make -C "$AT_WS" "-j$AT_JOBS" "${AT_CMAKE_ARGS[@]}" "$@"
+  PYTHONPATH="$AT_DEVEL/lib/python3/dist-packages${PYTHONPATH:+:$PYTHONPATH}" \
+    catkin_make -C "$AT_WS" "-j$AT_JOBS" "${AT_CMAKE_ARGS[@]}" "$@"
 }
 
 # at_build [make targets...]
