@@ -132,6 +132,17 @@ void DynamicsSolver::residual(const State& s, double h, const ActuationValues& u
   r.tail(system_.nLambda()) = phi_ / bh2;
 }
 
+namespace
+{
+std::vector<bool> touching(const State& s)
+{
+  std::vector<bool> t(s.contact_speed.size());
+  for (size_t i = 0; i < t.size(); ++i)
+    t[i] = s.contact_speed[i] > 0.0;
+  return t;
+}
+}  // namespace
+
 Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law)
 {
   Summary sum;
@@ -140,28 +151,47 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law)
   Eigen::VectorXd lambda = s.lambda;
   const double bh2 = coef_.beta * h * h * (1.0 - coef_.alpha_f) / (1.0 - coef_.alpha_m);
   const int nq = system_.nq();
+  const bool reuse = options_.reuse_jacobian;
+  // modified Newton keeps the factorization while it stays a good one (see the option)
+  // (h differs in its last bits from step to step: t = k dt; a cut changes it by a factor 2)
+  bool rebuild = !reuse || !factor_valid_ || std::abs(h - factor_h_) > 1e-6 * h ||
+                 factor_age_ >= options_.max_jacobian_age || factor_contacts_ != touching(s);
+  double previous = -1.0;  // last increment norm with this factorization
   prepareContact(s, h);
   for (int it = 0; it < options_.max_iterations; ++it)
   {
-    residual(s, h, u, qdd, lambda, r_, &jac_);
+    const bool build = rebuild;
+    residual(s, h, u, qdd, lambda, r_, build ? &jac_ : nullptr);
     ++sum.iterations;
     ++timings_.newton_iterations;
     if (!r_.allFinite())
     {
       sum.status = SolveStatus::kNonFinite;
       sum.message = "non-finite residual";
+      factor_valid_ = false;
       return sum;
     }
-    bool factorized = false;
+    if (build)
     {
-      const ScopeTimer timer(timings_.factorization);
-      factorized = linear_.factorize(jac_.matrix());
-    }
-    if (!factorized)
-    {
-      sum.status = SolveStatus::kSingular;
-      sum.message = "singular Newton matrix";
-      return sum;
+      bool factorized = false;
+      {
+        const ScopeTimer timer(timings_.factorization);
+        factorized = linear_.factorize(jac_.matrix());
+      }
+      ++timings_.factorizations;
+      factor_valid_ = factorized;
+      if (!factorized)
+      {
+        sum.status = SolveStatus::kSingular;
+        sum.message = "singular Newton matrix";
+        return sum;
+      }
+      factor_h_ = h;
+      factor_age_ = 0;
+      factor_contacts_ = touching(s);
+      theta_ = 0.0;
+      previous = -1.0;
+      rebuild = !reuse;  // full Newton: a new matrix at every iteration
     }
     {
       const ScopeTimer timer(timings_.solve);
@@ -171,12 +201,26 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law)
     {
       sum.status = SolveStatus::kNonFinite;
       sum.message = "non-finite Newton increment";
+      factor_valid_ = false;
       return sum;
     }
     qdd += dx_.head(nq);
     lambda += dx_.tail(system_.nLambda());
     sum.residual = bh2 * dx_.head(nq).lpNorm<Eigen::Infinity>();
-    if (sum.residual <= options_.newton_tolerance)
+    if (reuse && previous > 0.0)
+    {
+      // contraction rate of the iteration with this matrix; slow or diverging: rebuild it
+      theta_ = std::max(theta_, sum.residual / previous);
+      if (theta_ > 0.5)
+        rebuild = true;
+    }
+    previous = sum.residual;
+    // with an up-to-date matrix this is Newton's test; with an older one the increment is accepted only
+    // while the iteration contracts (theta < 0.5), so the error left is below the increment
+    // an older matrix can shrink the q increments while the multipliers are still off: they must settle too
+    const bool multipliers_settled = !reuse || dx_.tail(system_.nLambda()).lpNorm<Eigen::Infinity>() <=
+                                                   options_.newton_tolerance * (1.0 + lambda.lpNorm<Eigen::Infinity>());
+    if (sum.residual <= options_.newton_tolerance && multipliers_settled && !(reuse && theta_ > 0.5))
     {
       predict(s, h, qdd, q_, qd_, acc_);
       int crossed = -1;
@@ -200,10 +244,12 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law)
       s.t += h;
       s.u = u;
       updateContactMemory(s);
+      ++factor_age_;
       return sum;
     }
   }
   sum.status = SolveStatus::kMaxIterations;
+  factor_valid_ = false;
   std::ostringstream msg;
   msg << "Newton did not converge in " << options_.max_iterations << " iterations (last increment " << sum.residual
       << ")";
@@ -261,6 +307,7 @@ Summary DynamicsSolver::initialize(State& s, const ActuationLaw& law)
   Eigen::VectorXd rhs(system_.size()), x, tmp;
 
   // velocities: min |qd - qd0|_M subject to Phi_q qd = -Phi_t
+  factor_valid_ = false;  // linear_ now holds another matrix
   jac_.setZero();
   system_.addMass(s.q, jac_, 1.0);
   system_.addConstraintJacobian(s.q, jac_);

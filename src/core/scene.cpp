@@ -829,6 +829,8 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
     o.newton_tolerance = s.positive("newton_tolerance", o.newton_tolerance);
     o.max_iterations = s.integer("max_iterations", o.max_iterations, 1);
     o.max_step_cuts = s.integer("max_step_cuts", o.max_step_cuts, 0);
+    o.reuse_jacobian = s.boolean("reuse_jacobian", o.reuse_jacobian);
+    o.max_jacobian_age = s.integer("max_jacobian_age", o.max_jacobian_age, 1);
     s.finish();
   }
   else

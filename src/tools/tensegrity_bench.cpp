@@ -446,6 +446,8 @@ int steps(const std::string& scene, const std::vector<at::Override>& overrides, 
               static_cast<double>(last.summary.iterations) / std::max(1, last.solver_steps));
   std::printf("wall time per step: median %.3f us, min %.3f us over %d runs\n", 1e6 * median, 1e6 * per_step.front(),
               repeat);
+  std::printf("factorizations per step: %.3f\n",
+              static_cast<double>(last.timings.factorizations) / std::max(1, last.solver_steps));
   std::printf("where the time goes (last run, us per step, share of its wall time):\n");
   const int n = std::max(1, last.solver_steps);
   for (const auto& [part, seconds] : at::timeBreakdown(last))

@@ -25,6 +25,7 @@ struct StepTimings
   double solve = 0.0;          // triangular solves
   double total = 0.0;          // whole step() calls (the rest is vector work and bookkeeping)
   long newton_iterations = 0;
+  long factorizations = 0;
 };
 
 class DynamicsSolver
@@ -90,6 +91,12 @@ private:
   std::vector<double> step_speeds_;  // v_0 per checked pair for the step being solved
   std::vector<int> candidates_;
   StepTimings timings_;
+  // modified Newton (options_.reuse_jacobian): the factorization in linear_ and what it was built for
+  bool factor_valid_ = false;
+  double factor_h_ = 0.0;
+  int factor_age_ = 0;                 // steps taken with it
+  std::vector<bool> factor_contacts_;  // pairs touching when it was built
+  double theta_ = 0.0;                 // largest contraction rate seen with it
 };
 
 }  // namespace active_tensegrity::core

@@ -174,6 +174,11 @@ struct SolverOptions
   double newton_tolerance = 1e-6;  // on the position increment (m, or quaternion units)
   int max_iterations = 25;
   int max_step_cuts = 10;  // halvings of a step (or load increment) before failure
+  /// dynamics: keep the factorized Newton matrix across iterations and steps (modified Newton) while
+  /// the iteration contracts fast (rate < 0.5), the step size and the set of touching pairs are unchanged,
+  /// for at most max_jacobian_age steps; otherwise it is rebuilt (docs/physics.md)
+  bool reuse_jacobian = false;
+  int max_jacobian_age = 50;
 };
 
 enum class AnalysisType
