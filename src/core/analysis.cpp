@@ -280,6 +280,7 @@ RunResult runAnalysis(const Model& model, const std::function<void(const State&)
       const Summary s = solver.step(state, t_target - state.t, law);
       result.summary.iterations += s.iterations;
       result.summary.step_cuts += s.step_cuts;
+      result.summary.crossings_refused += s.crossings_refused;
       result.summary.residual = s.residual;
       ++result.solver_steps;
       if (!s.ok())

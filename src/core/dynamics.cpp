@@ -268,6 +268,7 @@ Summary DynamicsSolver::advance(State& s, double h, const ActuationLaw& law, int
   }
   if (depth >= options_.max_step_cuts)
   {
+    sum.crossings_refused = sum.status == SolveStatus::kPassedThrough ? 1 : 0;
     std::ostringstream msg;
     msg << sum.message << " at t = " << s.t << " s with the step cut to " << h << " s";
     sum.message = msg.str();
@@ -276,11 +277,13 @@ Summary DynamicsSolver::advance(State& s, double h, const ActuationLaw& law, int
   Summary total;
   total.iterations = sum.iterations;
   total.step_cuts = 1;
+  total.crossings_refused = sum.status == SolveStatus::kPassedThrough ? 1 : 0;
   for (int half = 0; half < 2; ++half)
   {
     const Summary part = advance(s, 0.5 * h, law, depth + 1);
     total.iterations += part.iterations;
     total.step_cuts += part.step_cuts;
+    total.crossings_refused += part.crossings_refused;
     total.residual = part.residual;
     if (!part.ok())
     {
