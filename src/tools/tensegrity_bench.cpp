@@ -17,6 +17,12 @@
 // plans with several seeds from the scene's start equilibrium and prints status, planning time,
 // equilibrium solves, waypoints and figures per seed and the median planning time; with
 // --speed-limit, the time scale (and the largest speed) that keeps the dynamic peaks under the limits.
+//   tensegrity_bench work-precision SCENE [--set key=value]... [--dts a,b,..] [--ref-dt R] [--csv FILE]
+// runs the scene's dynamic analysis with several integrators over a ladder of steps and compares each
+// run with a much finer reference (generalized-alpha at R, tolerance 1e-10): largest body-position and
+// layer-height errors,
+// largest actuation-force error (relative to the reference's largest force), error of the peak contact
+// force and of its time; with the wall time of the run (callbacks excluded). One CSV row per run.
 //   tensegrity_bench stress [--quick]
 // runs the stability stress cases (tower and quadruplex: fast folding, large steps, bare steel, thin
 // struts, slack cables, impulsive actuation) and prints one table row per case: how it ended, steps,
@@ -25,6 +31,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <fstream>
 #include <iostream>
 #include <random>
 #include <sstream>
@@ -60,6 +67,11 @@ const char* kUsage =
     "  equilibrium solves, figures per seed, the median time; --contact-limit allows contact up to N newtons\n"
     "  (else --clearance, default 0.005 m); --speed-limit (seed 1) finds the time scale that keeps the\n"
     "  dynamic contact force and bending stress under the limits and prints the resulting largest speed.\n"
+    "       tensegrity_bench work-precision SCENE.yaml [--set key=value]... [--dts a,b,..] [--ref-dt R]\n"
+    "                        [--csv FILE]\n"
+    "  Integrators (Newmark as in the paper, trapezoidal, generalized-alpha, the paper's with modified\n"
+    "  Newton) over the steps (default 1e-3,5e-4,2e-4,1e-4 s) against a reference at R (default 2.5e-5 s):\n"
+    "  errors and wall time per run (CSV to FILE or stdout).\n"
     "       tensegrity_bench stress [--quick]\n"
     "  The stability stress cases (docs/benchmarks.md): one row per case; --quick runs the short ones.\n";
 
@@ -418,6 +430,163 @@ int plan(const std::string& scene, const std::vector<std::string>& args)
   return 0;
 }
 
+struct Trace
+{
+  std::vector<double> t, force;
+  std::vector<std::vector<double>> heights;  // per output: the layer heights (or the height)
+  std::vector<Eigen::VectorXd> q;            // per output: the coordinates
+  double peak = 0.0, peak_t = 0.0;           // largest normal contact force over every step, and when
+  at::RunResult result;
+};
+
+Trace traceRun(const at::Model& model)
+{
+  Trace tr;
+  std::vector<int> height_cols;
+  const std::vector<std::string> cols = at::csvColumns(model);
+  for (size_t i = 0; i < cols.size(); ++i)
+    if (cols[i].rfind("height_", 0) == 0)
+      height_cols.push_back(static_cast<int>(i));
+  if (height_cols.empty())
+    height_cols.push_back(3);  // height
+  tr.result = at::runAnalysis(
+      model,
+      [&](const at::State& s)
+      {
+        const std::vector<double> row = at::csvRow(model, s);
+        tr.t.push_back(row[0]);
+        tr.force.push_back(row[2]);
+        std::vector<double> h;
+        for (int c : height_cols)
+          h.push_back(row[c]);
+        tr.heights.push_back(h);
+        tr.q.push_back(s.q);
+      },
+      {},
+      [&](const at::State& s)
+      {
+        for (const at::ContactPairState& c : at::activeContacts(model, s))
+          if (c.normal_force > tr.peak)
+          {
+            tr.peak = c.normal_force;
+            tr.peak_t = s.t;
+          }
+      });
+  return tr;
+}
+
+int workPrecision(const std::string& scene, const std::vector<std::string>& args)
+{
+  std::vector<at::Override> overrides;
+  std::vector<double> dts = { 1e-3, 5e-4, 2e-4, 1e-4 };
+  double ref_dt = 2.5e-5;
+  std::string csv_path;
+  for (size_t i = 0; i < args.size(); ++i)
+  {
+    const std::string& a = args[i];
+    const auto next = [&]() -> std::string
+    {
+      if (i + 1 >= args.size())
+        throw std::invalid_argument(a + " needs a value");
+      return args[++i];
+    };
+    if (a == "--set")
+      overrides.push_back(at::parseOverride(next()));
+    else if (a == "--dts")
+    {
+      dts.clear();
+      for (const std::string& v : splitList(next()))
+        dts.push_back(std::stod(v));
+    }
+    else if (a == "--ref-dt")
+      ref_dt = std::stod(next());
+    else if (a == "--csv")
+      csv_path = next();
+    else
+      throw std::invalid_argument("unknown argument '" + a + "'");
+  }
+  at::Model base = at::loadScene(scene, overrides);
+  if (base.analysis.type != at::AnalysisType::kDynamic)
+    throw std::invalid_argument("work-precision needs a dynamic analysis (--set analysis.type=dynamic)");
+  // a common output grid that every step divides
+  double grid = 0.01;
+  for (double dt : dts)
+    grid = std::max(grid, dt);
+  base.analysis.output_interval = grid;
+
+  struct Scheme
+  {
+    const char* name;
+    at::Integrator integrator;
+    double gamma, beta, rho;
+    bool reuse;
+  };
+  const std::vector<Scheme> schemes = {
+    { "newmark_paper", at::Integrator::kNewmark, 0.6, 0.3025, 0.8, false },
+    { "trapezoidal", at::Integrator::kNewmark, 0.5, 0.25, 0.8, false },
+    { "generalized_alpha", at::Integrator::kGeneralizedAlpha, 0.5, 0.25, 0.8, false },
+    { "newmark_paper_modified_newton", at::Integrator::kNewmark, 0.6, 0.3025, 0.8, true },
+  };
+  const auto configure = [&](const Scheme& sc, double dt, double tol)
+  {
+    at::Model m = base;
+    m.solver.integrator = sc.integrator;
+    m.solver.newmark_gamma = sc.gamma;
+    m.solver.newmark_beta = sc.beta;
+    m.solver.rho_infinity = sc.rho;
+    m.solver.reuse_jacobian = sc.reuse;
+    m.solver.dt = dt;
+    m.solver.newton_tolerance = tol;
+    return m;
+  };
+  std::fprintf(stderr, "work-precision: reference (generalized-alpha, dt %g s) ...\n", ref_dt);
+  const Trace ref = traceRun(configure(schemes[2], ref_dt, 1e-10));
+  if (!ref.result.summary.ok())
+  {
+    std::cerr << "tensegrity_bench: the reference run failed: " << ref.result.summary.message << "\n";
+    return 3;
+  }
+  double ref_fmax = 1e-12;
+  for (double f : ref.force)
+    ref_fmax = std::max(ref_fmax, std::abs(f));
+
+  std::ofstream file;
+  if (!csv_path.empty())
+  {
+    file.open(csv_path);
+    if (!file)
+      throw std::invalid_argument("cannot write '" + csv_path + "'");
+  }
+  std::ostream& out = csv_path.empty() ? std::cout : file;
+  out << "scheme,dt,status,steps,newton_iterations,wall_time,position_error,height_error,force_error,peak_force_error,"
+         "peak_time_error,peak_force,reference_peak_force\n";
+  const double tol = base.solver.newton_tolerance;
+  for (const Scheme& sc : schemes)
+    for (double dt : dts)
+    {
+      const Trace tr = traceRun(configure(sc, dt, tol));
+      double herr = 0.0, ferr = 0.0, perr_pos = 0.0;
+      const size_t n = std::min(tr.t.size(), ref.t.size());
+      for (size_t k = 0; k < n; ++k)
+      {
+        for (const at::Body& b : base.bodies)
+          perr_pos = std::max(perr_pos, (tr.q[k].segment<3>(b.offset) - ref.q[k].segment<3>(b.offset)).norm());
+        for (size_t j = 0; j < tr.heights[k].size(); ++j)
+          herr = std::max(herr, std::abs(tr.heights[k][j] - ref.heights[k][j]));
+        ferr = std::max(ferr, std::abs(tr.force[k] - ref.force[k]) / ref_fmax);
+      }
+      const double wall = tr.result.wall_time - tr.result.callback_time;
+      const double perr = ref.peak > 0.0 ? std::abs(tr.peak - ref.peak) / ref.peak : 0.0;
+      out << sc.name << "," << dt << "," << at::toString(tr.result.summary.status) << "," << tr.result.solver_steps
+          << "," << tr.result.summary.iterations << "," << wall << "," << perr_pos << "," << herr << "," << ferr << ","
+          << perr << "," << std::abs(tr.peak_t - ref.peak_t) << "," << tr.peak << "," << ref.peak << "\n";
+      out.flush();
+      std::fprintf(stderr, "  %-30s dt %-8g %-10s wall %7.2f s  position err %.3e m  force err %.3e  peak err %.3e\n",
+                   sc.name, dt, at::toString(tr.result.summary.status), wall, perr_pos, ferr, perr);
+    }
+  return 0;
+}
+
 struct StressCase
 {
   const char* name;
@@ -552,9 +721,9 @@ int steps(const std::string& scene, const std::vector<at::Override>& overrides, 
 int main(int argc, char** argv)
 {
   const std::string command = argc >= 2 ? argv[1] : "";
-  const bool needs_scene = command == "steps" || command == "plan";
+  const bool needs_scene = command == "steps" || command == "plan" || command == "work-precision";
   if ((command != "steps" && command != "contact-pair" && command != "broad-phase" && command != "plan" &&
-       command != "stress") ||
+       command != "stress" && command != "work-precision") ||
       (needs_scene && argc < 3))
   {
     std::cerr << kUsage;
@@ -568,6 +737,8 @@ int main(int argc, char** argv)
   {
     if (command == "plan")
       return plan(scene, std::vector<std::string>(argv + 3, argv + argc));
+    if (command == "work-precision")
+      return workPrecision(scene, std::vector<std::string>(argv + 3, argv + argc));
     if (command == "stress")
       return stress(argc >= 3 && std::string(argv[2]) == "--quick");
     for (int i = needs_scene ? 3 : 2; i < argc; ++i)
