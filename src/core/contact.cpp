@@ -181,8 +181,11 @@ ContactPairState evaluateContact(const Model& model, int pair, const Eigen::Vect
   if (out)
   {
     out->force.setZero();
-    out->stiffness.setZero();
-    out->damping.setZero();
+    if (out->tangents)
+    {
+      out->stiffness.setZero();
+      out->damping.setZero();
+    }
   }
 
   // velocities of the axis points at fixed s, and the penetration rate (also outside contact: the
@@ -251,6 +254,20 @@ ContactPairState evaluateContact(const Model& model, int pair, const Eigen::Vect
   }
   if (!out)
     return st;
+  if (!out->tangents)
+  {
+    // the generalized force alone: g F_N (g below) and the friction's [f; B_A^T f; -f; -B_B^T f]
+    out->force << fn * c.n, fn * c.s1 * a.axis_jac.transpose() * c.n, -fn * c.n,
+        -fn * c.s2 * b.axis_jac.transpose() * c.n;
+    if (ft > 0.0)
+    {
+      out->force.segment<3>(0) += f;
+      out->force.segment<4>(3) += bua.transpose() * f;
+      out->force.segment<3>(7) -= f;
+      out->force.segment<4>(10) -= bub.transpose() * f;
+    }
+    return st;
+  }
 
   // Jacobians over x = [q_a; q_b] (14 columns): axis points at fixed s, axes
   Mat3x14 jp1 = Mat3x14::Zero(), jp2 = Mat3x14::Zero(), ja1 = Mat3x14::Zero(), ja2 = Mat3x14::Zero();

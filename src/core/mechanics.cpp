@@ -264,6 +264,7 @@ void System::contactForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, c
   if (!model_.contact.enabled)
     return;
   broad_phase_.candidates(q, 0.0, candidates_);
+  contribution_.tangents = jac != nullptr;
   for (int i : candidates_)
   {
     const double v0 = impact_speeds.empty() ? 0.0 : impact_speeds[i];

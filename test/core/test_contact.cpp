@@ -408,3 +408,30 @@ TEST(ContactSpecialCases, AxesThroughEachOtherStayFinite)
   EXPECT_NEAR(std::abs(st.normal.z()), 1.0, 1e-12);
   EXPECT_TRUE(c.force.allFinite() && c.stiffness.allFinite() && c.damping.allFinite());
 }
+
+TEST(ContactForce, ForceWithoutTangentsIsTheSameForce)
+{
+  // the residual-only path (modified Newton) must give the force the full evaluation gives, in every
+  // friction regime and in statics
+  std::mt19937 rng(12);
+  const Model m = twoStruts(0.3, 0.5);
+  int with_friction = 0;
+  for (int k = 0; k < 30; ++k)
+  {
+    const Eigen::VectorXd q = crossing(m, 2e-3, rng);
+    const double slip = k % 3 == 0 ? 0.005 : (k % 3 == 1 ? 0.05 : 0.5);
+    const Eigen::VectorXd qd = velocitiesWithSlip(m, q, slip, 0.05, rng);
+    for (ContactMode mode : { ContactMode::kDynamic, ContactMode::kStatic })
+    {
+      ContactContribution full, alone;
+      alone.tangents = false;
+      const ContactPairState a = evaluateContact(m, 0, q, qd, 0.05, mode, &full);
+      const ContactPairState b = evaluateContact(m, 0, q, qd, 0.05, mode, &alone);
+      ASSERT_TRUE(a.active);
+      EXPECT_EQ(a.normal_force, b.normal_force);
+      EXPECT_LE((full.force - alone.force).norm(), 1e-12 * full.force.norm()) << k;
+      with_friction += a.friction_force > 0.0 ? 1 : 0;
+    }
+  }
+  EXPECT_GT(with_friction, 10);
+}

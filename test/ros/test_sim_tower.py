@@ -67,8 +67,10 @@ class TestSimTower(unittest.TestCase):
 
     def test_fold_into_contact_record_and_play_back(self):
         bag_path = os.path.join(self.tmp, "tower.bag")
+        # its own process group: `rosbag record` is a wrapper around the recorder, and both must get the
+        # SIGINT that makes the recorder close the bag (and rename it from .active)
         record = subprocess.Popen(["rosbag", "record", "-O", bag_path] + TOPICS, stdout=subprocess.DEVNULL,
-                                  stderr=subprocess.DEVNULL)
+                                  stderr=subprocess.DEVNULL, start_new_session=True)
         try:
             time.sleep(2.0)  # the recorder subscribes
             names = ["pull1", "pull2", "pull3", "pull4"]
@@ -92,8 +94,9 @@ class TestSimTower(unittest.TestCase):
             self.assertTrue(wait_for(lambda: self.markers is not None, 10), "no contact arrows on ~markers")
             time.sleep(1.0)
         finally:
-            record.send_signal(signal.SIGINT)
+            os.killpg(record.pid, signal.SIGINT)
             record.wait(timeout=30)
+        self.assertTrue(wait_for(lambda: os.path.exists(bag_path), 30), "the recorder did not close the bag")
 
         # the bag: every body frame on /tf, contacts with forces
         frames, recorded = set(), []

@@ -77,6 +77,9 @@ struct ContactPairState
 /// K = -dQ/dq, C = -dQ/dqd over [q_a; q_b].
 struct ContactContribution
 {
+  /// false: only `force` is filled (stiffness and damping are left as they were): for residual-only
+  /// Newton iterations (modified Newton)
+  bool tangents = true;
   Eigen::Matrix<double, 14, 1> force = Eigen::Matrix<double, 14, 1>::Zero();
   Eigen::Matrix<double, 14, 14> stiffness = Eigen::Matrix<double, 14, 14>::Zero();
   Eigen::Matrix<double, 14, 14> damping = Eigen::Matrix<double, 14, 14>::Zero();
