@@ -666,7 +666,18 @@ PlanResult planFolding(const core::Model& model, const core::State& start, const
     out.waypoints.push_back(simple[k]);
   }
   out.final_height = e.height;
-  if (!followed)
+  // the goal as reached by following the path from the start (equilibria depend on the path: a goal
+  // state's equilibrium found from elsewhere may lie on another branch)
+  bool reached = true;
+  if (followed && r.target_values.empty() && e.height > r.target_height)
+  {
+    reached = false;
+    std::ostringstream msg;
+    msg << "followed from the start, the path ends at height " << e.height << " m, above the target " << r.target_height
+        << " m (the goal state's equilibrium was found on another branch)";
+    out.message = msg.str();
+  }
+  if (!followed || !reached)
     out.status = PlanStatus::kApproximateSolution;
   else if (out.status == PlanStatus::kExactSolution)
     out.message = "exact solution";

@@ -8,6 +8,7 @@ import unittest
 import rospy
 import rostest
 from sensor_msgs.msg import JointState
+from std_srvs.srv import SetBool
 
 from sim_test_util import wait_for
 from active_tensegrity.msg import ContactArray
@@ -66,6 +67,7 @@ class TestSimPlan(unittest.TestCase):
         res = self.plan(req)
         self.assertEqual(res.status, PlanFoldingResponse.EXACT_SOLUTION, res.message)
         self.assertTrue(res.executed, res.message)
+        self.assertTrue(rospy.ServiceProxy(NS + "/pause", SetBool)(False).success)  # run it
         self.assertLessEqual(res.final_height, 0.7)
         self.assertLessEqual(res.peak_contact_force, LIMIT)
         self.assertTrue(res.dynamics_verified)
