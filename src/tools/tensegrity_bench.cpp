@@ -36,6 +36,7 @@
 #include <random>
 #include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "active_tensegrity/core/analysis.h"
@@ -321,6 +322,31 @@ std::vector<std::string> splitList(const std::string& s)
   return out;
 }
 
+/// "--option value" arguments, walked in order: option() takes the next one, value() the value after it.
+class Args
+{
+public:
+  explicit Args(std::vector<std::string> args) : args_(std::move(args)) {}
+  bool more() const
+  {
+    return next_ < args_.size();
+  }
+  std::string option()
+  {
+    return args_[next_++];
+  }
+  std::string value(const std::string& option)
+  {
+    if (next_ >= args_.size())
+      throw std::invalid_argument(option + " needs a value");
+    return args_[next_++];
+  }
+
+private:
+  std::vector<std::string> args_;
+  size_t next_ = 0;
+};
+
 int plan(const std::string& scene, const std::vector<std::string>& args)
 {
   namespace ap = active_tensegrity::planning;
@@ -332,15 +358,11 @@ int plan(const std::string& scene, const std::vector<std::string>& args)
   req.limits.min_clearance = 0.005;
   int seeds = 5;
   bool speed_limit = false;
-  for (size_t i = 0; i < args.size(); ++i)
+  Args in(args);
+  while (in.more())
   {
-    const std::string& a = args[i];
-    const auto next = [&]() -> std::string
-    {
-      if (i + 1 >= args.size())
-        throw std::invalid_argument(a + " needs a value");
-      return args[++i];
-    };
+    const std::string a = in.option();
+    const auto next = [&]() { return in.value(a); };
     if (a == "--set")
       overrides.push_back(at::parseOverride(next()));
     else if (a == "--actuators")
@@ -481,15 +503,11 @@ int workPrecision(const std::string& scene, const std::vector<std::string>& args
   std::vector<double> dts = { 1e-3, 5e-4, 2e-4, 1e-4 };
   double ref_dt = 2.5e-5;
   std::string csv_path;
-  for (size_t i = 0; i < args.size(); ++i)
+  Args in(args);
+  while (in.more())
   {
-    const std::string& a = args[i];
-    const auto next = [&]() -> std::string
-    {
-      if (i + 1 >= args.size())
-        throw std::invalid_argument(a + " needs a value");
-      return args[++i];
-    };
+    const std::string a = in.option();
+    const auto next = [&]() { return in.value(a); };
     if (a == "--set")
       overrides.push_back(at::parseOverride(next()));
     else if (a == "--dts")
