@@ -25,8 +25,8 @@
 // force and of its time; with the wall time of the run (callbacks excluded). One CSV row per run.
 //   tensegrity_bench stress [--quick]
 // runs the stability stress cases (tower and quadruplex: fast folding, large steps, bare steel, thin
-// struts, slack cables, impulsive actuation) and prints one table row per case: how it ended, steps,
-// cuts, steps refused for a strut passing through another, peaks, and whether every number is finite.
+// struts, slack cables, impulsive actuation; two nearly parallel struts pressed together) and prints one table row per
+// case: how it ended, steps, cuts, steps refused for a strut passing through another, peaks, and whether every number is finite.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -648,6 +648,8 @@ int stress(bool quick_only)
     { "quadruplex V = 50 m/s", "quadruplex.yaml", with(quad, { "actuation.speed=50", "analysis.duration=0.2" }), true },
     { "quadruplex dt = 1e-2 s, V = 0.5 m/s", "quadruplex.yaml",
       with(quad, { "solver.dt=1e-2", "actuation.speed=0.5", "analysis.duration=3" }), true },
+    { "two struts 1 degree apart pressed side by side, 1 m/s", "parallel.yaml", { "actuation.speed=1" }, true },
+    { "two struts 1 degree apart pressed side by side, 10 m/s", "parallel.yaml", { "actuation.speed=10" }, true },
     { "quadruplex all cables slack (no prestress), V = 1 m/s", "quadruplex.yaml",
       with(quad, { "cables.lower.prestress=0", "cables.upper.prestress=0", "cables.bracing.prestress=0",
                    "actuation.speed=1", "analysis.duration=1.5" }),
