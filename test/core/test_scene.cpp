@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <exception>
+#include <filesystem>
 #include <functional>
 #include <map>
 #include <ostream>
@@ -17,6 +18,7 @@
 
 #include "active_tensegrity/core/mechanics.h"
 #include "active_tensegrity/core/scene.h"
+#include "active_tensegrity/core/state.h"
 
 using namespace active_tensegrity::core;
 
@@ -628,4 +630,26 @@ TEST(ContactSettings, KeysReachTheModelAndPairsGetTheirStiffness)
   ASSERT_EQ(m.checked_pairs.size(), 6u);
   for (const StrutPair& p : m.checked_pairs)
     EXPECT_NEAR(p.stiffness90, 4.0 / 3.0 * estar * std::sqrt(0.05), 1e-6 * p.stiffness90);
+}
+
+TEST(SceneFiles, EveryShippedSceneLoadsAndStartsConsistent)
+{
+  int n = 0;
+  for (const auto& entry :
+       std::filesystem::directory_iterator(std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) + "/config/scenes"))
+  {
+    if (entry.path().extension() != ".yaml")
+      continue;
+    ++n;
+    const Model m = loadScene(entry.path().string());
+    EXPECT_FALSE(m.bodies.empty()) << entry.path();
+    const State s = initialState(m);
+    EXPECT_TRUE(s.q.allFinite()) << entry.path();
+    // the joints hold at the start: every constraint row is satisfied by the initial configuration
+    const System sys(m);
+    Eigen::VectorXd phi;
+    sys.constraintValue(s.q, s.u, phi);
+    EXPECT_LT(phi.lpNorm<Eigen::Infinity>(), 1e-9) << entry.path();
+  }
+  EXPECT_GE(n, 5);  // quadruplex, tower, prism, masts, parallel, and whatever comes
 }
