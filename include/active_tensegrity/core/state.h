@@ -43,10 +43,10 @@ const char* toString(SolveStatus s);
 struct Summary
 {
   SolveStatus status = SolveStatus::kConverged;
-  int iterations = 0;     // Newton iterations, all attempts included
-  int step_cuts = 0;      // times a step or load increment was halved
+  int iterations = 0;         // Newton iterations, all attempts included
+  int step_cuts = 0;          // times a step or load increment was halved
   int crossings_refused = 0;  // dynamics: steps refused (and cut) because a strut would pass through another
-  double residual = 0.0;  // last increment norm (dynamics) or force residual (statics)
+  double residual = 0.0;      // last increment norm (dynamics) or force residual (statics)
   std::string message;
   bool ok() const
   {
