@@ -5,6 +5,7 @@
 #include <cmath>
 #include <limits>
 
+#include "active_tensegrity/core/adaptive.h"
 #include "active_tensegrity/core/dynamics.h"
 #include "active_tensegrity/core/broad_phase.h"
 #include "active_tensegrity/core/contact.h"
@@ -212,6 +213,77 @@ std::vector<std::pair<std::string, double>> timeBreakdown(const RunResult& resul
            { "rest", std::max(0.0, result.wall_time - t.total - result.callback_time) } };
 }
 
+namespace
+{
+/// The dynamic loop with solver.adaptive: steps to every output time and every actuation breakpoint.
+void runAdaptive(const Model& model, DynamicsSolver& solver, const ActuationLaw& law, State& state, RunResult& result,
+                 const std::function<void(const State&)>& on_output, const std::function<void(double)>& on_progress,
+                 const std::function<void(const State&)>& on_step)
+{
+  const AnalysisSettings& an = model.analysis;
+  const double eps = 1e-12 * std::max(1.0, an.duration);
+  std::vector<double> stops;
+  for (double t : an.schedule.breakpoints())
+    if (t > eps && t < an.duration - eps)
+      stops.push_back(t);
+  const double interval = an.output_interval;
+  const int every = interval > 0.0 ? 0 : 1;  // no output interval: a row per accepted step
+  double next_output = interval > 0.0 ? std::min(interval, an.duration) : an.duration;
+  size_t next_stop = 0;
+  AdaptiveStepper stepper(solver, model.solver);
+  long accepted = 0;
+  const auto timed = [&](const auto& f)
+  {
+    const auto t0 = std::chrono::steady_clock::now();
+    f();
+    result.callback_time += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  };
+  const auto each_step = [&](const State& s)
+  {
+    timed(
+        [&]()
+        {
+          if (on_step)
+            on_step(s);
+          if (every && s.t < an.duration - eps)
+          {
+            on_output(s);
+            ++result.steps;
+          }
+        });
+    if (on_progress && ++accepted % 256 == 0)
+      on_progress(s.t / an.duration);
+  };
+  while (state.t < an.duration - eps)
+  {
+    double stop = std::min(next_output, an.duration);
+    if (next_stop < stops.size())
+      stop = std::min(stop, stops[next_stop]);
+    const Summary s = stepper.advanceTo(state, stop, law, each_step);
+    result.summary.iterations += s.iterations;
+    result.summary.step_cuts += s.step_cuts;
+    result.summary.crossings_refused += s.crossings_refused;
+    result.summary.residual = s.residual;
+    if (!s.ok())
+    {
+      result.summary.status = s.status;
+      result.summary.message = s.message;
+      break;
+    }
+    if (next_stop < stops.size() && stop >= stops[next_stop] - eps)
+      ++next_stop;
+    if (stop >= next_output - eps || stop >= an.duration - eps)
+    {
+      timed([&]() { on_output(state); });
+      ++result.steps;
+      next_output += interval > 0.0 ? interval : an.duration;
+    }
+  }
+  result.adaptive = stepper.stats();
+  result.solver_steps = static_cast<int>(stepper.stats().accepted);
+}
+}  // namespace
+
 RunResult runAnalysis(const Model& model, const std::function<void(const State&)>& on_output,
                       const std::function<void(double)>& on_progress, const std::function<void(const State&)>& on_step)
 {
@@ -270,38 +342,43 @@ RunResult runAnalysis(const Model& model, const std::function<void(const State&)
     }
     on_output(state);
     ++result.steps;
-    const double dt = model.solver.dt;
-    const long n_steps = std::lround(std::ceil(an.duration / dt - 1e-9));
-    const double interval = an.output_interval > 0.0 ? an.output_interval : dt;
-    double next_output = interval;
-    for (long k = 1; k <= n_steps; ++k)
+    if (model.solver.adaptive)
+      runAdaptive(model, solver, law, state, result, on_output, on_progress, on_step);
+    else
     {
-      const double t_target = std::min(an.duration, k * dt);
-      const Summary s = solver.step(state, t_target - state.t, law);
-      result.summary.iterations += s.iterations;
-      result.summary.step_cuts += s.step_cuts;
-      result.summary.crossings_refused += s.crossings_refused;
-      result.summary.residual = s.residual;
-      ++result.solver_steps;
-      if (!s.ok())
+      const double dt = model.solver.dt;
+      const long n_steps = std::lround(std::ceil(an.duration / dt - 1e-9));
+      const double interval = an.output_interval > 0.0 ? an.output_interval : dt;
+      double next_output = interval;
+      for (long k = 1; k <= n_steps; ++k)
       {
-        result.summary.status = s.status;
-        result.summary.message = s.message;
-        break;
+        const double t_target = std::min(an.duration, k * dt);
+        const Summary s = solver.step(state, t_target - state.t, law);
+        result.summary.iterations += s.iterations;
+        result.summary.step_cuts += s.step_cuts;
+        result.summary.crossings_refused += s.crossings_refused;
+        result.summary.residual = s.residual;
+        ++result.solver_steps;
+        if (!s.ok())
+        {
+          result.summary.status = s.status;
+          result.summary.message = s.message;
+          break;
+        }
+        state.t = t_target;  // no drift from summing steps
+        const auto callbacks = std::chrono::steady_clock::now();
+        if (on_step)
+          on_step(state);
+        if (state.t >= next_output - 1e-9 * dt || k == n_steps)
+        {
+          on_output(state);
+          ++result.steps;
+          next_output += interval;
+        }
+        result.callback_time += std::chrono::duration<double>(std::chrono::steady_clock::now() - callbacks).count();
+        if (on_progress && k % 256 == 0)
+          on_progress(state.t / an.duration);
       }
-      state.t = t_target;  // no drift from summing steps
-      const auto callbacks = std::chrono::steady_clock::now();
-      if (on_step)
-        on_step(state);
-      if (state.t >= next_output - 1e-9 * dt || k == n_steps)
-      {
-        on_output(state);
-        ++result.steps;
-        next_output += interval;
-      }
-      result.callback_time += std::chrono::duration<double>(std::chrono::steady_clock::now() - callbacks).count();
-      if (on_progress && k % 256 == 0)
-        on_progress(state.t / an.duration);
     }
     result.timings = solver.timings();
   }

@@ -86,17 +86,51 @@ void DynamicsSolver::prepareContact(const State& s, double h)
   }
 }
 
-void DynamicsSolver::updateContactMemory(State& s)
+void DynamicsSolver::updateContactMemory(State& s, const Eigen::VectorXd& q_start)
 {
   const ScopeTimer timer(timings_.contact);
   const Model& model = system_.model();
+  previous_speed_.swap(s.contact_speed);
   s.contact_speed.assign(model.checked_pairs.size(), 0.0);
+  estimate_.onset_depth = 0.0;
+  estimate_.onset_gap = 0.0;
+  estimate_.onset_pair = -1;
   if (!model.contact.enabled)
     return;
   system_.contactCandidates(s.q, 0.0, candidates_);
   for (int i : candidates_)
-    if (contactGeometry(model, i, s.q).active)
-      s.contact_speed[i] = step_speeds_[i];
+  {
+    const double gap = contactGeometry(model, i, s.q).gap;
+    if (gap >= 0.0)
+      continue;
+    s.contact_speed[i] = step_speeds_[i];
+    const bool was_touching = i < static_cast<int>(previous_speed_.size()) && previous_speed_[i] > 0.0;
+    if (was_touching || -gap <= estimate_.onset_depth)
+      continue;
+    const double gap_start = contactGeometry(model, i, q_start).gap;
+    if (gap_start > 0.0)  // apart at the start (a scene may start with pairs touching)
+    {
+      estimate_.onset_depth = -gap;
+      estimate_.onset_gap = gap_start;
+      estimate_.onset_pair = i;
+    }
+  }
+}
+
+double DynamicsSolver::errorEstimate(const Eigen::VectorXd& a0, const Eigen::VectorXd& a1, double h) const
+{
+  // Newmark's local position error is (beta - 1/6) h^3 q''' and its velocity error (gamma - 1/2) h^2 q'''
+  // (which becomes a position error of the same order over the next step); h q''' ~ a1 - a0
+  const double c = (std::abs(coef_.beta - 1.0 / 6.0) + std::abs(coef_.gamma - 0.5)) * h * h;
+  double e = 0.0;
+  for (const Body& b : system_.model().bodies)
+  {
+    double eb = (a1.segment<3>(b.offset) - a0.segment<3>(b.offset)).norm();
+    if (b.kind == BodyKind::kStrut)
+      eb += b.length * (a1.segment<4>(b.offset + 3) - a0.segment<4>(b.offset + 3)).norm();
+    e = std::max(e, eb);
+  }
+  return c * e;
 }
 
 void DynamicsSolver::residual(const State& s, double h, const ActuationValues& u, const Eigen::VectorXd& qdd_new,
@@ -134,6 +168,9 @@ void DynamicsSolver::residual(const State& s, double h, const ActuationValues& u
 
 namespace
 {
+/// Modified Newton keeps a factorization built for a step within this relative change of h.
+constexpr double kReuseStepChange = 0.2;
+
 std::vector<bool> touching(const State& s)
 {
   std::vector<bool> t(s.contact_speed.size());
@@ -153,10 +190,12 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law)
   const int nq = system_.nq();
   const bool reuse = options_.reuse_jacobian;
   // modified Newton keeps the factorization while it stays a good one (see the option)
-  // (h differs in its last bits from step to step: t = k dt; a cut changes it by a factor 2)
-  bool rebuild = !reuse || !factor_valid_ || std::abs(h - factor_h_) > 1e-6 * h ||
+  // (h differs in its last bits from step to step: t = k dt; a cut changes it by a factor 2; a variable
+  // step keeps it while within 20 %: the matrix is then a little off, which the contraction check sees)
+  bool rebuild = !reuse || !factor_valid_ || std::abs(h - factor_h_) > kReuseStepChange * h ||
                  factor_age_ >= options_.max_jacobian_age || factor_contacts_ != touching(s);
   double previous = -1.0;  // last increment norm with this factorization
+  bool built_this_step = false;
   prepareContact(s, h);
   for (int it = 0; it < options_.max_iterations; ++it)
   {
@@ -188,6 +227,7 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law)
       }
       factor_h_ = h;
       factor_age_ = 0;
+      built_this_step = true;
       factor_contacts_ = touching(s);
       theta_ = 0.0;
       previous = -1.0;
@@ -207,7 +247,7 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law)
     qdd += dx_.head(nq);
     lambda += dx_.tail(system_.nLambda());
     sum.residual = bh2 * dx_.head(nq).lpNorm<Eigen::Infinity>();
-    if (reuse && previous > 0.0)
+    if (reuse && previous > 0.0 && sum.residual > 1e-3 * options_.newton_tolerance)  // (not round-off)
     {
       // contraction rate of the iteration with this matrix; slow or diverging: rebuild it
       theta_ = std::max(theta_, sum.residual / previous);
@@ -218,8 +258,11 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law)
     // with an up-to-date matrix this is Newton's test; with an older one the increment is accepted only
     // while the iteration contracts (theta < 0.5), so the error left is below the increment
     // an older matrix can shrink the q increments while the multipliers are still off: they must settle too
-    const bool multipliers_settled = !reuse || dx_.tail(system_.nLambda()).lpNorm<Eigen::Infinity>() <=
-                                                   options_.newton_tolerance * (1.0 + lambda.lpNorm<Eigen::Infinity>());
+    // (a matrix built in this step is Newton's: the multipliers are then as good as the q increment says,
+    // and at very small h their round-off, phi / (beta h^2), would fail the test)
+    const bool multipliers_settled = !reuse || built_this_step ||
+                                     dx_.tail(system_.nLambda()).lpNorm<Eigen::Infinity>() <=
+                                         options_.newton_tolerance * (1.0 + lambda.lpNorm<Eigen::Infinity>());
     if (sum.residual <= options_.newton_tolerance && multipliers_settled && !(reuse && theta_ > 0.5))
     {
       predict(s, h, qdd, q_, qd_, acc_);
@@ -236,14 +279,15 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law)
         sum.message = system_.passedThroughMessage(crossed);
         return sum;
       }
-      s.q = q_;
+      estimate_.error = errorEstimate(s.acc, acc_, h);
+      s.q.swap(q_);  // q_ keeps the start positions for the onset check
       s.qd = qd_;
       s.acc = acc_;
       s.qdd = qdd;
       s.lambda = lambda;
       s.t += h;
       s.u = u;
-      updateContactMemory(s);
+      updateContactMemory(s, q_);
       ++factor_age_;
       return sum;
     }
@@ -293,6 +337,12 @@ Summary DynamicsSolver::advance(State& s, double h, const ActuationLaw& law, int
     }
   }
   return total;
+}
+
+Summary DynamicsSolver::tryStep(State& s, double h, const ActuationLaw& law)
+{
+  const ScopeTimer timer(timings_.total);
+  return attempt(s, h, law);
 }
 
 Summary DynamicsSolver::step(State& s, double h, const ActuationLaw& law)

@@ -831,6 +831,14 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
     o.max_step_cuts = s.integer("max_step_cuts", o.max_step_cuts, 0);
     o.reuse_jacobian = s.boolean("reuse_jacobian", o.reuse_jacobian);
     o.max_jacobian_age = s.integer("max_jacobian_age", o.max_jacobian_age, 1);
+    o.adaptive = s.boolean("adaptive", o.adaptive);
+    o.error_tolerance = s.positive("error_tolerance", o.error_tolerance);
+    o.dt_min = s.positive("dt_min", o.dt_min);
+    o.dt_max = s.positive("dt_max", o.dt_max);
+    o.onset_depth = s.positive("onset_depth", o.onset_depth);
+    if (o.dt_min > o.dt_max)
+      s.fail(s.key("dt_min"),
+             "must not exceed dt_max = " + std::to_string(o.dt_max) + ", got " + std::to_string(o.dt_min));
     s.finish();
   }
   else

@@ -26,6 +26,18 @@ double RampSchedule::endTime() const
   return start_time + final_value / speed + tb;
 }
 
+std::vector<double> RampSchedule::breakpoints() const
+{
+  if (speed <= 0.0 || final_value <= 0.0)
+    return {};
+  const double tb = std::min(blend_time, final_value / speed);
+  const double end = endTime();
+  std::vector<double> out = { start_time, start_time + tb, end - tb, end };
+  out.erase(std::unique(out.begin(), out.end(), [](double a, double b) { return b - a <= 1e-12 * (1.0 + b); }),
+            out.end());
+  return out;
+}
+
 ActuationValue RampSchedule::evaluate(double t) const
 {
   if (speed <= 0.0 || final_value <= 0.0 || t <= start_time)

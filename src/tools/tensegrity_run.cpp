@@ -221,6 +221,18 @@ int main(int argc, char** argv)
           << "wall_time: " << result.wall_time << "\n";
   if (model.analysis.type == at::AnalysisType::kDynamic && result.wall_time > 0.0)
     summary << "real_time_factor: " << fin.t / result.wall_time << "\n";
+  if (model.analysis.type == at::AnalysisType::kDynamic && model.solver.adaptive)
+  {
+    const at::AdaptiveStats& a = result.adaptive;
+    summary << "adaptive_steps:  # solver.adaptive: accepted steps, refused ones by cause, step sizes (s)\n"
+            << "  accepted: " << a.accepted << "\n"
+            << "  rejected_error: " << a.rejected_error << "\n"
+            << "  rejected_onset: " << a.rejected_onset << "\n"
+            << "  rejected_solver: " << a.rejected_solver << "\n"
+            << "  at_min_step: " << a.at_min_step << "\n"
+            << "  smallest: " << csvNumber(a.h_min) << "\n"
+            << "  largest: " << csvNumber(a.h_max) << "\n";
+  }
   summary << "time_breakdown:  # wall seconds (share); callbacks = output rows, per-step peaks, writing\n";
   for (const auto& [part, seconds] : at::timeBreakdown(result))
     summary << "  " << part << ": {seconds: " << csvNumber(seconds)

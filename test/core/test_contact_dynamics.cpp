@@ -2,12 +2,14 @@
 // solution, the Lankarani-Nikravesh rebound against an independent 1-D integration and against c_e,
 // energy kept by frictionless elastic contact and never gained with friction, momentum kept, the
 // full Newton Jacobian with contact against finite differences, and no step that tunnels.
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <random>
 
 #include <gtest/gtest.h>
 
+#include "active_tensegrity/core/adaptive.h"
 #include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/dynamics.h"
 #include "fd_check.h"
@@ -279,4 +281,65 @@ TEST(ContactTunnelling, AStepThroughAStrutIsCutNotAccepted)
   EXPECT_GT(total.step_cuts, 0);
   EXPECT_GT(s.q(9), s.q(2));  // B is still above A
   EXPECT_GT(s.qd(9), 0.0);    // and moving up after the rebound
+}
+
+TEST(AdaptiveSteps, HertzImpactOnsetLocatedClosedFormKeptAndStepGrowsAfter)
+{
+  // the Hertz impact above with variable steps from 1 ms: the step that starts the contact is cut to
+  // end at most onset_depth inside, the steps in the contact follow the error estimate, and after the
+  // rebound they grow back to dt_max; the closed-form peak, duration and rebound are kept
+  const Model m = crossedCylinders(1.0, 0.0);
+  SolverOptions o = options(1e-3);
+  o.adaptive = true;
+  o.error_tolerance = 1e-8;
+  o.newton_tolerance = 1e-11;
+  o.onset_depth = 1e-6;
+  o.dt_max = 2e-3;
+  DynamicsSolver solver(m, o);
+  State s = initialState(m);
+  s.qd.segment<3>(7) = Vec3(0.0, 0.0, -kSpeed);
+  ASSERT_TRUE(solver.initialize(s, noActuation()).ok());
+  AdaptiveStepper stepper(solver, o);
+  double first_depth = -1.0, max_force = 0.0, t_start = -1.0, t_end = -1.0, prev_gap = 5e-4, prev_t = 0.0;
+  double contact_steps_max = 0.0, h_after = 0.0;
+  const auto record = [&](const State& st)
+  {
+    const double h = st.t - prev_t;
+    const double gap = contactGeometry(m, 0, st.q).gap;
+    if (gap < 0.0 && first_depth < 0.0)
+      first_depth = -gap;
+    if (prev_gap >= 0.0 && gap < 0.0 && t_start < 0.0)
+      t_start = prev_t + h * prev_gap / (prev_gap - gap);
+    if (prev_gap < 0.0 && gap >= 0.0 && t_end < 0.0)
+      t_end = prev_t + h * prev_gap / (prev_gap - gap);
+    if (gap < 0.0)
+      contact_steps_max = std::max(contact_steps_max, h);
+    else if (t_end > 0.0)
+      h_after = std::max(h_after, h);
+    for (const ContactPairState& c : activeContacts(m, st))
+      max_force = std::max(max_force, c.normal_force);
+    prev_gap = gap;
+    prev_t = st.t;
+  };
+  const Summary r = stepper.advanceTo(s, 0.03, noActuation(), record);
+  ASSERT_TRUE(r.ok()) << r.message;
+  const double mstar = 0.5 * m.bodies[0].mass;
+  const double k = m.checked_pairs[0].stiffness90;
+  const double dmax = std::pow(5.0 * mstar * kSpeed * kSpeed / (4.0 * k), 0.4);
+  const double fmax = k * std::pow(dmax, 1.5);
+  const double tc = 2.9432 * dmax / kSpeed;
+  const AdaptiveStats& st = stepper.stats();
+  std::printf("[ measured ] %ld steps (%ld refused for error, %ld at the onset), first depth %.3g m, force %.5g N "
+              "(%.5g), duration %.5g s (%.5g), steps in contact <= %.3g s, after %.3g s, rebound %.5f\n",
+              st.accepted, st.rejected_error, st.rejected_onset, first_depth, max_force, fmax, t_end - t_start, tc,
+              contact_steps_max, h_after, (s.qd(9) - s.qd(2)) / kSpeed);
+  EXPECT_GT(st.rejected_onset, 0);
+  EXPECT_GT(first_depth, 0.0);
+  EXPECT_LE(first_depth, o.onset_depth);
+  EXPECT_NEAR(max_force, fmax, 0.005 * fmax);
+  EXPECT_NEAR(t_end - t_start, tc, 0.005 * tc);
+  EXPECT_NEAR(s.qd(9) - s.qd(2), kSpeed, 0.01 * kSpeed);  // equal masses: A leaves at the speed B came
+  EXPECT_GE(h_after, o.dt_max * (1.0 - 1e-9));
+  EXPECT_LT(contact_steps_max, 0.1 * o.dt_max);
+  EXPECT_LT(st.accepted, 600);  // the fixed 1e-5 s step of the test above takes 3000 for this span
 }

@@ -1,12 +1,15 @@
 // Time integration: the full Newton Jacobian of one step against finite differences, and physics
 // invariants (energy, angular momentum, quaternion norm), a closed-form pendulum period, the
 // measured order of accuracy of each integrator, and a clean failure status.
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <random>
 
 #include <gtest/gtest.h>
 
+#include "active_tensegrity/core/adaptive.h"
+#include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/dynamics.h"
 #include "active_tensegrity/core/scene.h"
 #include "fd_check.h"
@@ -391,4 +394,84 @@ TEST(Dynamics, ModifiedNewtonReusesTheMatrixAtTheAccuracyOfFullNewton)
               "largest distance to tolerance 1e-11: full %.2e, modified %.2e; energy deviation %.2e\n",
               ta.newton_iterations, ta.factorizations, tb.newton_iterations, tb.factorizations, err_full, err_reuse,
               max_dev);
+}
+
+namespace
+{
+struct AdaptiveRun
+{
+  double error = 0.0;  // largest strut-centre position error at T (m)
+  AdaptiveStats stats;
+};
+
+AdaptiveRun adaptiveError(const Quadruplex& quad, SolverOptions o, double tol, double T, const Eigen::VectorXd& ref)
+{
+  o.adaptive = true;
+  o.error_tolerance = tol;
+  o.newton_tolerance = 1e-3 * tol;
+  o.dt = 1e-4;
+  o.dt_max = 0.05;
+  DynamicsSolver solver(quad.model, o);
+  State s = quad.start(0.5, 5);
+  const ActuationLaw law = constantLaw(1);
+  EXPECT_TRUE(solver.initialize(s, law).ok());
+  AdaptiveStepper stepper(solver, o);
+  EXPECT_TRUE(stepper.advanceTo(s, T, law).ok());
+  EXPECT_EQ(s.t, T);
+  AdaptiveRun run;
+  run.stats = stepper.stats();
+  for (const Body& b : quad.model.bodies)
+    run.error = std::max(run.error, (s.q.segment<3>(b.offset) - ref.segment<3>(b.offset)).norm());
+  return run;
+}
+}  // namespace
+
+TEST(AdaptiveSteps, ErrorFollowsTheToleranceAndStepsFollowTheError)
+{
+  // the freely vibrating quadruplex against the fine fixed-step reference. The tolerance bounds the
+  // error per step (~ h^3), so the steps shrink about 100^(1/3) = 4.6-fold when it tightens 100-fold and
+  // the global error, at most the sum of the local ones, about 100^(2/3) = 22-fold
+  Quadruplex quad;
+  const double T = 0.4;
+  const Eigen::VectorXd ref = reference(quad, T);
+  const SolverOptions o = options(Integrator::kGeneralizedAlpha, 1e-4, 0.5, 0.25, 0.9);
+  const AdaptiveRun loose = adaptiveError(quad, o, 1e-4, T, ref);
+  const AdaptiveRun tight = adaptiveError(quad, o, 1e-6, T, ref);
+  std::printf("[ measured ] tol 1e-4: error %.3e m in %ld steps (%ld refused); tol 1e-6: error %.3e m in %ld steps "
+              "(%ld refused)\n",
+              loose.error, loose.stats.accepted, loose.stats.rejected_error, tight.error, tight.stats.accepted,
+              tight.stats.rejected_error);
+  EXPECT_LT(tight.error, loose.error / 12.0);
+  EXPECT_LT(tight.error, static_cast<double>(tight.stats.accepted) * 1e-6);
+  EXPECT_LT(loose.error, static_cast<double>(loose.stats.accepted) * 1e-4);
+  const double growth = static_cast<double>(tight.stats.accepted) / loose.stats.accepted;
+  EXPECT_GT(growth, 2.5);  // 100^(1/3) = 4.6
+  EXPECT_LT(growth, 8.0);
+}
+
+TEST(AdaptiveSteps, LandsOnOutputTimesAndActuationBreakpoints)
+{
+  // the quadruplex compression with a sharp ramp (start 0.013 s, end 0.113 s): every output row and both
+  // kinks are steps of the run
+  Model m = loadScene(std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) + "/config/scenes/quadruplex.yaml");
+  m.analysis.type = AnalysisType::kDynamic;
+  m.analysis.duration = 0.15;
+  m.analysis.output_interval = 0.01;
+  m.analysis.max_actuation = 0.05;
+  m.analysis.schedule = RampSchedule{ 0.5, 0.013, 0.05, 0.0 };
+  m.solver.adaptive = true;
+  m.solver.dt = 1e-3;
+  std::vector<double> outputs, steps;
+  const RunResult r = runAnalysis(
+      m, [&](const State& s) { outputs.push_back(s.t); }, {}, [&](const State& s) { steps.push_back(s.t); });
+  ASSERT_TRUE(r.summary.ok()) << r.summary.message;
+  ASSERT_EQ(outputs.size(), 16u);  // 0, 0.01, ..., 0.15
+  for (size_t i = 0; i < outputs.size(); ++i)
+    EXPECT_NEAR(outputs[i], 0.01 * static_cast<double>(i), 1e-12);
+  for (double kink : { 0.013, 0.113 })
+    EXPECT_TRUE(std::any_of(steps.begin(), steps.end(), [&](double t) { return std::abs(t - kink) < 1e-12; }))
+        << "no step ends at " << kink;
+  EXPECT_EQ(r.solver_steps, static_cast<int>(steps.size()));
+  EXPECT_EQ(r.adaptive.accepted, static_cast<long>(steps.size()));
+  EXPECT_EQ(r.final_state.u[0].value, 0.05);
 }

@@ -243,3 +243,21 @@ TEST(RampSchedule, NoSpeedOrNoTravelMeansNoMotion)
     }
   }
 }
+
+TEST(RampSchedule, BreakpointsAreTheKinksOfTheLaw)
+{
+  // sharp: start and end; blended: also where the blends meet the cruise; a blend as long as half the
+  // ramp: the cruise vanishes and its two ends merge
+  EXPECT_EQ(ramp(0.5, 1.0, 1.0, 0.0).breakpoints(), (std::vector<double>{ 1.0, 3.0 }));
+  const std::vector<double> blended = ramp(0.5, 1.0, 1.0, 0.4).breakpoints();
+  ASSERT_EQ(blended.size(), 4u);
+  EXPECT_DOUBLE_EQ(blended[1], 1.4);
+  EXPECT_DOUBLE_EQ(blended[2], 3.0);
+  EXPECT_DOUBLE_EQ(blended[3], 3.4);
+  EXPECT_EQ(ramp(1.0, 0.0, 1.0, 1.0).breakpoints().size(), 3u);
+  EXPECT_TRUE(ramp(0.0, 1.0, 1.0, 0.0).breakpoints().empty());
+  // the law is smooth between them: the rate is continuous away from the breakpoints, the
+  // acceleration jumps at the sharp ones
+  const RampSchedule sharp = ramp(0.5, 1.0, 1.0, 0.0);
+  EXPECT_NE(sharp.evaluate(1.0 - 1e-9).rate, sharp.evaluate(1.0 + 1e-9).rate);
+}

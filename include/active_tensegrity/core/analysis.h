@@ -7,6 +7,7 @@
 #include <utility>
 #include <vector>
 
+#include "active_tensegrity/core/adaptive.h"
 #include "active_tensegrity/core/dynamics.h"
 #include "active_tensegrity/core/state.h"
 
@@ -63,6 +64,8 @@ struct RunResult
   /// Dynamic runs: where the solver's time went. Both: wall time spent in on_step and on_output (s).
   StepTimings timings;
   double callback_time = 0.0;
+  /// Dynamic runs with solver.adaptive: accepted and rejected steps, smallest and largest step.
+  AdaptiveStats adaptive;
   State final_state;
 };
 

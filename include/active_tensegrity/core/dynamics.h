@@ -28,6 +28,19 @@ struct StepTimings
   long factorizations = 0;
 };
 
+/// What an accepted step tells a step-size controller (AdaptiveStepper).
+struct StepEstimate
+{
+  /// Local error of the strut ends' positions (m): h^2 (|beta - 1/6| + |gamma - 1/2|) |a_{n+1} - a_n|
+  /// per body, translation plus length times the quaternion part, largest over bodies (docs/physics.md).
+  double error = 0.0;
+  /// Pairs that touch at the end of the step but did not at its start: the deepest penetration among
+  /// them (m, 0 when none), that pair's gap at the start (m) and its index in Model::checked_pairs.
+  double onset_depth = 0.0;
+  double onset_gap = 0.0;
+  int onset_pair = -1;
+};
+
 class DynamicsSolver
 {
 public:
@@ -38,6 +51,14 @@ public:
   Summary initialize(State& state, const ActuationLaw& law);
   /// Advances by h (halving it on failure); on failure `state` is left at the last good instant.
   Summary step(State& state, double h, const ActuationLaw& law);
+  /// One attempt at a step of h, never cut: on success `state` is advanced and estimate() describes
+  /// the step; on failure `state` is unchanged.
+  Summary tryStep(State& state, double h, const ActuationLaw& law);
+  /// The error estimate and contact onset of the last accepted step.
+  const StepEstimate& estimate() const
+  {
+    return estimate_;
+  }
 
   const System& system() const
   {
@@ -75,8 +96,11 @@ private:
   void prepareContact(const State& start, double h);
   void residual(const State& start, double h, const ActuationValues& u, const Eigen::VectorXd& qdd_new,
                 const Eigen::VectorXd& lambda_new, Eigen::VectorXd& r, BlockSparseMatrix* jac);
-  /// After a converged step: remember v_0 of pairs in contact at `end`, forget separated ones.
-  void updateContactMemory(State& end);
+  /// After a converged step from positions q_start: remember v_0 of pairs in contact at `end`, forget
+  /// separated ones; records the contact onsets in estimate_.
+  void updateContactMemory(State& end, const Eigen::VectorXd& q_start);
+  /// The local error estimate of a step of h from algorithmic accelerations a0 to a1 (StepEstimate).
+  double errorEstimate(const Eigen::VectorXd& a0, const Eigen::VectorXd& a1, double h) const;
   Summary attempt(State& state, double h, const ActuationLaw& law);
   Summary advance(State& state, double h, const ActuationLaw& law, int depth);
   void predict(const State& start, double h, const Eigen::VectorXd& qdd_new, Eigen::VectorXd& q, Eigen::VectorXd& qd,
@@ -90,7 +114,9 @@ private:
   Eigen::VectorXd q_, qd_, acc_, inertial_, applied_, cforce_, phi_, r_, dx_;
   std::vector<double> step_speeds_;  // v_0 per checked pair for the step being solved
   std::vector<int> candidates_;
+  std::vector<double> previous_speed_;  // contact memory at the start of the step being accepted
   StepTimings timings_;
+  StepEstimate estimate_;
   // modified Newton (options_.reuse_jacobian): the factorization in linear_ and what it was built for
   bool factor_valid_ = false;
   double factor_h_ = 0.0;

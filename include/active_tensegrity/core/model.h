@@ -179,6 +179,13 @@ struct SolverOptions
   /// for at most max_jacobian_age steps; otherwise it is rebuilt (docs/physics.md)
   bool reuse_jacobian = false;
   int max_jacobian_age = 50;
+  /// dynamics: variable step size from a local error estimate, contact onsets located in time
+  /// (AdaptiveStepper, docs/physics.md); dt is then the first step
+  bool adaptive = false;
+  double error_tolerance = 1e-5;  // m: local error per step of the strut ends' positions
+  double dt_min = 1e-7;           // s: below this a step is taken (or fails) without error control
+  double dt_max = 1e-2;           // s
+  double onset_depth = 1e-5;      // m: deepest penetration a step may end with in a pair it brought into contact
 };
 
 enum class AnalysisType

@@ -3,6 +3,8 @@
 /// finite (smooth start).
 #pragma once
 
+#include <vector>
+
 namespace active_tensegrity::core
 {
 struct ActuationValue
@@ -23,6 +25,9 @@ struct RampSchedule
   ActuationValue evaluate(double t) const;
   /// Time at which the final value is reached.
   double endTime() const;
+  /// The times where s(t) is not smooth (start, end of the smooth start, start of the smooth stop,
+  /// end), ascending and distinct: a variable-step integrator steps exactly onto them.
+  std::vector<double> breakpoints() const;
 };
 
 }  // namespace active_tensegrity::core

@@ -1,0 +1,55 @@
+/// Variable time steps for DynamicsSolver (solver.adaptive): the step follows a local error estimate
+/// (StepEstimate::error against solver.error_tolerance), a step that brings a pair into contact deeper
+/// than solver.onset_depth is refused and retried at the interpolated onset time, and the step grows
+/// again after (docs/physics.md, "Adaptive time steps").
+#pragma once
+
+#include <functional>
+
+#include "active_tensegrity/core/dynamics.h"
+
+namespace active_tensegrity::core
+{
+/// Counts of what an AdaptiveStepper did.
+struct AdaptiveStats
+{
+  long accepted = 0;
+  long rejected_error = 0;   // local error above the tolerance
+  long rejected_onset = 0;   // a new contact entered too deep: retried at the interpolated onset
+  long rejected_solver = 0;  // Newton failed or a pair would pass through: the step was cut
+  long at_min_step = 0;      // steps accepted at dt_min with the error or onset depth still too large
+  double h_min = 0.0;        // smallest and largest accepted step (s)
+  double h_max = 0.0;
+};
+
+class AdaptiveStepper
+{
+public:
+  /// The first step is options.dt (clamped to [dt_min, dt_max]).
+  AdaptiveStepper(DynamicsSolver& solver, const SolverOptions& options);
+
+  /// Advances `state` to t_end exactly (the last step is shortened to land on it) with the steps the
+  /// error control allows; calls on_step after every accepted step. On failure (a step below dt_min
+  /// that still does not converge) the state stays at the last good instant and the summary says why.
+  Summary advanceTo(State& state, double t_end, const ActuationLaw& law,
+                    const std::function<void(const State&)>& on_step = {});
+
+  /// The step the controller will try next (s).
+  double nextStep() const
+  {
+    return h_;
+  }
+  const AdaptiveStats& stats() const
+  {
+    return stats_;
+  }
+
+private:
+  DynamicsSolver& solver_;
+  SolverOptions options_;
+  double h_;
+  State trial_;
+  AdaptiveStats stats_;
+};
+
+}  // namespace active_tensegrity::core

@@ -1,0 +1,102 @@
+#include "active_tensegrity/core/adaptive.h"
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+#include <utility>
+
+namespace active_tensegrity::core
+{
+namespace
+{
+constexpr double kSafety = 0.9;     // proposed step = kSafety * h * (1 / err)^(1/3)
+constexpr double kMaxGrowth = 2.0;  // per accepted step
+constexpr double kMinShrink = 0.1;  // per rejected step
+constexpr double kKeepBand = 1.2;   // a proposal in [h, kKeepBand h] keeps h (and the factorization)
+}  // namespace
+
+AdaptiveStepper::AdaptiveStepper(DynamicsSolver& solver, const SolverOptions& options)
+  : solver_(solver), options_(options), h_(std::clamp(options.dt, options.dt_min, options.dt_max))
+{
+}
+
+Summary AdaptiveStepper::advanceTo(State& s, double t_end, const ActuationLaw& law,
+                                   const std::function<void(const State&)>& on_step)
+{
+  Summary total;
+  const double eps = 1e-12 * std::max(1.0, std::abs(t_end));
+  while (t_end - s.t > eps)
+  {
+    // land on t_end without a sliver of a step: the last one or two steps share what is left
+    const double remaining = t_end - s.t;
+    double h = std::min(h_, options_.dt_max);
+    bool clipped = false;
+    if (remaining <= 1.05 * h)
+    {
+      clipped = remaining < h;
+      h = remaining;
+    }
+    else if (remaining < 2.0 * h)
+    {
+      h = 0.5 * remaining;
+      clipped = true;
+    }
+    const bool at_min = h <= options_.dt_min * (1.0 + 1e-9);
+    trial_ = s;
+    const Summary r = solver_.tryStep(trial_, h, law);
+    total.iterations += r.iterations;
+    total.residual = r.residual;
+    if (!r.ok())
+    {
+      ++stats_.rejected_solver;
+      ++total.step_cuts;
+      if (r.status == SolveStatus::kPassedThrough)
+        ++total.crossings_refused;
+      if (at_min)
+      {
+        total.status = r.status;
+        std::ostringstream msg;
+        msg << r.message << " at t = " << s.t << " s with the step at its minimum " << h << " s";
+        total.message = msg.str();
+        return total;
+      }
+      h_ = std::max(options_.dt_min, 0.5 * h);
+      continue;
+    }
+    const StepEstimate& e = solver_.estimate();
+    const double err = e.error / options_.error_tolerance;
+    if (!at_min && e.onset_depth > options_.onset_depth)
+    {
+      // the gap closed from onset_gap to -onset_depth: aim at half the allowed depth
+      ++stats_.rejected_onset;
+      const double fraction = (e.onset_gap + 0.5 * options_.onset_depth) / (e.onset_gap + e.onset_depth);
+      h_ = std::max(options_.dt_min, h * std::clamp(fraction, 0.02, 0.9));
+      continue;
+    }
+    if (!at_min && err > 1.0)
+    {
+      ++stats_.rejected_error;
+      h_ = std::max(options_.dt_min, h * std::clamp(kSafety * std::cbrt(1.0 / err), kMinShrink, kSafety));
+      continue;
+    }
+    if (at_min && (err > 1.0 || e.onset_depth > options_.onset_depth))
+      ++stats_.at_min_step;
+    std::swap(s, trial_);
+    ++stats_.accepted;
+    stats_.h_min = stats_.accepted == 1 ? h : std::min(stats_.h_min, h);
+    stats_.h_max = std::max(stats_.h_max, h);
+    if (on_step)
+      on_step(s);
+    double ratio = std::clamp(kSafety * std::cbrt(1.0 / std::max(err, 1e-12)), kMinShrink, kMaxGrowth);
+    if (ratio >= 1.0 && ratio <= kKeepBand)
+      ratio = 1.0;
+    const double proposal = std::clamp(h * ratio, options_.dt_min, options_.dt_max);
+    // a step shortened to land on t_end says little about the longer one: only shrink from it
+    if (!clipped || proposal < h)
+      h_ = proposal;
+  }
+  s.t = t_end;  // no drift from summing steps
+  return total;
+}
+
+}  // namespace active_tensegrity::core
