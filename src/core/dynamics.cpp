@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <sstream>
 
 namespace active_tensegrity::core
@@ -30,6 +31,8 @@ private:
 DynamicsSolver::DynamicsSolver(const Model& model, const SolverOptions& options)
   : system_(model), options_(options), jac_(system_.makeMatrix())
 {
+  for (const Body& b : model.bodies)
+    mass_scale_ = std::max(mass_scale_, b.mass);
   if (options.integrator == Integrator::kNewmark)
     coef_ = { options.newmark_gamma, options.newmark_beta, 0.0, 0.0 };
   else
@@ -260,9 +263,14 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law)
     // an older matrix can shrink the q increments while the multipliers are still off: they must settle too
     // (a matrix built in this step is Newton's: the multipliers are then as good as the q increment says,
     // and at very small h their round-off, phi / (beta h^2), would fail the test)
-    const bool multipliers_settled = !reuse || built_this_step ||
-                                     dx_.tail(system_.nLambda()).lpNorm<Eigen::Infinity>() <=
-                                         options_.newton_tolerance * (1.0 + lambda.lpNorm<Eigen::Infinity>());
+    // (the multipliers cannot be known better than the round-off of phi / (beta h^2) makes them: about
+    // eps |q| m / (beta h^2), which at tiny steps is far above the tolerance)
+    const double lambda_floor =
+        10.0 * std::numeric_limits<double>::epsilon() * (1.0 + s.q.lpNorm<Eigen::Infinity>()) * mass_scale_ / bh2;
+    const bool multipliers_settled =
+        !reuse || built_this_step ||
+        dx_.tail(system_.nLambda()).lpNorm<Eigen::Infinity>() <=
+            options_.newton_tolerance * (1.0 + lambda.lpNorm<Eigen::Infinity>()) + lambda_floor;
     if (sum.residual <= options_.newton_tolerance && multipliers_settled && !(reuse && theta_ > 0.5))
     {
       predict(s, h, qdd, q_, qd_, acc_);

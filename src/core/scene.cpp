@@ -855,7 +855,9 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
       an.type = AnalysisType::kDynamic;
     else
       a.fail(a.key("type"), "expected 'static' or 'dynamic', got '" + type + "'");
-    an.max_actuation = a.positive("max_actuation");
+    // a scene without actuators (free motion, e.g. a drop) needs no actuation travel or speed
+    const bool actuated = !model.actuators.empty();
+    an.max_actuation = actuated ? a.positive("max_actuation") : a.nonNegative("max_actuation", 0.0);
     an.steps = a.integer("steps", an.steps, 1);
     an.duration = a.positive("duration", 1.0);
     an.output_interval = a.nonNegative("output_interval", 0.0);
@@ -871,7 +873,7 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
     else
     {
       root.optional("actuation");
-      if (an.type == AnalysisType::kDynamic)
+      if (an.type == AnalysisType::kDynamic && actuated)
         root.fail("actuation", "a dynamic analysis needs actuation.speed (m/s)");
     }
     if (an.type == AnalysisType::kStatic && ground_count == 0)

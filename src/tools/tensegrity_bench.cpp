@@ -17,12 +17,14 @@
 // plans with several seeds from the scene's start equilibrium and prints status, planning time,
 // equilibrium solves, waypoints and figures per seed and the median planning time; with
 // --speed-limit, the time scale (and the largest speed) that keeps the dynamic peaks under the limits.
-//   tensegrity_bench work-precision SCENE [--set key=value]... [--dts a,b,..] [--ref-dt R] [--csv FILE]
-// runs the scene's dynamic analysis with several integrators over a ladder of steps and compares each
-// run with a much finer reference (generalized-alpha at R, tolerance 1e-10): largest body-position and
-// layer-height errors,
-// largest actuation-force error (relative to the reference's largest force), error of the peak contact
-// force and of its time; with the wall time of the run (callbacks excluded). One CSV row per run.
+//   tensegrity_bench work-precision SCENE [--set key=value]... [--dts a,b,..] [--tols a,b,..]
+//                                  [--schemes a,b,..] [--ref-dt R] [--csv FILE]
+// runs the scene's dynamic analysis with several integrators over a ladder of steps (fixed-step schemes)
+// or error tolerances (adaptive ones) and compares each run with a much finer reference
+// (generalized-alpha at R, tolerance 1e-10): largest body-position and layer-height errors, largest
+// actuation-force error (relative to the reference's largest force), error of the peak contact force,
+// of its time and of the contact impulse (time integral of the summed normal forces); with the wall time
+// of the run (callbacks excluded). One CSV row per run.
 //   tensegrity_bench stress [--quick]
 // runs the stability stress cases (tower and quadruplex: fast folding, large steps, bare steel, thin
 // struts, slack cables, impulsive actuation; two nearly parallel struts pressed together) and prints one table row per
@@ -68,10 +70,11 @@ const char* kUsage =
     "  equilibrium solves, figures per seed, the median time; --contact-limit allows contact up to N newtons\n"
     "  (else --clearance, default 0.005 m); --speed-limit (seed 1) finds the time scale that keeps the\n"
     "  dynamic contact force and bending stress under the limits and prints the resulting largest speed.\n"
-    "       tensegrity_bench work-precision SCENE.yaml [--set key=value]... [--dts a,b,..] [--ref-dt R]\n"
-    "                        [--csv FILE]\n"
-    "  Integrators (Newmark as in the paper, trapezoidal, generalized-alpha, the paper's with modified\n"
-    "  Newton) over the steps (default 1e-3,5e-4,2e-4,1e-4 s) against a reference at R (default 2.5e-5 s):\n"
+    "       tensegrity_bench work-precision SCENE.yaml [--set key=value]... [--dts a,b,..] [--tols a,b,..]\n"
+    "                        [--schemes a,b,..] [--ref-dt R] [--csv FILE]\n"
+    "  Integrators (newmark_paper, trapezoidal, generalized_alpha, newmark_paper_modified_newton over the\n"
+    "  steps, default 1e-3,5e-4,2e-4,1e-4 s; adaptive_newmark_paper, adaptive_generalized_alpha over the\n"
+    "  error tolerances, default 1e-3,1e-4,1e-5,1e-6 m) against a reference at R (default 2.5e-5 s):\n"
     "  errors and wall time per run (CSV to FILE or stdout).\n"
     "       tensegrity_bench stress [--quick]\n"
     "  The stability stress cases (docs/benchmarks.md): one row per case; --quick runs the short ones.\n";
@@ -458,6 +461,7 @@ struct Trace
   std::vector<std::vector<double>> heights;  // per output: the layer heights (or the height)
   std::vector<Eigen::VectorXd> q;            // per output: the coordinates
   double peak = 0.0, peak_t = 0.0;           // largest normal contact force over every step, and when
+  double impulse = 0.0;                      // time integral of the summed normal contact forces (N s)
   at::RunResult result;
 };
 
@@ -471,6 +475,7 @@ Trace traceRun(const at::Model& model)
       height_cols.push_back(static_cast<int>(i));
   if (height_cols.empty())
     height_cols.push_back(3);  // height
+  double last_t = 0.0, last_sum = 0.0;
   tr.result = at::runAnalysis(
       model,
       [&](const at::State& s)
@@ -487,20 +492,83 @@ Trace traceRun(const at::Model& model)
       {},
       [&](const at::State& s)
       {
+        double sum = 0.0;
         for (const at::ContactPairState& c : at::activeContacts(model, s))
+        {
+          sum += c.normal_force;
           if (c.normal_force > tr.peak)
           {
             tr.peak = c.normal_force;
             tr.peak_t = s.t;
           }
+        }
+        tr.impulse += 0.5 * (sum + last_sum) * (s.t - last_t);  // trapezoid over the steps taken
+        last_t = s.t;
+        last_sum = sum;
       });
   return tr;
+}
+
+/// One integrator of the work-precision benchmark; adaptive ones run over the tolerance ladder.
+struct Scheme
+{
+  const char* name;
+  at::Integrator integrator;
+  double gamma, beta, rho;
+  bool reuse, adaptive;
+};
+
+const std::vector<Scheme>& workPrecisionSchemes()
+{
+  static const std::vector<Scheme> schemes = {
+    { "newmark_paper", at::Integrator::kNewmark, 0.6, 0.3025, 0.8, false, false },
+    { "trapezoidal", at::Integrator::kNewmark, 0.5, 0.25, 0.8, false, false },
+    { "generalized_alpha", at::Integrator::kGeneralizedAlpha, 0.5, 0.25, 0.8, false, false },
+    { "newmark_paper_modified_newton", at::Integrator::kNewmark, 0.6, 0.3025, 0.8, true, false },
+    { "adaptive_newmark_paper", at::Integrator::kNewmark, 0.6, 0.3025, 0.8, true, true },
+    { "adaptive_generalized_alpha", at::Integrator::kGeneralizedAlpha, 0.5, 0.25, 0.8, true, true },
+  };
+  return schemes;
+}
+
+/// A run's errors against the reference, on the common output grid.
+struct Errors
+{
+  double position = 0.0;  // largest body-position error (m)
+  double height = 0.0;    // largest layer-height error (m)
+  double force = 0.0;     // largest actuation-force error / the reference's largest force
+  double peak = 0.0;      // relative error of the peak contact force
+  double peak_time = 0.0; // s
+  double impulse = 0.0;   // relative error of the contact impulse
+};
+
+Errors compare(const at::Model& model, const Trace& tr, const Trace& ref)
+{
+  double ref_fmax = 1e-12;
+  for (double f : ref.force)
+    ref_fmax = std::max(ref_fmax, std::abs(f));
+  Errors e;
+  const size_t n = std::min(tr.t.size(), ref.t.size());
+  for (size_t k = 0; k < n; ++k)
+  {
+    for (const at::Body& b : model.bodies)
+      e.position = std::max(e.position, (tr.q[k].segment<3>(b.offset) - ref.q[k].segment<3>(b.offset)).norm());
+    for (size_t j = 0; j < tr.heights[k].size(); ++j)
+      e.height = std::max(e.height, std::abs(tr.heights[k][j] - ref.heights[k][j]));
+    e.force = std::max(e.force, std::abs(tr.force[k] - ref.force[k]) / ref_fmax);
+  }
+  e.peak = ref.peak > 0.0 ? std::abs(tr.peak - ref.peak) / ref.peak : 0.0;
+  e.peak_time = std::abs(tr.peak_t - ref.peak_t);
+  e.impulse = ref.impulse > 0.0 ? std::abs(tr.impulse - ref.impulse) / ref.impulse : 0.0;
+  return e;
 }
 
 int workPrecision(const std::string& scene, const std::vector<std::string>& args)
 {
   std::vector<at::Override> overrides;
   std::vector<double> dts = { 1e-3, 5e-4, 2e-4, 1e-4 };
+  std::vector<double> tols = { 1e-3, 1e-4, 1e-5, 1e-6 };
+  std::vector<std::string> names;
   double ref_dt = 2.5e-5;
   std::string csv_path;
   Args in(args);
@@ -508,14 +576,21 @@ int workPrecision(const std::string& scene, const std::vector<std::string>& args
   {
     const std::string a = in.option();
     const auto next = [&]() { return in.value(a); };
+    const auto numbers = [&]()
+    {
+      std::vector<double> v;
+      for (const std::string& x : splitList(next()))
+        v.push_back(std::stod(x));
+      return v;
+    };
     if (a == "--set")
       overrides.push_back(at::parseOverride(next()));
     else if (a == "--dts")
-    {
-      dts.clear();
-      for (const std::string& v : splitList(next()))
-        dts.push_back(std::stod(v));
-    }
+      dts = numbers();
+    else if (a == "--tols")
+      tols = numbers();
+    else if (a == "--schemes")
+      names = splitList(next());
     else if (a == "--ref-dt")
       ref_dt = std::stod(next());
     else if (a == "--csv")
@@ -523,29 +598,23 @@ int workPrecision(const std::string& scene, const std::vector<std::string>& args
     else
       throw std::invalid_argument("unknown argument '" + a + "'");
   }
+  std::vector<Scheme> schemes;
+  for (const Scheme& sc : workPrecisionSchemes())
+    if (names.empty() || std::find(names.begin(), names.end(), sc.name) != names.end())
+      schemes.push_back(sc);
+  for (const std::string& n : names)
+    if (std::none_of(schemes.begin(), schemes.end(), [&](const Scheme& sc) { return n == sc.name; }))
+      throw std::invalid_argument("--schemes: unknown scheme '" + n + "'");
   at::Model base = at::loadScene(scene, overrides);
   if (base.analysis.type != at::AnalysisType::kDynamic)
     throw std::invalid_argument("work-precision needs a dynamic analysis (--set analysis.type=dynamic)");
-  // a common output grid that every step divides
-  double grid = 0.01;
+  // a common output grid that every step divides (adaptive runs step onto it)
+  double grid = base.analysis.output_interval > 0.0 ? base.analysis.output_interval : 0.01;
   for (double dt : dts)
     grid = std::max(grid, dt);
   base.analysis.output_interval = grid;
 
-  struct Scheme
-  {
-    const char* name;
-    at::Integrator integrator;
-    double gamma, beta, rho;
-    bool reuse;
-  };
-  const std::vector<Scheme> schemes = {
-    { "newmark_paper", at::Integrator::kNewmark, 0.6, 0.3025, 0.8, false },
-    { "trapezoidal", at::Integrator::kNewmark, 0.5, 0.25, 0.8, false },
-    { "generalized_alpha", at::Integrator::kGeneralizedAlpha, 0.5, 0.25, 0.8, false },
-    { "newmark_paper_modified_newton", at::Integrator::kNewmark, 0.6, 0.3025, 0.8, true },
-  };
-  const auto configure = [&](const Scheme& sc, double dt, double tol)
+  const auto configure = [&](const Scheme& sc, double dt, double tol, double error_tol)
   {
     at::Model m = base;
     m.solver.integrator = sc.integrator;
@@ -553,20 +622,24 @@ int workPrecision(const std::string& scene, const std::vector<std::string>& args
     m.solver.newmark_beta = sc.beta;
     m.solver.rho_infinity = sc.rho;
     m.solver.reuse_jacobian = sc.reuse;
+    m.solver.adaptive = sc.adaptive;
     m.solver.dt = dt;
     m.solver.newton_tolerance = tol;
+    if (sc.adaptive)
+    {
+      m.solver.error_tolerance = error_tol;
+      m.solver.newton_tolerance = std::min(tol, 0.1 * error_tol);
+    }
     return m;
   };
+  const Scheme reference = { "reference", at::Integrator::kGeneralizedAlpha, 0.5, 0.25, 0.8, false, false };
   std::fprintf(stderr, "work-precision: reference (generalized-alpha, dt %g s) ...\n", ref_dt);
-  const Trace ref = traceRun(configure(schemes[2], ref_dt, 1e-10));
+  const Trace ref = traceRun(configure(reference, ref_dt, 1e-10, 0.0));
   if (!ref.result.summary.ok())
   {
     std::cerr << "tensegrity_bench: the reference run failed: " << ref.result.summary.message << "\n";
     return 3;
   }
-  double ref_fmax = 1e-12;
-  for (double f : ref.force)
-    ref_fmax = std::max(ref_fmax, std::abs(f));
 
   std::ofstream file;
   if (!csv_path.empty())
@@ -576,31 +649,27 @@ int workPrecision(const std::string& scene, const std::vector<std::string>& args
       throw std::invalid_argument("cannot write '" + csv_path + "'");
   }
   std::ostream& out = csv_path.empty() ? std::cout : file;
-  out << "scheme,dt,status,steps,newton_iterations,wall_time,position_error,height_error,force_error,peak_force_error,"
-         "peak_time_error,peak_force,reference_peak_force\n";
+  out << "scheme,dt,tolerance,status,steps,newton_iterations,wall_time,position_error,height_error,force_error,"
+         "peak_force_error,peak_time_error,impulse_error,peak_force,reference_peak_force\n";
   const double tol = base.solver.newton_tolerance;
   for (const Scheme& sc : schemes)
-    for (double dt : dts)
+    for (double x : sc.adaptive ? tols : dts)
     {
-      const Trace tr = traceRun(configure(sc, dt, tol));
-      double herr = 0.0, ferr = 0.0, perr_pos = 0.0;
-      const size_t n = std::min(tr.t.size(), ref.t.size());
-      for (size_t k = 0; k < n; ++k)
-      {
-        for (const at::Body& b : base.bodies)
-          perr_pos = std::max(perr_pos, (tr.q[k].segment<3>(b.offset) - ref.q[k].segment<3>(b.offset)).norm());
-        for (size_t j = 0; j < tr.heights[k].size(); ++j)
-          herr = std::max(herr, std::abs(tr.heights[k][j] - ref.heights[k][j]));
-        ferr = std::max(ferr, std::abs(tr.force[k] - ref.force[k]) / ref_fmax);
-      }
+      // adaptive runs start from the scene's dt; dt in the table is then their mean step
+      const Trace tr = traceRun(configure(sc, sc.adaptive ? base.solver.dt : x, tol, x));
+      const Errors e = compare(base, tr, ref);
       const double wall = tr.result.wall_time - tr.result.callback_time;
-      const double perr = ref.peak > 0.0 ? std::abs(tr.peak - ref.peak) / ref.peak : 0.0;
-      out << sc.name << "," << dt << "," << at::toString(tr.result.summary.status) << "," << tr.result.solver_steps
-          << "," << tr.result.summary.iterations << "," << wall << "," << perr_pos << "," << herr << "," << ferr << ","
-          << perr << "," << std::abs(tr.peak_t - ref.peak_t) << "," << tr.peak << "," << ref.peak << "\n";
+      const double dt = sc.adaptive ? base.analysis.duration / std::max(1, tr.result.solver_steps) : x;
+      out << sc.name << "," << dt << "," << (sc.adaptive ? x : 0.0) << "," << at::toString(tr.result.summary.status)
+          << "," << tr.result.solver_steps << "," << tr.result.summary.iterations << "," << wall << "," << e.position
+          << "," << e.height << "," << e.force << "," << e.peak << "," << e.peak_time << "," << e.impulse << ","
+          << tr.peak << "," << ref.peak << "\n";
       out.flush();
-      std::fprintf(stderr, "  %-30s dt %-8g %-10s wall %7.2f s  position err %.3e m  force err %.3e  peak err %.3e\n",
-                   sc.name, dt, at::toString(tr.result.summary.status), wall, perr_pos, ferr, perr);
+      std::fprintf(stderr,
+                   "  %-30s %s %-8g %-10s wall %7.2f s  position err %.3e m  force err %.3e  peak err %.3e  "
+                   "impulse err %.3e\n",
+                   sc.name, sc.adaptive ? "tol" : "dt ", x, at::toString(tr.result.summary.status), wall, e.position,
+                   e.force, e.peak, e.impulse);
     }
   return 0;
 }

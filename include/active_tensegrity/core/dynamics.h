@@ -123,6 +123,7 @@ private:
   int factor_age_ = 0;                 // steps taken with it
   std::vector<bool> factor_contacts_;  // pairs touching when it was built
   double theta_ = 0.0;                 // largest contraction rate seen with it
+  double mass_scale_ = 0.0;            // largest body mass (kg): the multipliers' round-off scale
 };
 
 }  // namespace active_tensegrity::core
