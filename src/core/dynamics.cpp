@@ -174,12 +174,22 @@ namespace
 /// Modified Newton keeps a factorization built for a step within this relative change of h.
 constexpr double kReuseStepChange = 0.2;
 
-std::vector<bool> touching(const State& s)
+/// Whether the pairs touching in `s` are those of `t` (pairs in contact: remembered impact speed > 0).
+bool sameTouching(const std::vector<bool>& t, const State& s)
 {
-  std::vector<bool> t(s.contact_speed.size());
+  if (t.size() != s.contact_speed.size())
+    return false;
+  for (size_t i = 0; i < t.size(); ++i)
+    if (t[i] != (s.contact_speed[i] > 0.0))
+      return false;
+  return true;
+}
+
+void setTouching(std::vector<bool>& t, const State& s)
+{
+  t.resize(s.contact_speed.size());
   for (size_t i = 0; i < t.size(); ++i)
     t[i] = s.contact_speed[i] > 0.0;
-  return t;
 }
 }  // namespace
 
@@ -187,8 +197,10 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law)
 {
   Summary sum;
   const ActuationValues u = law(s.t + h);
-  Eigen::VectorXd qdd = s.qdd;
-  Eigen::VectorXd lambda = s.lambda;
+  Eigen::VectorXd& qdd = qdd_iter_;  // members: no allocation in the step loop
+  Eigen::VectorXd& lambda = lambda_iter_;
+  qdd = s.qdd;
+  lambda = s.lambda;
   const double bh2 = coef_.beta * h * h * (1.0 - coef_.alpha_f) / (1.0 - coef_.alpha_m);
   const int nq = system_.nq();
   const bool reuse = options_.reuse_jacobian;
@@ -196,7 +208,7 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law)
   // (h differs in its last bits from step to step: t = k dt; a cut changes it by a factor 2; a variable
   // step keeps it while within 20 %: the matrix is then a little off, which the contraction check sees)
   bool rebuild = !reuse || !factor_valid_ || std::abs(h - factor_h_) > kReuseStepChange * h ||
-                 factor_age_ >= options_.max_jacobian_age || factor_contacts_ != touching(s);
+                 factor_age_ >= options_.max_jacobian_age || !sameTouching(factor_contacts_, s);
   double previous = -1.0;  // last increment norm with this factorization
   bool built_this_step = false;
   prepareContact(s, h);
@@ -231,14 +243,15 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law)
       factor_h_ = h;
       factor_age_ = 0;
       built_this_step = true;
-      factor_contacts_ = touching(s);
+      setTouching(factor_contacts_, s);
       theta_ = 0.0;
       previous = -1.0;
       rebuild = !reuse;  // full Newton: a new matrix at every iteration
     }
     {
       const ScopeTimer timer(timings_.solve);
-      linear_.solve(-r_, dx_);
+      r_ = -r_;
+      linear_.solve(r_, dx_);
     }
     if (!dx_.allFinite())
     {
@@ -311,13 +324,9 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law)
 
 Summary DynamicsSolver::advance(State& s, double h, const ActuationLaw& law, int depth)
 {
-  State trial = s;
-  Summary sum = attempt(trial, h, law);
+  Summary sum = attempt(s, h, law);  // changes s only when it succeeds
   if (sum.ok())
-  {
-    s = std::move(trial);
     return sum;
-  }
   if (depth >= options_.max_step_cuts)
   {
     sum.crossings_refused = sum.status == SolveStatus::kPassedThrough ? 1 : 0;

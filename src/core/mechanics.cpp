@@ -4,11 +4,15 @@
 #include <array>
 #include <cmath>
 #include <stdexcept>
+#include <string>
 
 namespace active_tensegrity::core
 {
 namespace
 {
+/// Rows of a kPoints constraint (a ball joint has 3); checked when a System is built.
+constexpr int kMaxPointRows = 6;
+
 Vec4 thetaOf(const Eigen::VectorXd& x, const Body& b)
 {
   return x.segment<4>(b.offset + 3);
@@ -186,6 +190,11 @@ System::System(const Model& model, std::vector<Constraint> extra_constraints) : 
   constraints_ = model.constraints;
   for (Constraint& c : extra_constraints)
     constraints_.push_back(std::move(c));
+  zero_q_ = Eigen::VectorXd::Zero(model.nq);
+  for (const Constraint& c : constraints_)
+    if (c.kind == Constraint::Kind::kPoints && c.rows() > kMaxPointRows)
+      throw std::invalid_argument("constraint '" + c.name + "' has " + std::to_string(c.rows()) + " rows; at most " +
+                                  std::to_string(kMaxPointRows) + " are supported");
   constraint_rows_.reserve(constraints_.size());
   for (const Constraint& c : constraints_)
   {
@@ -366,7 +375,7 @@ void System::inertialForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, 
 void System::constraintValue(const Eigen::VectorXd& q, const ActuationValues& u, Eigen::VectorXd& phi) const
 {
   phi.setZero(n_lambda_);
-  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(model_.nq);
+  const Eigen::VectorXd& zero = zero_q_;
   for (size_t i = 0; i < constraints_.size(); ++i)
   {
     const Constraint& c = constraints_[i];
@@ -395,9 +404,12 @@ void System::constraintValue(const Eigen::VectorXd& q, const ActuationValues& u,
 namespace
 {
 // d_k^T B rows of a kPoints constraint for one end
-Eigen::MatrixXd pointRows(const Constraint& c, const PointKinematics& k)
+// (at most kMaxPointRows rows and 7 columns: on the stack, no allocation in the step loop)
+using PointRows = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::ColMajor, kMaxPointRows, 7>;
+
+PointRows pointRows(const Constraint& c, const PointKinematics& k)
 {
-  Eigen::MatrixXd rows(c.rows(), k.nq);
+  PointRows rows(c.rows(), k.nq);
   for (int r = 0; r < c.rows(); ++r)
     rows.row(r) = c.directions[r].transpose() * k.jac.leftCols(k.nq);
   return rows;
@@ -425,7 +437,7 @@ void forEachBodyEnd(const Constraint& c, F&& f)
 
 void System::addConstraintJacobian(const Eigen::VectorXd& q, BlockSparseMatrix& jac) const
 {
-  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(model_.nq);
+  const Eigen::VectorXd& zero = zero_q_;
   for (size_t i = 0; i < constraints_.size(); ++i)
   {
     const Constraint& c = constraints_[i];
@@ -435,7 +447,7 @@ void System::addConstraintJacobian(const Eigen::VectorXd& q, BlockSparseMatrix& 
       forEachBodyEnd(c,
                      [&](const PointRef& end, double sign)
                      {
-                       const Eigen::MatrixXd rows = sign * pointRows(c, pointKinematics(model_, end, q, zero));
+                       const PointRows rows = sign * pointRows(c, pointKinematics(model_, end, q, zero));
                        jac.add(g, end.body, rows);
                        jac.addTransposed(g, end.body, rows);
                      });
@@ -459,7 +471,7 @@ Eigen::MatrixXd System::constraintJacobianDense(const Eigen::VectorXd& q) const
 void System::constraintForce(const Eigen::VectorXd& q, const Eigen::VectorXd& lambda, Eigen::VectorXd& out) const
 {
   out.setZero(model_.nq);
-  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(model_.nq);
+  const Eigen::VectorXd& zero = zero_q_;
   for (size_t i = 0; i < constraints_.size(); ++i)
   {
     const Constraint& c = constraints_[i];
@@ -575,7 +587,7 @@ double System::kineticEnergy(const Eigen::VectorXd& q, const Eigen::VectorXd& qd
 double System::potentialEnergy(const Eigen::VectorXd& q, const ActuationValues& u) const
 {
   double e = 0.0;
-  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(model_.nq);
+  const Eigen::VectorXd& zero = zero_q_;
   if (model_.gravity_enabled)
     for (const Body& b : model_.bodies)
       e -= b.mass * model_.gravity.dot(q.segment<3>(b.offset));

@@ -30,6 +30,7 @@
 // struts, slack cables, impulsive actuation; two nearly parallel struts pressed together) and prints one table row per
 // case: how it ended, steps, cuts, steps refused for a strut passing through another, peaks, and whether every number is finite.
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -49,6 +50,37 @@
 #include "active_tensegrity/planning/folding_planner.h"
 
 namespace at = active_tensegrity::core;
+
+// Heap allocations are counted by interposing glibc's malloc family in this executable (the core and
+// Eigen allocate through them; operator new does too): `steps` reports them per step.
+extern "C"
+{
+  void* __libc_malloc(size_t size);
+  void* __libc_calloc(size_t n, size_t size);
+  void* __libc_realloc(void* p, size_t size);
+}
+namespace
+{
+std::atomic<long> g_allocations{ 0 };
+}
+extern "C"
+{
+  void* malloc(size_t size)
+  {
+    g_allocations.fetch_add(1, std::memory_order_relaxed);
+    return __libc_malloc(size);
+  }
+  void* calloc(size_t n, size_t size)
+  {
+    g_allocations.fetch_add(1, std::memory_order_relaxed);
+    return __libc_calloc(n, size);
+  }
+  void* realloc(void* p, size_t size)
+  {
+    g_allocations.fetch_add(1, std::memory_order_relaxed);
+    return __libc_realloc(p, size);
+  }
+}
 
 namespace
 {
@@ -534,12 +566,12 @@ const std::vector<Scheme>& workPrecisionSchemes()
 /// A run's errors against the reference, on the common output grid.
 struct Errors
 {
-  double position = 0.0;  // largest body-position error (m)
-  double height = 0.0;    // largest layer-height error (m)
-  double force = 0.0;     // largest actuation-force error / the reference's largest force
-  double peak = 0.0;      // relative error of the peak contact force
-  double peak_time = 0.0; // s
-  double impulse = 0.0;   // relative error of the contact impulse
+  double position = 0.0;   // largest body-position error (m)
+  double height = 0.0;     // largest layer-height error (m)
+  double force = 0.0;      // largest actuation-force error / the reference's largest force
+  double peak = 0.0;       // relative error of the peak contact force
+  double peak_time = 0.0;  // s
+  double impulse = 0.0;    // relative error of the contact impulse
 };
 
 Errors compare(const at::Model& model, const Trace& tr, const Trace& ref)
@@ -765,12 +797,21 @@ int steps(const std::string& scene, const std::vector<at::Override>& overrides, 
   const at::Model model = at::loadScene(scene, overrides);
   std::vector<double> per_step;
   at::RunResult last;
+  long allocations = 0;
   for (int r = 0; r < repeat; ++r)
   {
     const auto per_step_row = [&model](const at::State& s) { g_sink = g_sink + at::csvRow(model, s).back(); };
+    // allocations from the first step on (setup and initialization excluded)
+    long at_first_step = -1;
+    const auto count = [&at_first_step](const at::State&)
+    {
+      if (at_first_step < 0)
+        at_first_step = g_allocations.load();
+    };
     last = peaks ? at::runAnalysis(
                        model, [](const at::State&) {}, {}, per_step_row) :
-                   at::runAnalysis(model, [](const at::State&) {});
+                   at::runAnalysis(model, count);
+    allocations = at_first_step < 0 ? 0 : g_allocations.load() - at_first_step;
     if (!last.summary.ok())
     {
       std::cerr << "tensegrity_bench: the analysis failed: " << last.summary.message << "\n";
@@ -794,6 +835,9 @@ int steps(const std::string& scene, const std::vector<at::Override>& overrides, 
               static_cast<double>(last.summary.iterations) / std::max(1, last.solver_steps));
   std::printf("wall time per step: median %.3f us, min %.3f us over %d runs\n", 1e6 * median, 1e6 * per_step.front(),
               repeat);
+  if (!peaks)
+    std::printf("heap allocations per step (solver and loop, after the first output): %.2f\n",
+                static_cast<double>(allocations) / std::max(1, last.solver_steps));
   std::printf("factorizations per step: %.3f\n",
               static_cast<double>(last.timings.factorizations) / std::max(1, last.solver_steps));
   std::printf("where the time goes (last run, us per step, share of its wall time):\n");

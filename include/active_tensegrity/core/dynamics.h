@@ -111,7 +111,7 @@ private:
   Coefficients coef_;
   BlockSparseMatrix jac_;
   SparseLinearSolver linear_;
-  Eigen::VectorXd q_, qd_, acc_, inertial_, applied_, cforce_, phi_, r_, dx_;
+  Eigen::VectorXd q_, qd_, acc_, inertial_, applied_, cforce_, phi_, r_, dx_, qdd_iter_, lambda_iter_;
   std::vector<double> step_speeds_;  // v_0 per checked pair for the step being solved
   std::vector<int> candidates_;
   std::vector<double> previous_speed_;  // contact memory at the start of the step being accepted

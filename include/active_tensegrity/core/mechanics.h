@@ -163,6 +163,7 @@ private:
   int n_lambda_ = 0;
   BlockSparseMatrix pattern_;
   BroadPhase broad_phase_;
+  Eigen::VectorXd zero_q_;               // zero velocities (for positions-only point kinematics)
   mutable std::vector<int> candidates_;  // scratch of contactForce
   mutable ContactContribution contribution_;
 };
