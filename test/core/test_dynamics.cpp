@@ -357,6 +357,7 @@ TEST(Dynamics, ModifiedNewtonReusesTheMatrixAtTheAccuracyOfFullNewton)
   Quadruplex quad;
   SolverOptions full = options(Integrator::kNewmark, 1e-3);
   full.newton_tolerance = 1e-8;
+  full.reuse_jacobian = false;
   SolverOptions reuse = full;
   reuse.reuse_jacobian = true;
   SolverOptions fine = full;

@@ -177,7 +177,7 @@ struct SolverOptions
   /// dynamics: keep the factorized Newton matrix across iterations and steps (modified Newton) while
   /// the iteration contracts fast (rate < 0.5), the step size and the set of touching pairs are unchanged,
   /// for at most max_jacobian_age steps; otherwise it is rebuilt (docs/physics.md)
-  bool reuse_jacobian = false;
+  bool reuse_jacobian = true;
   int max_jacobian_age = 50;
   /// dynamics: variable step size from a local error estimate, contact onsets located in time
   /// (AdaptiveStepper, docs/physics.md); dt is then the first step
