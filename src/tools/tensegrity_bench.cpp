@@ -25,6 +25,9 @@
 // actuation-force error (relative to the reference's largest force), error of the peak contact force,
 // of its time and of the contact impulse (time integral of the summed normal forces); with the wall time
 // of the run (callbacks excluded). One CSV row per run.
+// --mujoco-dts a,b,.. then runs the scene translated into MuJoCo (mujoco_peer.h) over that ladder with each of
+// --mujoco-integrators (default euler,implicit,rk4), rows named mujoco_<integrator>, measured the same way;
+// --mujoco-contact-force F sets its contact stiffness scale (default: the reference's peak contact force).
 //   tensegrity_bench stress [--quick]
 // runs the stability stress cases (tower and quadruplex: fast folding, large steps, bare steel, thin
 // struts, slack cables, impulsive actuation; two nearly parallel struts pressed together) and prints one table row per
@@ -48,8 +51,10 @@
 #include "active_tensegrity/core/scene.h"
 #include "active_tensegrity/core/statics.h"
 #include "active_tensegrity/planning/folding_planner.h"
+#include "mujoco_peer.h"
 
 namespace at = active_tensegrity::core;
+namespace tools = active_tensegrity::tools;
 
 // Heap allocations are counted by interposing glibc's malloc family in this executable (the core and
 // Eigen allocate through them; operator new does too): `steps` reports them per step.
@@ -108,6 +113,10 @@ const char* kUsage =
     "  steps, default 1e-3,5e-4,2e-4,1e-4 s; adaptive_newmark_paper, adaptive_generalized_alpha over the\n"
     "  error tolerances, default 1e-3,1e-4,1e-5,1e-6 m) against a reference at R (default 2.5e-5 s):\n"
     "  errors and wall time per run (CSV to FILE or stdout).\n"
+    "                        [--mujoco-dts a,b,..] [--mujoco-integrators euler,implicit,rk4]\n"
+    "                        [--mujoco-contact-force F]\n"
+    "  --mujoco-dts adds the scene in MuJoCo over that ladder (rows mujoco_<integrator>; contact\n"
+    "  stiffness from F, default the reference's peak force).\n"
     "       tensegrity_bench stress [--quick]\n"
     "  The stability stress cases (docs/benchmarks.md): one row per case; --quick runs the short ones.\n";
 
@@ -603,6 +612,9 @@ int workPrecision(const std::string& scene, const std::vector<std::string>& args
   std::vector<std::string> names;
   double ref_dt = 2.5e-5;
   std::string csv_path;
+  std::vector<double> mujoco_dts;  // the MuJoCo peer's ladder (none: not run)
+  std::vector<std::string> mujoco_integrators = { "euler", "implicit", "rk4" };
+  double mujoco_force = 0.0;  // contact force scale F* (0: the reference's peak)
   Args in(args);
   while (in.more())
   {
@@ -627,6 +639,13 @@ int workPrecision(const std::string& scene, const std::vector<std::string>& args
       ref_dt = std::stod(next());
     else if (a == "--csv")
       csv_path = next();
+    else if (a == "--mujoco-dts")
+      for (const std::string& v : splitList(next()))
+        mujoco_dts.push_back(std::stod(v));
+    else if (a == "--mujoco-integrators")
+      mujoco_integrators = splitList(next());
+    else if (a == "--mujoco-contact-force")
+      mujoco_force = std::stod(next());
     else
       throw std::invalid_argument("unknown argument '" + a + "'");
   }
@@ -643,6 +662,8 @@ int workPrecision(const std::string& scene, const std::vector<std::string>& args
   // a common output grid that every step divides (adaptive runs step onto it)
   double grid = base.analysis.output_interval > 0.0 ? base.analysis.output_interval : 0.01;
   for (double dt : dts)
+    grid = std::max(grid, dt);
+  for (double dt : mujoco_dts)
     grid = std::max(grid, dt);
   base.analysis.output_interval = grid;
 
@@ -702,6 +723,40 @@ int workPrecision(const std::string& scene, const std::vector<std::string>& args
                    "impulse err %.3e\n",
                    sc.name, sc.adaptive ? "tol" : "dt ", x, at::toString(tr.result.summary.status), wall, e.position,
                    e.force, e.peak, e.impulse);
+    }
+  // the MuJoCo peer over its own ladder, measured against the same reference (docs/benchmarks.md)
+  for (const std::string& integrator : mujoco_integrators)
+    for (double dt : mujoco_dts)
+    {
+      tools::MujocoOptions mo;
+      mo.integrator = tools::parseMujocoIntegrator(integrator);
+      mo.timestep = dt;
+      mo.contact_force = mujoco_force > 0.0 ? mujoco_force : (ref.peak > 0.0 ? ref.peak : 1000.0);
+      const tools::MujocoTrace mj = tools::runMujoco(base, mo);
+      // as our trace (body centres into q; the peer measures no contact impulse: written as nan)
+      Trace tr;
+      tr.t = mj.t;
+      tr.force = mj.force;
+      tr.heights = mj.heights;
+      tr.peak = mj.peak;
+      tr.peak_t = mj.peak_t;
+      for (const std::vector<at::Vec3>& centres : mj.positions)
+      {
+        Eigen::VectorXd q = Eigen::VectorXd::Zero(base.nq);
+        for (size_t b = 0; b < base.bodies.size(); ++b)
+          q.segment<3>(base.bodies[b].offset) = centres[b];
+        tr.q.push_back(q);
+      }
+      const Errors e = compare(base, tr, ref);
+      const std::string name = "mujoco_" + integrator;
+      out << name << "," << dt << ",0," << mj.status << "," << mj.steps << "," << mj.solver_iterations << ","
+          << mj.wall_time << "," << e.position << "," << e.height << "," << e.force << "," << e.peak << ","
+          << e.peak_time << ",nan," << mj.peak << "," << ref.peak << "\n";
+      out.flush();
+      std::fprintf(stderr,
+                   "  %-30s dt  %-8g %-10s wall %7.2f s  position err %.3e m  force err %.3e  peak err %.3e%s\n",
+                   name.c_str(), dt, mj.status.c_str(), mj.wall_time, e.position, e.force, e.peak,
+                   mj.ok() ? "" : ("  (" + mj.message + ")").c_str());
     }
   return 0;
 }

@@ -1,0 +1,918 @@
+#include "mujoco_peer.h"
+
+#include <mujoco/mujoco.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <map>
+#include <sstream>
+#include <stdexcept>
+#include <utility>
+
+#include "active_tensegrity/core/contact.h"
+#include "active_tensegrity/core/mechanics.h"
+
+namespace active_tensegrity::tools
+{
+namespace
+{
+using core::Vec3;
+
+// the peer whose forces MuJoCo's control callback evaluates (MuJoCo's callbacks are global)
+thread_local MujocoPeer* g_active = nullptr;
+// the last warning MuJoCo printed, instead of stdout and MUJOCO_LOG.TXT
+thread_local std::string g_warning;
+// armature of a carrier's slide along its drive, per kg of the driven strut: the connect's forces then move
+// it by a negligible amount within a step
+constexpr double kDriveArmature = 1e6;
+
+void controlCallback(const mjModel*, mjData*)
+{
+  if (g_active)
+    g_active->evaluateForces();
+}
+
+void warningHandler(const char* text)
+{
+  g_warning = text;
+}
+
+// makes `peer` the one the callback serves for the lifetime of this object
+class Active
+{
+public:
+  explicit Active(MujocoPeer* peer) : previous_(g_active)
+  {
+    g_active = peer;
+    mjcb_control = controlCallback;
+  }
+  ~Active()
+  {
+    g_active = previous_;
+  }
+
+private:
+  MujocoPeer* previous_;
+};
+
+std::string num(double v)
+{
+  std::ostringstream s;
+  s.precision(17);
+  s << v;
+  return s.str();
+}
+
+std::string vec(const Vec3& v)
+{
+  return num(v.x()) + " " + num(v.y()) + " " + num(v.z());
+}
+
+bool samePoint(const core::PointRef& a, const core::PointRef& b)
+{
+  return a.body == b.body && (a.local - b.local).norm() < 1e-12;
+}
+
+const char* const kWarningNames[mjNWARNING] = { "near-singular inertia",
+                                                "contact list full",
+                                                "constraint list full",
+                                                "visual geoms full",
+                                                "bad qpos",
+                                                "bad qvel",
+                                                "bad qacc",
+                                                "bad ctrl" };
+}  // namespace
+
+const char* toString(MujocoIntegrator integrator)
+{
+  switch (integrator)
+  {
+    case MujocoIntegrator::kEuler:
+      return "euler";
+    case MujocoIntegrator::kImplicit:
+      return "implicit";
+    case MujocoIntegrator::kRk4:
+      return "rk4";
+  }
+  return "?";
+}
+
+MujocoIntegrator parseMujocoIntegrator(const std::string& name)
+{
+  if (name == "euler")
+    return MujocoIntegrator::kEuler;
+  if (name == "implicit")
+    return MujocoIntegrator::kImplicit;
+  if (name == "rk4")
+    return MujocoIntegrator::kRk4;
+  throw std::invalid_argument("unknown MuJoCo integrator '" + name + "' (euler, implicit, rk4)");
+}
+
+struct MujocoPeer::Impl
+{
+  // a point mass moved kinematically by a guided node actuator
+  struct DrivenMass
+  {
+    int body = -1, actuator = -1;
+    Vec3 p0 = Vec3::Zero(), direction = Vec3::Zero();
+    double mass = 0.0;
+  };
+  // a driven strut end: a carrier body on a slide along the drive (with a huge armature, pushed by
+  // (m + armature) s_dd and put back on s(t), s_dot(t) before every step: a kinematic driver whose velocity
+  // MuJoCo sees) and slides across it, connected to the strut end
+  struct Carrier
+  {
+    int constraint = -1, actuator = -1;
+    Vec3 p0 = Vec3::Zero(), direction = Vec3::Zero();
+    int drive_qpos = -1, drive_dof = -1;  // the slide along the drive
+    double drive_inertia = 0.0;           // carrier mass + armature
+    int equality = -1;
+    double mass = 0.0;
+  };
+  // one end of a cable segment computed here: a site (on a MuJoCo body or the world) or a driven mass
+  struct End
+  {
+    int site = -1;    // MuJoCo site id
+    int driven = -1;  // index into driven
+  };
+  struct Segment
+  {
+    End a, b;
+    Vec3 n = Vec3::Zero();  // unit vector from a to b, last evaluation
+    double length = 0.0;
+  };
+  struct CableMap
+  {
+    std::vector<int> tendons, actuators;  // MuJoCo ids
+    std::vector<Segment> segments;        // segments that touch a driven mass
+    double length = 0.0, tension = 0.0;   // last evaluation
+  };
+
+  const core::Model& model;
+  MujocoOptions options;
+  std::vector<int> body_id;  // ours -> MuJoCo body (-1: driven mass)
+  std::vector<int> driven_of_body;
+  std::vector<DrivenMass> driven;
+  std::vector<Carrier> carriers;
+  std::vector<CableMap> cables;
+  std::vector<int> pair_of_checked;  // checked pair -> MuJoCo pair (-1 without contact)
+  std::vector<double> pair_stiffness, pair_damping;
+  std::vector<std::pair<core::PointRef, std::string>> site_names;  // sites made, by point
+  std::vector<int> site_ids;                                       // parallel to site_names after compile
+  std::vector<std::string> cable_tendon_names, cable_actuator_names;
+  core::ActuationValues u;  // at the last force evaluation
+
+  Impl(const core::Model& m, const MujocoOptions& o) : model(m), options(o) {}
+
+  const std::string& siteFor(const core::PointRef& p)
+  {
+    for (const auto& [point, name] : site_names)
+      if (samePoint(point, p))
+        return name;
+    site_names.emplace_back(p, "site" + std::to_string(site_names.size()));
+    return site_names.back().second;
+  }
+
+  core::ActuationValue value(int actuator, double t) const
+  {
+    if (actuator < 0 || actuator >= static_cast<int>(model.actuators.size()))
+      return {};
+    return model.analysis.schedule.evaluate(t);
+  }
+
+  Vec3 drivenPosition(int k, double t) const
+  {
+    return driven[k].p0 + value(driven[k].actuator, t).value * driven[k].direction;
+  }
+};
+
+MujocoPeer::MujocoPeer(const core::Model& model, const MujocoOptions& options)
+  : impl_(std::make_unique<Impl>(model, options))
+{
+  Impl& im = *impl_;
+  const int n_bodies = static_cast<int>(model.bodies.size());
+  im.body_id.assign(n_bodies, -1);
+  im.driven_of_body.assign(n_bodies, -1);
+
+  // constraints: pins and joints (connect), driven nodes (driven masses or carriers), guides
+  struct Connect
+  {
+    int a_body;
+    Vec3 a_local;
+    int b_body;  // -1: world (then a point that coincides with a's at the start)
+    std::string name;
+  };
+  std::vector<Connect> connects;
+  std::vector<bool> used(model.constraints.size(), false);
+  const auto isGuideOf = [&](const core::Constraint& g, const core::Constraint& c)
+  {
+    if (g.kind != core::Constraint::Kind::kPoints || g.actuator >= 0 || g.rows() != 2 || g.b.body >= 0 ||
+        !samePoint(g.a, c.a))
+      return false;
+    const Vec3 d = c.directions[0];
+    return std::abs(g.directions[0].dot(d)) < 1e-9 && std::abs(g.directions[1].dot(d)) < 1e-9;
+  };
+  for (size_t i = 0; i < model.constraints.size(); ++i)
+  {
+    const core::Constraint& c = model.constraints[i];
+    if (c.kind == core::Constraint::Kind::kQuatNorm)
+    {
+      used[i] = true;  // the free joint's quaternion
+      continue;
+    }
+    if (c.kind == core::Constraint::Kind::kSpinLock)
+      throw std::invalid_argument("MuJoCo peer: spin locks are for statics (constraint '" + c.name + "')");
+    if (c.actuator < 0)
+      continue;  // pins, joints and guides below
+    if (c.rows() != 1 || c.b.body >= 0 || c.a.body < 0)
+      throw std::invalid_argument("MuJoCo peer: unsupported driven constraint '" + c.name +
+                                  "' (one row of a body point against the ground expected)");
+    used[i] = true;
+    const Vec3 d = c.directions[0];
+    int guide = -1;
+    for (size_t j = 0; j < model.constraints.size(); ++j)
+      if (j != i && isGuideOf(model.constraints[j], c))
+        guide = static_cast<int>(j);
+    const core::Body& body = model.bodies[c.a.body];
+    const Vec3 p0 = core::pointKinematics(model, c.a, model.q0, Eigen::VectorXd::Zero(model.nq)).p;
+    if (body.kind == core::BodyKind::kPointMass)
+    {
+      if (guide < 0)
+        throw std::invalid_argument("MuJoCo peer: driven point mass '" + body.name +
+                                    "' must be guided (it is moved kinematically)");
+      used[guide] = true;
+      Impl::DrivenMass dm;
+      dm.body = c.a.body;
+      dm.actuator = c.actuator;
+      dm.p0 = p0 - c.a.local;
+      dm.direction = d;
+      dm.mass = body.mass;
+      im.driven_of_body[c.a.body] = static_cast<int>(im.driven.size());
+      im.driven.push_back(dm);
+    }
+    else
+    {
+      if (guide >= 0)
+        used[guide] = true;
+      Impl::Carrier cr;
+      cr.constraint = static_cast<int>(i);
+      cr.actuator = c.actuator;
+      cr.p0 = p0;
+      cr.direction = d;
+      cr.mass = options.carrier_mass_fraction * body.mass;
+      im.carriers.push_back(cr);
+    }
+  }
+  for (size_t i = 0; i < model.constraints.size(); ++i)
+  {
+    if (used[i])
+      continue;
+    const core::Constraint& c = model.constraints[i];
+    const bool identity = c.rows() == 3 && c.directions[0] == Vec3::UnitX() && c.directions[1] == Vec3::UnitY() &&
+                          c.directions[2] == Vec3::UnitZ() && c.offsets[0] == 0.0 && c.offsets[1] == 0.0 &&
+                          c.offsets[2] == 0.0;
+    if (!identity || c.a.body < 0)
+      throw std::invalid_argument("MuJoCo peer: unsupported constraint '" + c.name +
+                                  "' (ground pins, ball joints and driven nodes only)");
+    if (im.driven_of_body[c.a.body] >= 0 || (c.b.body >= 0 && im.driven_of_body[c.b.body] >= 0))
+      throw std::invalid_argument("MuJoCo peer: constraint '" + c.name + "' holds a driven point mass");
+    connects.push_back({ c.a.body, c.a.local, c.b.body, c.name });
+  }
+
+  // cables: runs of points between driven masses become tendons, segments touching a driven mass are ours
+  struct TendonSpec
+  {
+    std::string name;
+    std::vector<std::string> sites;
+  };
+  std::vector<TendonSpec> tendons;
+  std::vector<std::vector<int>> tendons_of_cable(model.cables.size());
+  struct SegmentSpec
+  {
+    core::PointRef a, b;
+  };
+  std::vector<std::vector<SegmentSpec>> segments_of_cable(model.cables.size());
+  const auto drivenPoint = [&](const core::PointRef& p) { return p.body >= 0 && im.driven_of_body[p.body] >= 0; };
+  for (size_t ci = 0; ci < model.cables.size(); ++ci)
+  {
+    const core::Cable& cable = model.cables[ci];
+    std::vector<core::PointRef> run;
+    const auto flush = [&]()
+    {
+      bool moving = false;
+      for (const core::PointRef& p : run)
+        moving = moving || p.body >= 0;
+      if (run.size() >= 2 && moving)
+      {
+        TendonSpec t;
+        t.name = "tendon" + std::to_string(tendons.size());
+        for (const core::PointRef& p : run)
+          t.sites.push_back(im.siteFor(p));
+        tendons_of_cable[ci].push_back(static_cast<int>(tendons.size()));
+        tendons.push_back(t);
+      }
+      else
+        for (size_t k = 0; k + 1 < run.size(); ++k)
+          segments_of_cable[ci].push_back({ run[k], run[k + 1] });  // fixed in space: a constant length
+      run.clear();
+    };
+    for (size_t k = 0; k < cable.points.size(); ++k)
+    {
+      const core::PointRef& p = cable.points[k];
+      if (k > 0 && (drivenPoint(p) || drivenPoint(cable.points[k - 1])))
+        segments_of_cable[ci].push_back({ cable.points[k - 1], p });
+      if (drivenPoint(p))
+        flush();
+      else
+      {
+        im.siteFor(p);
+        run.push_back(p);
+      }
+    }
+    flush();
+  }
+
+  // the MJCF
+  const double dt = options.timestep;
+  const bool contact = model.contact.enabled && !model.checked_pairs.empty();
+  const bool friction = model.contact.friction > 0.0;
+  const Vec3 gravity = model.gravity_enabled ? model.gravity : Vec3::Zero();
+  const int n_pairs = contact ? static_cast<int>(model.checked_pairs.size()) : 0;
+  const int ncon_max = 2 * n_pairs + 4;
+  const int njmax = 3 * static_cast<int>(connects.size() + im.carriers.size()) + (friction ? 3 : 1) * ncon_max + 16;
+  const char* integrator = options.integrator == MujocoIntegrator::kEuler    ? "Euler" :
+                           options.integrator == MujocoIntegrator::kImplicit ? "implicit" :
+                                                                               "RK4";
+  const std::string eq_sol = " solref=\"" + num(options.equality_timeconst * dt) + " 1\" solimp=\"" +
+                             num(options.equality_impedance) + " " + num(options.equality_impedance) + " 0.001 0.5 2\"";
+  std::ostringstream x;
+  x << "<mujoco model=\"" << (model.name.empty() ? "scene" : model.name) << "\">\n";
+  x << "  <compiler angle=\"radian\" inertiafromgeom=\"false\"/>\n";
+  x << "  <size njmax=\"" << njmax << "\" nconmax=\"" << ncon_max << "\"/>\n";
+  x << "  <option timestep=\"" << num(dt) << "\" integrator=\"" << integrator << "\" gravity=\"" << vec(gravity)
+    << "\" cone=\"elliptic\" solver=\"Newton\" iterations=\"" << options.solver_iterations << "\" tolerance=\""
+    << num(options.solver_tolerance) << "\"/>\n";
+  x << "  <default><geom contype=\"0\" conaffinity=\"0\"/><site size=\"0.005\"/></default>\n";
+  x << "  <worldbody>\n";
+  const auto sitesOn = [&](int body, const std::string& indent)
+  {
+    for (const auto& [p, name] : im.site_names)
+      if (p.body == body)
+        x << indent << "<site name=\"" << name << "\" pos=\"" << vec(p.local) << "\"/>\n";
+  };
+  sitesOn(-1, "    ");
+  for (int i = 0; i < n_bodies; ++i)
+  {
+    const core::Body& b = model.bodies[i];
+    if (im.driven_of_body[i] >= 0)
+      continue;
+    const Vec3 r = model.q0.segment<3>(b.offset);
+    x << "    <body name=\"body" << i << "\" pos=\"" << vec(r) << "\"";
+    if (b.kind == core::BodyKind::kStrut)
+    {
+      const core::Vec4 th = model.q0.segment<4>(b.offset + 3);
+      x << " quat=\"" << num(th(0)) << " " << num(th(1)) << " " << num(th(2)) << " " << num(th(3)) << "\">\n";
+      x << "      <freejoint name=\"free" << i << "\"/>\n";
+      x << "      <inertial pos=\"0 0 0\" mass=\"" << num(b.mass) << "\" diaginertia=\"" << vec(b.inertia) << "\"/>\n";
+      x << "      <geom name=\"geom" << i << "\" type=\"capsule\" size=\"" << num(b.radius()) << " "
+        << num(0.5 * b.length) << "\"/>\n";
+    }
+    else
+    {
+      x << ">\n";
+      for (const char* axis : { "1 0 0", "0 1 0", "0 0 1" })
+        x << "      <joint type=\"slide\" axis=\"" << axis << "\"/>\n";
+      const double j = 1e-6 * b.mass;
+      x << "      <inertial pos=\"0 0 0\" mass=\"" << num(b.mass) << "\" diaginertia=\"" << num(j) << " " << num(j)
+        << " " << num(j) << "\"/>\n";
+    }
+    sitesOn(i, "      ");
+    x << "    </body>\n";
+  }
+  for (size_t k = 0; k < im.carriers.size(); ++k)
+  {
+    const Impl::Carrier& cr = im.carriers[k];
+    const core::Constraint& c = model.constraints[cr.constraint];
+    bool guided = false;
+    for (const core::Constraint& g : model.constraints)
+      guided = guided || isGuideOf(g, c);
+    const Vec3 d = cr.direction;
+    x << "    <body name=\"carrier" << k << "\" pos=\"" << vec(cr.p0) << "\">\n";
+    x << "      <joint name=\"drive" << k << "\" type=\"slide\" axis=\"" << vec(d) << "\" armature=\""
+      << num(kDriveArmature * model.bodies[c.a.body].mass) << "\"/>\n";
+    if (!guided)
+    {
+      const Vec3 any = std::abs(d.x()) < 0.9 ? Vec3::UnitX() : Vec3::UnitY();
+      const Vec3 across1 = d.cross(any).normalized(), across2 = d.cross(across1);
+      x << "      <joint type=\"slide\" axis=\"" << vec(across1) << "\"/>\n";
+      x << "      <joint type=\"slide\" axis=\"" << vec(across2) << "\"/>\n";
+    }
+    const double j = 1e-6 * std::max(cr.mass, 1e-9);
+    x << "      <inertial pos=\"0 0 0\" mass=\"" << num(std::max(cr.mass, 1e-9)) << "\" diaginertia=\"" << num(j) << " "
+      << num(j) << " " << num(j) << "\"/>\n";
+    x << "    </body>\n";
+  }
+  x << "  </worldbody>\n";
+  if (!connects.empty() || !im.carriers.empty())
+  {
+    x << "  <equality>\n";
+    for (const Connect& c : connects)
+    {
+      x << "    <connect name=\"" << c.name << "\" body1=\"body" << c.a_body << "\"";
+      if (c.b_body >= 0)
+        x << " body2=\"body" << c.b_body << "\"";
+      x << " anchor=\"" << vec(c.a_local) << "\"" << eq_sol << "/>\n";
+    }
+    for (size_t k = 0; k < im.carriers.size(); ++k)
+    {
+      const core::Constraint& c = model.constraints[im.carriers[k].constraint];
+      x << "    <connect name=\"drive" << k << "\" body1=\"body" << c.a.body << "\" body2=\"carrier" << k
+        << "\" anchor=\"" << vec(c.a.local) << "\"" << eq_sol << "/>\n";
+    }
+    x << "  </equality>\n";
+  }
+  if (!tendons.empty())
+  {
+    x << "  <tendon>\n";
+    for (const TendonSpec& t : tendons)
+    {
+      x << "    <spatial name=\"" << t.name << "\" limited=\"false\" width=\"0.003\">\n";
+      for (const std::string& s : t.sites)
+        x << "      <site site=\"" << s << "\"/>\n";
+      x << "    </spatial>\n";
+    }
+    x << "  </tendon>\n  <actuator>\n";
+    for (const TendonSpec& t : tendons)
+      x << "    <motor name=\"pull_" << t.name << "\" tendon=\"" << t.name << "\" gear=\"1\" ctrllimited=\"false\"/>\n";
+    x << "  </actuator>\n";
+  }
+  if (contact)
+  {
+    x << "  <contact>\n";
+    for (const core::StrutPair& p : model.checked_pairs)
+      x << "    <pair geom1=\"geom" << p.body_a << "\" geom2=\"geom" << p.body_b << "\" condim=\"" << (friction ? 3 : 1)
+        << "\" friction=\"" << num(model.contact.friction) << " " << num(model.contact.friction)
+        << " 0 0 0\" solref=\"-1 -1\" solimp=\"" << num(options.contact_impedance) << " "
+        << num(options.contact_impedance) << " 0.001 0.5 2\" margin=\"0\" gap=\"0\"/>\n";
+    x << "  </contact>\n";
+  }
+  x << "</mujoco>\n";
+  xml_ = x.str();
+
+  // load through a virtual file
+  auto vfs = std::make_unique<mjVFS>();
+  mj_defaultVFS(vfs.get());
+  if (mj_makeEmptyFileVFS(vfs.get(), "scene.xml", static_cast<int>(xml_.size())) != 0)
+    throw std::runtime_error("MuJoCo peer: cannot make the virtual file");
+  const int file = mj_findFileVFS(vfs.get(), "scene.xml");
+  std::copy(xml_.begin(), xml_.end(), static_cast<char*>(vfs->filedata[file]));
+  char error[1000] = "";
+  mju_user_warning = warningHandler;
+  m_ = mj_loadXML("scene.xml", vfs.get(), error, sizeof(error));
+  mj_deleteVFS(vfs.get());
+  if (!m_)
+    throw std::runtime_error(std::string("MuJoCo peer: MuJoCo refused the model: ") + error);
+  d_ = mj_makeData(m_);
+
+  // ids
+  for (int i = 0; i < n_bodies; ++i)
+    if (im.driven_of_body[i] < 0)
+      im.body_id[i] = mj_name2id(m_, mjOBJ_BODY, ("body" + std::to_string(i)).c_str());
+  for (const auto& [p, name] : im.site_names)
+    im.site_ids.push_back(mj_name2id(m_, mjOBJ_SITE, name.c_str()));
+  const auto siteId = [&](const core::PointRef& p)
+  {
+    for (size_t k = 0; k < im.site_names.size(); ++k)
+      if (samePoint(im.site_names[k].first, p))
+        return im.site_ids[k];
+    return -1;
+  };
+  im.cables.resize(model.cables.size());
+  for (size_t ci = 0; ci < model.cables.size(); ++ci)
+  {
+    for (int t : tendons_of_cable[ci])
+    {
+      im.cables[ci].tendons.push_back(mj_name2id(m_, mjOBJ_TENDON, tendons[t].name.c_str()));
+      im.cables[ci].actuators.push_back(mj_name2id(m_, mjOBJ_ACTUATOR, ("pull_" + tendons[t].name).c_str()));
+    }
+    for (const SegmentSpec& s : segments_of_cable[ci])
+    {
+      Impl::Segment seg;
+      for (int e = 0; e < 2; ++e)
+      {
+        const core::PointRef& p = e == 0 ? s.a : s.b;
+        Impl::End& end = e == 0 ? seg.a : seg.b;
+        if (drivenPoint(p))
+          end.driven = im.driven_of_body[p.body];
+        else
+          end.site = siteId(p);
+      }
+      im.cables[ci].segments.push_back(seg);
+    }
+  }
+  for (size_t k = 0; k < im.carriers.size(); ++k)
+  {
+    const int joint = mj_name2id(m_, mjOBJ_JOINT, ("drive" + std::to_string(k)).c_str());
+    im.carriers[k].drive_qpos = m_->jnt_qposadr[joint];
+    im.carriers[k].drive_dof = m_->jnt_dofadr[joint];
+    im.carriers[k].drive_inertia = m_->dof_armature[im.carriers[k].drive_dof] + std::max(im.carriers[k].mass, 1e-9);
+    im.carriers[k].equality = mj_name2id(m_, mjOBJ_EQUALITY, ("drive" + std::to_string(k)).c_str());
+    // MuJoCo regularizes a constraint row with R = (1 - d) / d * diagApprox, diagApprox from the bodies'
+    // mean inverse weights at qpos0; a light carrier's (1 / m_c, and it cannot even move along the drive)
+    // would make the drive soft along it, so the carrier takes the weights of the strut it carries
+    const int carrier = mj_name2id(m_, mjOBJ_BODY, ("carrier" + std::to_string(k)).c_str());
+    const int strut = im.body_id[model.constraints[im.carriers[k].constraint].a.body];
+    m_->body_invweight0[2 * carrier] = m_->body_invweight0[2 * strut];
+    m_->body_invweight0[2 * carrier + 1] = m_->body_invweight0[2 * strut + 1];
+  }
+
+  // contact: linear spring-dashpot through the direct solref, per unit of MuJoCo's approximate mass
+  im.pair_of_checked.assign(model.checked_pairs.size(), -1);
+  im.pair_stiffness.assign(model.checked_pairs.size(), 0.0);
+  im.pair_damping.assign(model.checked_pairs.size(), 0.0);
+  if (contact)
+  {
+    const double ce = std::clamp(model.contact.restitution, 0.0, 1.0);
+    // a linear oscillator rebounds with e = exp(-zeta pi / sqrt(1 - zeta^2))
+    const double zeta = ce <= 0.0 ? 1.0 : -std::log(ce) / std::sqrt(M_PI * M_PI + std::log(ce) * std::log(ce));
+    double impratio = 1.0;
+    for (int i = 0; i < n_pairs; ++i)
+    {
+      const core::StrutPair& p = model.checked_pairs[i];
+      const double f = options.contact_force;
+      const double k_lin = std::cbrt(p.stiffness90 * p.stiffness90 * f);  // K90^(2/3) F*^(1/3)
+      const double inv_mass =
+          m_->body_invweight0[2 * im.body_id[p.body_a]] + m_->body_invweight0[2 * im.body_id[p.body_b]];
+      const double c_lin = 2.0 * zeta * std::sqrt(k_lin / inv_mass);
+      im.pair_of_checked[i] = i;
+      im.pair_stiffness[i] = k_lin;
+      im.pair_damping[i] = c_lin;
+      m_->pair_solref[2 * i] = -k_lin * inv_mass;
+      m_->pair_solref[2 * i + 1] = -c_lin * inv_mass;
+      // friction rows damp the slip with impratio * C_lin (elliptic cone, no friction solref in 2.2.2):
+      // our regularized Coulomb reaches mu F_N at v1, so match that slope at F*
+      if (i == 0 && friction && c_lin > 0.0)
+        impratio =
+            std::max(1.0, model.contact.friction * f /
+                              (std::max(1e-6, model.contact.slip_velocity - model.contact.stick_velocity) * c_lin));
+    }
+    m_->opt.impratio = impratio;
+  }
+  reset();
+}
+
+MujocoPeer::~MujocoPeer()
+{
+  if (d_)
+    mj_deleteData(d_);
+  if (m_)
+    mj_deleteModel(m_);
+}
+
+void MujocoPeer::reset()
+{
+  mj_resetData(m_, d_);
+  setDrives();
+  for (int w = 0; w < mjNWARNING; ++w)
+    d_->warning[w].number = 0;
+  message_.clear();
+  forward();
+}
+
+void MujocoPeer::setDrives()
+{
+  for (const Impl::Carrier& cr : impl_->carriers)
+  {
+    const core::ActuationValue u = impl_->value(cr.actuator, d_->time);
+    d_->qpos[cr.drive_qpos] = u.value;
+    d_->qvel[cr.drive_dof] = u.rate;
+  }
+}
+
+void MujocoPeer::forward()
+{
+  setDrives();
+  Active active(this);
+  mj_forward(m_, d_);
+}
+
+double MujocoPeer::time() const
+{
+  return d_->time;
+}
+
+bool MujocoPeer::step()
+{
+  setDrives();
+  int before[mjNWARNING];
+  for (int w = 0; w < mjNWARNING; ++w)
+    before[w] = d_->warning[w].number;
+  const double t0 = d_->time;
+  {
+    Active active(this);
+    mj_step(m_, d_);
+  }
+  for (int w = 0; w < mjNWARNING; ++w)
+    if (d_->warning[w].number > before[w])
+    {
+      message_ = std::string("MuJoCo warning '") + kWarningNames[w] + "' in the step from t = " + num(t0) + " s" +
+                 (g_warning.empty() ? "" : ": " + g_warning);
+      return false;
+    }
+  for (int i = 0; i < m_->nq; ++i)
+    if (!std::isfinite(d_->qpos[i]))
+    {
+      message_ = "non-finite position in the step from t = " + num(t0) + " s";
+      return false;
+    }
+  for (int i = 0; i < m_->nv; ++i)
+    if (!std::isfinite(d_->qvel[i]))
+    {
+      message_ = "non-finite velocity in the step from t = " + num(t0) + " s";
+      return false;
+    }
+  return true;
+}
+
+void MujocoPeer::evaluateForces()
+{
+  Impl& im = *impl_;
+  const core::Model& model = im.model;
+  const double t = d_->time;
+  im.u.assign(model.actuators.size(), core::ActuationValue{});
+  for (size_t a = 0; a < model.actuators.size(); ++a)
+    im.u[a] = im.value(static_cast<int>(a), t);
+  mju_zero(d_->qfrc_applied, m_->nv);
+  // the drives' carriers follow s_dd between the steps
+  for (const Impl::Carrier& cr : im.carriers)
+    d_->qfrc_applied[cr.drive_dof] = cr.drive_inertia * im.u[cr.actuator].accel;
+  for (size_t ci = 0; ci < model.cables.size(); ++ci)
+  {
+    const core::Cable& cable = model.cables[ci];
+    Impl::CableMap& cm = im.cables[ci];
+    double length = 0.0, rate = 0.0;
+    for (int t_id : cm.tendons)
+    {
+      length += d_->ten_length[t_id];
+      rate += d_->ten_velocity[t_id];
+    }
+    for (Impl::Segment& s : cm.segments)
+    {
+      Vec3 p[2], v[2];
+      for (int e = 0; e < 2; ++e)
+      {
+        const Impl::End& end = e == 0 ? s.a : s.b;
+        if (end.driven >= 0)
+        {
+          const Impl::DrivenMass& dm = im.driven[end.driven];
+          p[e] = im.drivenPosition(end.driven, t);
+          v[e] = im.u[dm.actuator].rate * dm.direction;
+        }
+        else
+        {
+          mjtNum res[6];
+          mj_objectVelocity(m_, d_, mjOBJ_SITE, end.site, res, 0);
+          p[e] = Vec3(d_->site_xpos[3 * end.site], d_->site_xpos[3 * end.site + 1], d_->site_xpos[3 * end.site + 2]);
+          v[e] = Vec3(res[3], res[4], res[5]);
+        }
+      }
+      const Vec3 dp = p[1] - p[0];
+      s.length = dp.norm();
+      s.n = s.length > 0.0 ? Vec3(dp / s.length) : Vec3::Zero();
+      length += s.length;
+      rate += s.n.dot(v[1] - v[0]);
+    }
+    // our evaluateCable: pull-in, EA kept, damping on the material stretch rate, tension only
+    double pull = 0.0, pull_rate = 0.0;
+    if (cable.actuator >= 0)
+    {
+      pull = im.u[cable.actuator].value;
+      pull_rate = im.u[cable.actuator].rate;
+    }
+    const double rest = cable.rest_length - pull;
+    const double k = cable.area > 0.0 ? cable.stiffness * cable.rest_length / rest : cable.stiffness;
+    const double c = model.damping_enabled ? cable.damping : 0.0;
+    const double stretch = length - rest;
+    double tension = k * stretch + c * (rate + pull_rate);
+    if (length <= 0.0 || (cable.tension_only && (stretch <= 0.0 || tension <= 0.0)))
+      tension = 0.0;
+    cm.length = length;
+    cm.tension = tension;
+    for (int a : cm.actuators)
+      d_->ctrl[a] = -tension;
+    // segments to driven masses pull their other end (a site on a moving body) along the segment
+    for (const Impl::Segment& s : cm.segments)
+      for (int e = 0; e < 2; ++e)
+      {
+        const Impl::End& end = e == 0 ? s.a : s.b;
+        if (end.site < 0 || m_->site_bodyid[end.site] == 0 || tension == 0.0)
+          continue;
+        const Vec3 f = (e == 0 ? tension : -tension) * s.n;
+        mjtNum force[3] = { f.x(), f.y(), f.z() }, torque[3] = { 0.0, 0.0, 0.0 };
+        mj_applyFT(m_, d_, force, torque, d_->site_xpos + 3 * end.site, m_->site_bodyid[end.site], d_->qfrc_applied);
+      }
+  }
+}
+
+core::Vec3 MujocoPeer::bodyPosition(int body) const
+{
+  const Impl& im = *impl_;
+  if (im.driven_of_body[body] >= 0)
+    return im.drivenPosition(im.driven_of_body[body], d_->time);
+  const int id = im.body_id[body];
+  return Vec3(d_->xpos[3 * id], d_->xpos[3 * id + 1], d_->xpos[3 * id + 2]);
+}
+
+core::Vec3 MujocoPeer::pointPosition(const core::PointRef& point) const
+{
+  const Impl& im = *impl_;
+  if (point.body < 0)
+    return point.local;
+  if (im.driven_of_body[point.body] >= 0)
+    return bodyPosition(point.body) + point.local;
+  const int id = im.body_id[point.body];
+  const Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> rot(d_->xmat + 9 * id);
+  return bodyPosition(point.body) + rot * point.local;
+}
+
+double MujocoPeer::cableLength(int cable) const
+{
+  return impl_->cables[cable].length;
+}
+
+double MujocoPeer::cableTension(int cable) const
+{
+  return impl_->cables[cable].tension;
+}
+
+double MujocoPeer::actuationForce(int actuator) const
+{
+  const Impl& im = *impl_;
+  const core::Model& model = im.model;
+  const core::Actuator& act = model.actuators[actuator];
+  double force = 0.0;
+  for (int c : act.cables)
+    force += im.cables[c].tension;
+  const core::ActuationValue u = im.value(actuator, d_->time);
+  for (size_t k = 0; k < im.driven.size(); ++k)
+  {
+    const Impl::DrivenMass& dm = im.driven[k];
+    if (dm.actuator != actuator)
+      continue;
+    // m s_dd d = F d + cable forces + m g (+ guide forces across d)
+    const Vec3 g = model.gravity_enabled ? model.gravity : Vec3::Zero();
+    double f = dm.mass * (u.accel - g.dot(dm.direction));
+    for (const Impl::CableMap& cm : im.cables)
+      for (const Impl::Segment& s : cm.segments)
+      {
+        // the cable pulls each end towards the other: on a, +T n; on b, -T n
+        if (s.a.driven == static_cast<int>(k))
+          f -= cm.tension * s.n.dot(dm.direction);
+        if (s.b.driven == static_cast<int>(k))
+          f += cm.tension * s.n.dot(dm.direction);
+      }
+    force += f;
+  }
+  for (const Impl::Carrier& cr : im.carriers)
+  {
+    if (cr.actuator != actuator)
+      continue;
+    // the connect's force on body1 (the strut end) is efc_force (Jacobian of p1 - p2)
+    for (int i = 0; i < d_->nefc; ++i)
+      if (d_->efc_type[i] == mjCNSTR_EQUALITY && d_->efc_id[i] == cr.equality)
+      {
+        force += Vec3(d_->efc_force[i], d_->efc_force[i + 1], d_->efc_force[i + 2]).dot(cr.direction);
+        break;
+      }
+  }
+  return force;
+}
+
+double MujocoPeer::maxContactForce() const
+{
+  double f = 0.0;
+  for (int i = 0; i < d_->ncon; ++i)
+  {
+    if (d_->contact[i].efc_address < 0)
+      continue;
+    mjtNum r[6];
+    mj_contactForce(m_, d_, i, r);
+    f = std::max(f, r[0]);
+  }
+  return f;
+}
+
+double MujocoPeer::totalMass() const
+{
+  double m = 0.0;
+  for (int b = 1; b < m_->nbody; ++b)
+    m += m_->body_mass[b];
+  return m;
+}
+
+double MujocoPeer::carrierMass() const
+{
+  double m = 0.0;
+  for (const Impl::Carrier& cr : impl_->carriers)
+    m += std::max(cr.mass, 1e-9);
+  return m;
+}
+
+double MujocoPeer::contactStiffness(int pair) const
+{
+  return impl_->pair_stiffness[pair];
+}
+
+double MujocoPeer::contactDamping(int pair) const
+{
+  return impl_->pair_damping[pair];
+}
+
+int MujocoPeer::bodyId(int body) const
+{
+  return impl_->body_id[body];
+}
+
+const std::vector<int>& MujocoPeer::tendonIds(int cable) const
+{
+  return impl_->cables[cable].tendons;
+}
+
+int MujocoPeer::pairCount() const
+{
+  return m_->npair;
+}
+
+MujocoTrace runMujoco(const core::Model& model, const MujocoOptions& options)
+{
+  using Clock = std::chrono::steady_clock;
+  MujocoTrace tr;
+  if (model.analysis.type != core::AnalysisType::kDynamic)
+    throw std::invalid_argument("MuJoCo peer: the scene's analysis must be dynamic");
+  MujocoPeer peer(model, options);
+  const double dt = options.timestep;
+  const long n_steps = std::lround(std::ceil(model.analysis.duration / dt - 1e-9));
+  const double interval = model.analysis.output_interval > 0.0 ? model.analysis.output_interval : dt;
+  const auto output = [&]()
+  {
+    peer.forward();
+    tr.t.push_back(peer.time());
+    tr.force.push_back(model.actuators.empty() ? 0.0 : peer.actuationForce(0));
+    std::vector<double> h;
+    const auto height = [&](const std::vector<int>& nodes)
+    {
+      double top = -INFINITY;
+      for (int n : nodes)
+        top = std::max(top, peer.pointPosition(model.nodes[n].point).z());
+      return top - model.ground_level;
+    };
+    if (model.layers.empty())
+      h.push_back(height(model.height_nodes));
+    for (const core::OutputLayer& layer : model.layers)
+      h.push_back(height(layer.nodes));
+    tr.heights.push_back(h);
+    std::vector<core::Vec3> p;
+    for (size_t b = 0; b < model.bodies.size(); ++b)
+      p.push_back(peer.bodyPosition(static_cast<int>(b)));
+    tr.positions.push_back(p);
+    const double f = peer.maxContactForce();
+    if (f > tr.peak)
+    {
+      tr.peak = f;
+      tr.peak_t = peer.time();
+    }
+  };
+  output();
+  double next_output = interval;
+  for (long k = 1; k <= n_steps; ++k)
+  {
+    const double before = peer.time();
+    const Clock::time_point t0 = Clock::now();
+    const bool ok = peer.step();
+    tr.wall_time += std::chrono::duration<double>(Clock::now() - t0).count();
+    ++tr.steps;
+    tr.solver_iterations += peer.mujocoData()->solver_iter;
+    if (!ok)
+    {
+      tr.status = "mujoco_failed";
+      tr.message = peer.message();
+      break;
+    }
+    // the step's forces are those of its start
+    const double f = peer.maxContactForce();
+    if (f > tr.peak)
+    {
+      tr.peak = f;
+      tr.peak_t = before;
+    }
+    if (k * dt >= next_output - 1e-9 * dt || k == n_steps)
+    {
+      output();
+      next_output += interval;
+    }
+  }
+  return tr;
+}
+
+}  // namespace active_tensegrity::tools

@@ -1,0 +1,301 @@
+// The MuJoCo peer (src/tools/mujoco_peer.h) translates our scenes faithfully: the MuJoCo model has our
+// bodies, masses, inertias, tendons, joints and pairs; at the initial state every cable has our length and
+// tension (sliding cables and the driven segments included) and every actuator our force; the contact is
+// the linear law it is documented to be; a free prism falls with g; short runs stay finite.
+// No claim here about how close MuJoCo's trajectories come to ours: that is measured, not asserted
+// (tensegrity_bench work-precision --mujoco-dts, docs/benchmarks.md).
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+#include <mujoco/mujoco.h>
+
+#include "active_tensegrity/core/analysis.h"
+#include "active_tensegrity/core/contact.h"
+#include "active_tensegrity/core/scene.h"
+#include "mujoco_peer.h"
+
+namespace at = active_tensegrity::core;
+namespace tools = active_tensegrity::tools;
+
+namespace
+{
+const std::string kScenes = std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) + "/config/scenes/";
+
+at::Model scene(const std::string& file, const std::vector<std::string>& overrides)
+{
+  std::vector<at::Override> o;
+  for (const std::string& kv : overrides)
+    o.push_back(at::parseOverride(kv));
+  return at::loadScene(kScenes + file, o);
+}
+
+// our quantities at the initial state (the solver's consistent start: one short step of the analysis)
+at::State initial(const at::Model& model)
+{
+  at::Model m = model;
+  m.analysis.duration = m.solver.dt;
+  at::State first;
+  bool have = false;
+  at::runAnalysis(m,
+                  [&](const at::State& s)
+                  {
+                    if (!have)
+                      first = s;
+                    have = true;
+                  });
+  return first;
+}
+
+void expectCablesAsOurs(const at::Model& model, tools::MujocoPeer& peer)
+{
+  const at::State s = at::initialState(model);
+  for (size_t i = 0; i < model.cables.size(); ++i)
+  {
+    const at::CableState ours =
+        at::evaluateCable(model, model.cables[i], s.q, s.qd, s.u, model.damping_enabled, nullptr, nullptr, 0.0, 0.0);
+    EXPECT_NEAR(peer.cableLength(static_cast<int>(i)), ours.length, 1e-12) << model.cables[i].name;
+    EXPECT_NEAR(peer.cableTension(static_cast<int>(i)), ours.tension, 1e-9 * (1.0 + ours.tension))
+        << model.cables[i].name;
+  }
+}
+}  // namespace
+
+TEST(MujocoPeer, TowerBodiesMassesTendonsJointsAndPairs)
+{
+  // prestress in the sliding and square cables, so that tensions are compared too
+  const at::Model model = scene("tower.yaml", { "analysis.type=dynamic", "cables.sliding.prestress=100",
+                                                "cables.squares.prestress=50", "springs.middle.prestress=20" });
+  tools::MujocoPeer peer(model, tools::MujocoOptions{});
+  const mjModel* m = peer.mujocoModel();
+  // 16 struts (the driven bodies B1-B4 move kinematically: no MuJoCo body), 6 dofs each
+  EXPECT_EQ(m->nbody, 1 + 16);
+  EXPECT_EQ(m->nv, 96);
+  double strut_mass = 0.0;
+  for (const at::Body& b : model.bodies)
+    if (b.kind == at::BodyKind::kStrut)
+      strut_mass += b.mass;
+  EXPECT_NEAR(peer.totalMass(), strut_mass, 1e-9 * strut_mass);
+  // every cable one tendon (the sliding ones end at the pulley G, the driven segment is computed)
+  EXPECT_EQ(m->ntendon, 20);
+  EXPECT_EQ(m->nu, 20);
+  for (size_t i = 0; i < model.cables.size(); ++i)
+    EXPECT_EQ(peer.tendonIds(static_cast<int>(i)).size(), 1u) << model.cables[i].name;
+  // a sliding cable: one tendon through the four nodes on struts, G's site included
+  int l1 = -1;
+  for (size_t i = 0; i < model.cables.size(); ++i)
+    if (model.cables[i].name == "L1")
+      l1 = peer.tendonIds(static_cast<int>(i))[0];
+  ASSERT_GE(l1, 0);
+  EXPECT_EQ(m->tendon_num[l1], 5);
+  // 4 ground pins and 12 strut-to-strut joints; the 16 listed pairs
+  EXPECT_EQ(m->neq, 16);
+  EXPECT_EQ(peer.pairCount(), 16);
+  for (size_t i = 0; i < model.bodies.size(); ++i)
+  {
+    const at::Body& b = model.bodies[i];
+    if (b.kind != at::BodyKind::kStrut)
+    {
+      EXPECT_EQ(peer.bodyId(static_cast<int>(i)), -1) << b.name;
+      continue;
+    }
+    const int id = peer.bodyId(static_cast<int>(i));
+    ASSERT_GT(id, 0) << b.name;
+    EXPECT_NEAR(m->body_mass[id], b.mass, 1e-12 * b.mass);
+    for (int k = 0; k < 3; ++k)
+      EXPECT_NEAR(m->body_inertia[3 * id + k], b.inertia(k), 1e-12 * b.inertia(k)) << b.name;
+    // the capsule: our outer radius, half length
+    const int g = m->body_geomadr[id];
+    EXPECT_EQ(m->geom_type[g], mjGEOM_CAPSULE);
+    EXPECT_NEAR(m->geom_size[3 * g], b.radius(), 1e-15);
+    EXPECT_NEAR(m->geom_size[3 * g + 1], 0.5 * b.length, 1e-15);
+    // pose: centre and axis as ours
+    EXPECT_LT((peer.bodyPosition(static_cast<int>(i)) - model.q0.segment<3>(b.offset)).norm(), 1e-12);
+    const at::Mat3 r = at::rotationMatrix(model.q0.segment<4>(b.offset + 3));
+    for (int a = 0; a < 3; ++a)
+      for (int c = 0; c < 3; ++c)
+        EXPECT_NEAR(peer.mujocoData()->xmat[9 * id + 3 * a + c], r(a, c), 1e-12);
+  }
+  // lengths and tensions at the start, sliding cables and driven segments included
+  expectCablesAsOurs(model, peer);
+  // the actuation force at the start: the tension of L1 (B1 does not accelerate yet), as ours
+  const at::State s0 = initial(model);
+  EXPECT_NEAR(peer.actuationForce(0), at::actuationForce(model, s0, 0), 1e-6 * 100.0);
+  EXPECT_NEAR(peer.actuationForce(0), 100.0, 1e-6);
+}
+
+TEST(MujocoPeer, QuadruplexPrestressAndDrivenNodesAsOurs)
+{
+  // gravity on, so that the pins and the drive carry loads at the start
+  const at::Model model =
+      scene("quadruplex.yaml", { "analysis.type=dynamic", "actuation.speed=0.5", "analysis.max_actuation=0.3",
+                                 "gravity.enabled=true", "contact.enabled=true", "analysis.duration=0.05" });
+  tools::MujocoPeer peer(model, tools::MujocoOptions{});
+  const mjModel* m = peer.mujocoModel();
+  // 4 struts; 4 drives, each a light carrier on a slide along the drive and two across
+  EXPECT_EQ(m->nbody, 1 + 4 + 4);
+  EXPECT_EQ(m->nmocap, 0);
+  EXPECT_EQ(m->nv, 4 * 6 + 4 * 3);
+  EXPECT_EQ(m->ntendon, 12);
+  EXPECT_EQ(m->neq, 4 + 4);  // pins, drives
+  EXPECT_EQ(peer.pairCount(), 6);
+  double strut_mass = 0.0;
+  for (const at::Body& b : model.bodies)
+    strut_mass += b.mass;
+  EXPECT_NEAR(peer.totalMass() - peer.carrierMass(), strut_mass, 1e-9 * strut_mass);
+  EXPECT_LT(peer.carrierMass(), 1e-3 * strut_mass);
+  expectCablesAsOurs(model, peer);
+  EXPECT_NEAR(peer.cableTension(0), 200.0, 1e-6);  // C1, Table 1's prestress
+  // the force holding the top nodes (gravity, prestress) as our multipliers give it; MuJoCo's near-hard
+  // equality (impedance 0.9999) and the carriers leave a small difference
+  const double ours = at::actuationForce(model, initial(model), 0);
+  EXPECT_GT(std::abs(ours), 10.0);
+  EXPECT_NEAR(peer.actuationForce(0), ours, 2e-3 * std::abs(ours));
+  // a short run stays finite and ends where it should
+  for (tools::MujocoIntegrator integrator :
+       { tools::MujocoIntegrator::kEuler, tools::MujocoIntegrator::kImplicit, tools::MujocoIntegrator::kRk4 })
+  {
+    tools::MujocoOptions o;
+    o.integrator = integrator;
+    o.timestep = 5e-4;
+    const tools::MujocoTrace tr = tools::runMujoco(model, o);
+    EXPECT_TRUE(tr.ok()) << tools::toString(integrator) << ": " << tr.message;
+    EXPECT_EQ(tr.steps, 100);
+    ASSERT_FALSE(tr.t.empty());
+    EXPECT_NEAR(tr.t.back(), 0.05, 1e-9);
+    for (const auto& step : tr.positions)
+      for (const at::Vec3& p : step)
+        EXPECT_TRUE(p.allFinite());
+  }
+}
+
+TEST(MujocoPeer, ContactIsTheDocumentedLinearLawWhereverTheStrutsTouch)
+{
+  // two free rubber-sleeved struts crossing at a right angle, one touched 0.4 m off its centre
+  at::Model model;
+  model.name = "pair";
+  for (int i = 0; i < 2; ++i)
+  {
+    at::Body b;
+    b.name = i == 0 ? "A" : "B";
+    b.length = 1.2;
+    at::StrutLayer layer;
+    layer.material = "rubber";
+    layer.outer_radius = 0.04;
+    layer.density = 1000.0;
+    layer.youngs_modulus = 7.84e6;
+    layer.poisson_ratio = 0.47;
+    b.layers.push_back(layer);
+    b.mass = layer.density * M_PI * 0.04 * 0.04 * b.length;
+    const double jt = b.mass * (3.0 * 0.04 * 0.04 + b.length * b.length) / 12.0;
+    b.inertia = at::Vec3(jt, jt, 0.5 * b.mass * 0.04 * 0.04);
+    model.bodies.push_back(b);
+  }
+  at::finalizeModel(model);
+  model.contact.enabled = true;
+  model.contact.friction = 0.0;
+  model.contact.restitution = 0.5;
+  model.checked_pairs.push_back(at::makeStrutPair(model, 0, 1));
+  model.analysis.type = at::AnalysisType::kDynamic;
+  const double overlap = 0.004;
+  model.q0.setZero(model.nq);
+  model.q0.segment<3>(0) = at::Vec3(0.4, 0.0, 0.0);  // A along x: touched at x = 0, 0.4 m off its centre
+  model.q0.segment<4>(3) = at::thetaFromZAxis(at::Vec3::UnitX());
+  model.q0.segment<3>(7) = at::Vec3(0.0, 0.0, 0.08 - overlap);  // B along y, above
+  model.q0.segment<4>(10) = at::thetaFromZAxis(at::Vec3::UnitY());
+  tools::MujocoOptions o;
+  o.contact_force = 500.0;
+  tools::MujocoPeer peer(model, o);
+  // the secant of our Hertz law through F*: K90 zeta*^1.5 = F* at zeta* = F* / K_lin
+  const double k_lin = peer.contactStiffness(0);
+  const double zeta_star = o.contact_force / k_lin;
+  EXPECT_NEAR(model.checked_pairs[0].stiffness90 * std::pow(zeta_star, 1.5), o.contact_force, 1e-9 * o.contact_force);
+  // at rest: F = K_lin r to O(impedance), though the effective mass at x = 0 on A is not A's mass
+  EXPECT_NEAR(peer.maxContactForce(), k_lin * overlap, 2e-3 * k_lin * overlap);
+  // a linear oscillator with our restitution: zeta = -ln e / sqrt(pi^2 + ln^2 e)
+  const double m_red = 0.5 * model.bodies[0].mass;
+  const double zeta = -std::log(0.5) / std::sqrt(M_PI * M_PI + std::log(0.5) * std::log(0.5));
+  EXPECT_NEAR(peer.contactDamping(0), 2.0 * zeta * std::sqrt(k_lin * m_red), 1e-9 * peer.contactDamping(0));
+}
+
+TEST(MujocoPeer, FreePrismFallsWithG)
+{
+  // the prism without its drive, under gravity: its centre of mass falls as g t^2 / 2 (RK4 is exact for
+  // that), the self-stressed cables keep their tensions
+  at::Model model = scene("prism.yaml", { "gravity.enabled=true", "analysis.duration=0.2" });
+  model.actuators.clear();
+  std::vector<at::Constraint> kept;
+  for (const at::Constraint& c : model.constraints)
+    if (c.actuator < 0)
+      kept.push_back(c);
+  model.constraints = kept;
+  tools::MujocoOptions o;
+  o.integrator = tools::MujocoIntegrator::kRk4;
+  o.timestep = 1e-3;
+  const tools::MujocoTrace tr = tools::runMujoco(model, o);
+  ASSERT_TRUE(tr.ok()) << tr.message;
+  ASSERT_EQ(tr.positions.size(), tr.t.size());
+  const auto centre = [&](size_t k)
+  {
+    at::Vec3 c = at::Vec3::Zero();
+    for (const at::Vec3& p : tr.positions[k])
+      c += p / static_cast<double>(tr.positions[k].size());  // three equal struts
+    return c;
+  };
+  const at::Vec3 c0 = centre(0);
+  for (size_t k = 0; k < tr.t.size(); ++k)
+    EXPECT_NEAR((centre(k) - c0).z(), -0.5 * 9.81 * tr.t[k] * tr.t[k], 1e-9) << "t = " << tr.t[k];
+  tools::MujocoPeer peer(model, o);
+  for (int k = 0; k < 200; ++k)
+    ASSERT_TRUE(peer.step()) << peer.message();
+  peer.forward();
+  EXPECT_NEAR(peer.cableTension(0), 173.2050807569, 0.02 * 173.2);
+  EXPECT_NEAR(peer.cableTension(6), 291.2704512527, 0.02 * 291.3);
+}
+
+TEST(MujocoPeer, TowerShortFoldStaysFiniteWithEveryIntegrator)
+{
+  // a smooth start (the scene's sharp one throws the tower ahead of the pull: the cables go slack)
+  const at::Model model = scene("tower.yaml", { "analysis.type=dynamic", "actuation.speed=5",
+                                                "actuation.blend_time=0.1", "analysis.duration=0.05" });
+  for (tools::MujocoIntegrator integrator :
+       { tools::MujocoIntegrator::kEuler, tools::MujocoIntegrator::kImplicit, tools::MujocoIntegrator::kRk4 })
+  {
+    tools::MujocoOptions o;
+    o.integrator = integrator;
+    o.timestep = 1e-3;
+    const tools::MujocoTrace tr = tools::runMujoco(model, o);
+    EXPECT_TRUE(tr.ok()) << tools::toString(integrator) << ": " << tr.message;
+    ASSERT_EQ(tr.t.size(), 6u);  // outputs every 0.01 s
+    // the pull shortens the tower: the top layer goes down; B1 accelerates and pulls
+    EXPECT_LT(tr.heights.back().back(), tr.heights.front().back());
+    for (size_t k = 1; k < tr.force.size(); ++k)
+      EXPECT_GT(tr.force[k], 0.0) << "t = " << tr.t[k];
+    for (const auto& step : tr.positions)
+      for (const at::Vec3& p : step)
+        EXPECT_TRUE(p.allFinite());
+  }
+}
+
+TEST(MujocoPeer, UnsupportedConstraintsAreNamed)
+{
+  at::Model model = scene("quadruplex.yaml", { "analysis.type=dynamic", "actuation.speed=0.5" });
+  at::Constraint c;
+  c.kind = at::Constraint::Kind::kPoints;
+  c.name = "odd";
+  c.a = model.nodes[4].point;
+  c.b = at::PointRef{ -1, at::Vec3::Zero() };
+  c.directions = { at::Vec3::UnitX() };
+  c.offsets = { 0.3 };
+  model.constraints.push_back(c);
+  try
+  {
+    tools::MujocoPeer peer(model, tools::MujocoOptions{});
+    FAIL() << "accepted";
+  }
+  catch (const std::invalid_argument& e)
+  {
+    EXPECT_NE(std::string(e.what()).find("'odd'"), std::string::npos) << e.what();
+  }
+}
