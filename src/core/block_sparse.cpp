@@ -11,16 +11,22 @@ void BlockSparseMatrix::init(const std::vector<int>& group_sizes, const std::vec
   offsets_.assign(sizes_.size() + 1, 0);
   for (size_t g = 0; g < sizes_.size(); ++g)
     offsets_[g + 1] = offsets_[g] + sizes_[g];
-  const int n = offsets_.back();
-
   std::vector<std::pair<int, int>> all = blocks;
   for (size_t g = 0; g < sizes_.size(); ++g)
     all.emplace_back(static_cast<int>(g), static_cast<int>(g));
+  build(std::move(all));
+  pattern_version_ = 0;
+}
+
+void BlockSparseMatrix::build(std::vector<std::pair<int, int>> all)
+{
+  const int n = offsets_.back();
   std::sort(all.begin(), all.end());
   all.erase(std::unique(all.begin(), all.end()), all.end());
+  blocks_ = std::move(all);
 
   std::vector<Eigen::Triplet<double>> triplets;
-  for (const auto& [gr, gc] : all)
+  for (const auto& [gr, gc] : blocks_)
     for (int j = 0; j < sizes_[gc]; ++j)
       for (int i = 0; i < sizes_[gr]; ++i)
         triplets.emplace_back(offsets_[gr] + i, offsets_[gc] + j, 0.0);
@@ -30,7 +36,7 @@ void BlockSparseMatrix::init(const std::vector<int>& group_sizes, const std::vec
 
   block_index_.clear();
   block_starts_.clear();
-  for (const auto& [gr, gc] : all)
+  for (const auto& [gr, gc] : blocks_)
   {
     std::vector<int> starts(sizes_[gc]);
     for (int j = 0; j < sizes_[gc]; ++j)
@@ -45,6 +51,29 @@ void BlockSparseMatrix::init(const std::vector<int>& group_sizes, const std::vec
     block_index_[key(gr, gc)] = static_cast<int>(block_starts_.size());
     block_starts_.push_back(std::move(starts));
   }
+}
+
+void BlockSparseMatrix::reserve(int gr, int gc)
+{
+  if (hasBlock(gr, gc) && hasBlock(gc, gr))
+    return;
+  const Eigen::SparseMatrix<double> old = matrix_;
+  std::vector<std::pair<int, int>> all = blocks_;
+  all.emplace_back(gr, gc);
+  all.emplace_back(gc, gr);
+  build(std::move(all));
+  // the old entries are a subset of the new pattern: copy them column by column (both sorted by row)
+  for (int col = 0; col < old.outerSize(); ++col)
+  {
+    int k = matrix_.outerIndexPtr()[col];
+    for (Eigen::SparseMatrix<double>::InnerIterator it(old, col); it; ++it)
+    {
+      while (matrix_.innerIndexPtr()[k] != it.row())
+        ++k;
+      matrix_.valuePtr()[k] = it.value();
+    }
+  }
+  ++pattern_version_;
 }
 
 void BlockSparseMatrix::setZero()

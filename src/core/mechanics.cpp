@@ -219,8 +219,8 @@ System::System(const Model& model, std::vector<Constraint> extra_constraints) : 
       for (size_t j = i + 1; j < c.points.size(); ++j)
         if (c.points[i].body >= 0 && c.points[j].body >= 0)
           couple(c.points[i].body, c.points[j].body);
-  for (const StrutPair& p : model.checked_pairs)
-    couple(p.body_a, p.body_b);
+  // strut pairs get their blocks when they first touch (contactForce reserves them): a scene with many
+  // checked pairs (`auto` on a large lattice) would otherwise start with a nearly dense matrix
   for (size_t i = 0; i < constraints_.size(); ++i)
   {
     const Constraint& c = constraints_[i];
@@ -286,6 +286,7 @@ void System::contactForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, c
     F.segment<7>(b.offset) += contribution_.force.tail<7>();
     if (!jac)
       continue;
+    jac->reserve(p.body_a, p.body_b);
     const int g[2] = { p.body_a, p.body_b };
     for (int x = 0; x < 2; ++x)
       for (int y = 0; y < 2; ++y)

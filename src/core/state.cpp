@@ -35,10 +35,12 @@ const char* toString(SolveStatus s)
 
 bool SparseLinearSolver::factorize(const Eigen::SparseMatrix<double>& a)
 {
-  if (!analyzed_)
+  if (a.rows() != analyzed_rows_ || a.nonZeros() != analyzed_nonzeros_)
   {
     lu_.analyzePattern(a);
-    analyzed_ = true;
+    analyzed_rows_ = a.rows();
+    analyzed_nonzeros_ = a.nonZeros();
+    ++analyses_;
   }
   lu_.factorize(a);
   return lu_.info() == Eigen::Success;

@@ -1,5 +1,7 @@
-/// A sparse matrix made of dense blocks whose pattern is fixed once (all blocks a scene can ever
-/// touch), so that values are added in place and the symbolic factorization is reused.
+/// A sparse matrix made of dense blocks. Its pattern is set once for the blocks a scene always has
+/// (bodies coupled by cables, joints and constraint rows), so that values are added in place and the
+/// symbolic factorization is reused; blocks that only some states need (a strut pair in contact) are
+/// added when first needed by reserve(), and the pattern then only grows (patternVersion() counts it).
 #pragma once
 
 #include <cstdint>
@@ -25,6 +27,14 @@ public:
   /// Adds `block` transposed into (gc, gr).
   void addTransposed(int gr, int gc, const Eigen::Ref<const Eigen::MatrixXd>& block, double weight = 1.0);
   bool hasBlock(int gr, int gc) const;
+  /// Makes (gr, gc) and (gc, gr) part of the pattern, keeping every value; a no-op when they are.
+  /// Growing costs a rebuild of the matrix (O(non-zeros)); it happens once per block.
+  void reserve(int gr, int gc);
+  /// Incremented whenever reserve() changes the pattern (a factorization must then be analyzed again).
+  int patternVersion() const
+  {
+    return pattern_version_;
+  }
 
   const Eigen::SparseMatrix<double>& matrix() const
   {
@@ -48,7 +58,11 @@ private:
   {
     return (static_cast<std::uint64_t>(gr) << 32) | static_cast<std::uint32_t>(gc);
   }
+  void build(std::vector<std::pair<int, int>> blocks);
+
   std::vector<int> sizes_, offsets_;
+  std::vector<std::pair<int, int>> blocks_;  // the pattern's blocks (diagonal ones included), sorted
+  int pattern_version_ = 0;
   Eigen::SparseMatrix<double> matrix_;
   // for each block, the index in valuePtr() of its first row in each of its columns (contiguous rows)
   std::unordered_map<std::uint64_t, int> block_index_;

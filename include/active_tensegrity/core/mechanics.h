@@ -141,7 +141,8 @@ public:
   double kineticEnergy(const Eigen::VectorXd& q, const Eigen::VectorXd& qd) const;
   double potentialEnergy(const Eigen::VectorXd& q, const ActuationValues& u = {}) const;
 
-  /// A fresh matrix with this system's pattern (zero values).
+  /// A fresh matrix with this system's fixed pattern (zero values); contactForce() adds the blocks of
+  /// strut pairs in contact to it as they are needed (BlockSparseMatrix::reserve).
   BlockSparseMatrix makeMatrix() const
   {
     return pattern_;

@@ -54,11 +54,18 @@ struct Summary
   }
 };
 
-/// Sparse LU with the symbolic analysis done once (the matrix pattern never changes).
+/// Sparse LU whose symbolic analysis (ordering, elimination tree) is reused while the pattern stays.
+/// A new pattern is detected by its size and number of stored entries: the Newton matrices
+/// (BlockSparseMatrix) only ever grow, so every change of their pattern changes that number.
 class SparseLinearSolver
 {
 public:
   bool factorize(const Eigen::SparseMatrix<double>& a);
+  /// Symbolic analyses done so far (one per pattern seen).
+  int analyses() const
+  {
+    return analyses_;
+  }
   void solve(const Eigen::VectorXd& b, Eigen::VectorXd& x) const
   {
     x = lu_.solve(b);
@@ -66,7 +73,8 @@ public:
 
 private:
   Eigen::SparseLU<Eigen::SparseMatrix<double>, Eigen::COLAMDOrdering<int>> lu_;
-  bool analyzed_ = false;
+  Eigen::Index analyzed_rows_ = -1, analyzed_nonzeros_ = -1;
+  int analyses_ = 0;
 };
 
 }  // namespace active_tensegrity::core
