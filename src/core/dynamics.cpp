@@ -173,6 +173,8 @@ namespace
 {
 /// Modified Newton keeps a factorization built for a step within this relative change of h.
 constexpr double kReuseStepChange = 0.2;
+/// The smallest contraction rate modified Newton assumes when it estimates the error left in an iterate.
+constexpr double kRateFloor = 0.05;
 
 /// Whether the pairs touching in `s` are those of `t` (pairs in contact: remembered impact speed > 0).
 bool sameTouching(const std::vector<bool>& t, const State& s)
@@ -199,8 +201,20 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law)
   const ActuationValues u = law(s.t + h);
   Eigen::VectorXd& qdd = qdd_iter_;  // members: no allocation in the step loop
   Eigen::VectorXd& lambda = lambda_iter_;
-  qdd = s.qdd;
-  lambda = s.lambda;
+  // the first guess: accelerations and multipliers extrapolated linearly from the last step when `s` is
+  // where that step ended (else held constant); the iteration starts closer, and modified Newton then
+  // usually accepts its second iterate
+  if (extrapolate_ && s.t == last_end_t_ && s.qdd == last_end_qdd_)
+  {
+    const double r = h / last_h_;
+    qdd = s.qdd + r * (s.qdd - last_start_qdd_);
+    lambda = s.lambda + r * (s.lambda - last_start_lambda_);
+  }
+  else
+  {
+    qdd = s.qdd;
+    lambda = s.lambda;
+  }
   const double bh2 = coef_.beta * h * h * (1.0 - coef_.alpha_f) / (1.0 - coef_.alpha_m);
   const int nq = system_.nq();
   const bool reuse = options_.reuse_jacobian;
@@ -209,7 +223,7 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law)
   // step keeps it while within 20 %: the matrix is then a little off, which the contraction check sees)
   bool rebuild = !reuse || !factor_valid_ || std::abs(h - factor_h_) > kReuseStepChange * h ||
                  factor_age_ >= options_.max_jacobian_age || !sameTouching(factor_contacts_, s);
-  double previous = -1.0;  // last increment norm with this factorization
+  double previous = -1.0;  // last scaled increment with this factorization
   bool built_this_step = false;
   prepareContact(s, h);
   for (int it = 0; it < options_.max_iterations; ++it)
@@ -245,6 +259,7 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law)
       built_this_step = true;
       setTouching(factor_contacts_, s);
       theta_ = 0.0;
+      theta_known_ = false;
       previous = -1.0;
       rebuild = !reuse;  // full Newton: a new matrix at every iteration
     }
@@ -263,28 +278,36 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law)
     qdd += dx_.head(nq);
     lambda += dx_.tail(system_.nLambda());
     sum.residual = bh2 * dx_.head(nq).lpNorm<Eigen::Infinity>();
-    if (reuse && previous > 0.0 && sum.residual > 1e-3 * options_.newton_tolerance)  // (not round-off)
+    // The increment measured against what is asked of it, 1 = at the tolerance: positions (beta h^2 times
+    // the acceleration increment) to newton_tolerance, multipliers to it relative to their size. The
+    // multipliers cannot be known better than the round-off of phi / (beta h^2) makes them: about
+    // eps |q| m / (beta h^2), which at tiny steps is far above the tolerance.
+    const double lambda_floor =
+        10.0 * std::numeric_limits<double>::epsilon() * (1.0 + s.q.lpNorm<Eigen::Infinity>()) * mass_scale_ / bh2;
+    const double q_part = sum.residual / options_.newton_tolerance;
+    const double lambda_part = dx_.tail(system_.nLambda()).lpNorm<Eigen::Infinity>() /
+                               (options_.newton_tolerance * (1.0 + lambda.lpNorm<Eigen::Infinity>()) + lambda_floor);
+    const double scaled = std::max(q_part, lambda_part);
+    if (reuse && previous > 0.0 && scaled > 1e-3)  // (not round-off)
     {
       // contraction rate of the iteration with this matrix; slow or diverging: rebuild it
-      theta_ = std::max(theta_, sum.residual / previous);
+      theta_ = std::max(theta_, scaled / previous);
+      theta_known_ = true;
       if (theta_ > 0.5)
         rebuild = true;
     }
-    previous = sum.residual;
-    // with an up-to-date matrix this is Newton's test; with an older one the increment is accepted only
-    // while the iteration contracts (theta < 0.5), so the error left is below the increment
-    // an older matrix can shrink the q increments while the multipliers are still off: they must settle too
-    // (a matrix built in this step is Newton's: the multipliers are then as good as the q increment says,
-    // and at very small h their round-off, phi / (beta h^2), would fail the test)
-    // (the multipliers cannot be known better than the round-off of phi / (beta h^2) makes them: about
-    // eps |q| m / (beta h^2), which at tiny steps is far above the tolerance)
-    const double lambda_floor =
-        10.0 * std::numeric_limits<double>::epsilon() * (1.0 + s.q.lpNorm<Eigen::Infinity>()) * mass_scale_ / bh2;
-    const bool multipliers_settled =
-        !reuse || built_this_step ||
-        dx_.tail(system_.nLambda()).lpNorm<Eigen::Infinity>() <=
-            options_.newton_tolerance * (1.0 + lambda.lpNorm<Eigen::Infinity>()) + lambda_floor;
-    if (sum.residual <= options_.newton_tolerance && multipliers_settled && !(reuse && theta_ > 0.5))
+    previous = scaled;
+    // Full Newton, or a matrix built in this step (Newton's own step): the increment is the error
+    // measure, and the multipliers are as good as the position increment says (at very small h their
+    // round-off would fail their test). Modified Newton with an older matrix: the error left in the iterate
+    // after this increment is about theta / (1 - theta) times it, the remaining increments summed
+    // (Hairer & Wanner, Solving ODEs II, Sec. IV.8), theta the largest rate measured with this matrix
+    // (floored at kRateFloor); it is accepted only while the iteration contracts (theta <= 0.5), and its
+    // multipliers must settle too: an older matrix can shrink the q increments while they are still off.
+    const bool newton_step = !reuse || built_this_step;
+    const double rate = std::max(theta_, kRateFloor);
+    const double left = newton_step ? q_part : (theta_known_ ? rate / (1.0 - rate) : 1.0) * scaled;
+    if (left <= 1.0 && !(reuse && theta_ > 0.5))
     {
       predict(s, h, qdd, q_, qd_, acc_);
       int crossed = -1;
@@ -301,6 +324,9 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law)
         return sum;
       }
       estimate_.error = errorEstimate(s.acc, acc_, h);
+      last_start_qdd_ = s.qdd;
+      last_start_lambda_ = s.lambda;
+      last_h_ = h;
       s.q.swap(q_);  // q_ keeps the start positions for the onset check
       s.qd = qd_;
       s.acc = acc_;
@@ -308,6 +334,9 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law)
       s.lambda = lambda;
       s.t += h;
       s.u = u;
+      last_end_t_ = s.t;
+      last_end_qdd_ = s.qdd;
+      extrapolate_ = true;
       updateContactMemory(s, q_);
       ++factor_age_;
       return sum;
@@ -371,6 +400,7 @@ Summary DynamicsSolver::step(State& s, double h, const ActuationLaw& law)
 Summary DynamicsSolver::initialize(State& s, const ActuationLaw& law)
 {
   Summary sum;
+  extrapolate_ = false;
   s.u = law(s.t);
   const int nq = system_.nq();
   const int nl = system_.nLambda();

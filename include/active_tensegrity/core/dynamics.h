@@ -123,7 +123,13 @@ private:
   int factor_age_ = 0;                 // steps taken with it
   std::vector<bool> factor_contacts_;  // pairs touching when it was built
   double theta_ = 0.0;                 // largest contraction rate seen with it
+  bool theta_known_ = false;           // whether theta_ was measured (two increments above round-off)
   double mass_scale_ = 0.0;            // largest body mass (kg): the multipliers' round-off scale
+  // the last accepted step, for the first guess of the next one: accelerations and multipliers at its
+  // start, its length, and where it ended (the next step extrapolates only from that state)
+  bool extrapolate_ = false;
+  Eigen::VectorXd last_start_qdd_, last_start_lambda_, last_end_qdd_;
+  double last_h_ = 0.0, last_end_t_ = 0.0;
 };
 
 }  // namespace active_tensegrity::core
