@@ -32,6 +32,11 @@
 // runs the stability stress cases (tower and quadruplex: fast folding, large steps, bare steel, thin
 // struts, slack cables, impulsive actuation; two nearly parallel struts pressed together) and prints one table row per
 // case: how it ended, steps, cuts, steps refused for a strut passing through another, peaks, and whether every number is finite.
+//   tensegrity_bench lattice [--struts a,b,..] [--max-struts N] [--duration S] [--repeat N] [--pairs all|auto|near]
+//                            [--csv FILE] [--set key=value]... [--print-scene]
+// lattices of quadruplex cells of about 10 to 500 struts (lattice.cpp), each run dynamically with contact: one row per
+// size (sizes, Newton matrix non-zeros, us per step and its breakdown, peak contacts) and the fitted exponent of
+// the time per step against the number of struts.
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -51,6 +56,7 @@
 #include "active_tensegrity/core/scene.h"
 #include "active_tensegrity/core/statics.h"
 #include "active_tensegrity/planning/folding_planner.h"
+#include "lattice.h"
 #include "mujoco_peer.h"
 
 namespace at = active_tensegrity::core;
@@ -118,7 +124,13 @@ const char* kUsage =
     "  --mujoco-dts adds the scene in MuJoCo over that ladder (rows mujoco_<integrator>; contact\n"
     "  stiffness from F, default the reference's peak force).\n"
     "       tensegrity_bench stress [--quick]\n"
-    "  The stability stress cases (docs/benchmarks.md): one row per case; --quick runs the short ones.\n";
+    "  The stability stress cases (docs/benchmarks.md): one row per case; --quick runs the short ones.\n"
+    "       tensegrity_bench lattice [--struts a,b,..] [--max-struts N] [--duration S] [--repeat N]\n"
+    "                        [--pairs all|auto|near] [--csv FILE] [--set key=value]... [--print-scene]\n"
+    "  Quadruplex-cell lattices (default about 10, 20, 50, 100, 200, 500 struts) run dynamically into contact:\n"
+    "  us per step (median over N runs, default 3), its breakdown, sizes, and the fitted exponent vs struts;\n"
+    "  pairs: all (default: every pair sharing no node, listed), auto (pairs: auto), near (same or adjacent cells);\n"
+    "  --print-scene prints the scenes (YAML) instead.\n";
 
 using Clock = std::chrono::steady_clock;
 
@@ -909,6 +921,8 @@ int steps(const std::string& scene, const std::vector<at::Override>& overrides, 
 int main(int argc, char** argv)
 {
   const std::string command = argc >= 2 ? argv[1] : "";
+  if (command == "lattice")
+    return active_tensegrity::tools::latticeCommand(std::vector<std::string>(argv + 2, argv + argc));
   const bool needs_scene = command == "steps" || command == "plan" || command == "work-precision";
   if ((command != "steps" && command != "contact-pair" && command != "broad-phase" && command != "plan" &&
        command != "stress" && command != "work-precision") ||

@@ -1,0 +1,268 @@
+// The quadruplex-cell lattices of `tensegrity_bench lattice` (src/tools/lattice.cpp): they load with the
+// expected counts, check the intended strut pairs, start with every constraint satisfied and in equilibrium,
+// and a small one runs dynamically; the command refuses bad arguments by name.
+#include <cstdio>
+#include <set>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "active_tensegrity/core/analysis.h"
+#include "active_tensegrity/core/scene.h"
+#include "active_tensegrity/core/statics.h"
+#include "lattice.h"
+
+namespace at = active_tensegrity::core;
+namespace tl = active_tensegrity::tools;
+
+namespace
+{
+at::Model lattice(int nx, int ny, tl::LatticePairs pairs = tl::LatticePairs::kAuto)
+{
+  tl::LatticeOptions o;
+  o.nx = nx;
+  o.ny = ny;
+  o.pairs = pairs;
+  return at::loadSceneFromString(tl::quadruplexLatticeYaml(o), "lattice");
+}
+
+// both end points of every strut at q0 (world)
+std::vector<std::pair<at::Vec3, at::Vec3>> strutEnds(const at::Model& m)
+{
+  std::vector<std::pair<at::Vec3, at::Vec3>> ends;
+  for (const at::Body& b : m.bodies)
+  {
+    const at::Vec3 r = m.q0.segment<3>(b.offset);
+    const at::Vec3 axis = at::rotationMatrix(m.q0.segment<4>(b.offset + 3)).col(2);
+    ends.push_back({ r - 0.5 * b.length * axis, r + 0.5 * b.length * axis });
+  }
+  return ends;
+}
+
+// pairs of struts that share no end point, found from the geometry (not from the generator's names)
+std::set<std::pair<int, int>> pairsSharingNoNode(const at::Model& m)
+{
+  const auto ends = strutEnds(m);
+  const auto same = [](const at::Vec3& a, const at::Vec3& b) { return (a - b).norm() < 1e-9; };
+  std::set<std::pair<int, int>> out;
+  for (size_t i = 0; i < ends.size(); ++i)
+    for (size_t j = i + 1; j < ends.size(); ++j)
+    {
+      const auto& [a0, a1] = ends[i];
+      const auto& [b0, b1] = ends[j];
+      if (!same(a0, b0) && !same(a0, b1) && !same(a1, b0) && !same(a1, b1))
+        out.insert({ static_cast<int>(i), static_cast<int>(j) });
+    }
+  return out;
+}
+
+std::set<std::pair<int, int>> checked(const at::Model& m)
+{
+  std::set<std::pair<int, int>> out;
+  for (const at::StrutPair& p : m.checked_pairs)
+    out.insert({ std::min(p.body_a, p.body_b), std::max(p.body_a, p.body_b) });
+  return out;
+}
+
+// cell (i, j) of a strut from its name S<i>_<j>_<k>
+std::pair<int, int> cellOf(const std::string& name)
+{
+  int i = -1, j = -1, k = -1;
+  EXPECT_EQ(std::sscanf(name.c_str(), "S%d_%d_%d", &i, &j, &k), 3) << name;
+  return { i, j };
+}
+}  // namespace
+
+TEST(Lattice, LoadsWithFourStrutsPerCellAndTheExpectedCables)
+{
+  for (const auto& [nx, ny] : { std::pair{ 1, 1 }, std::pair{ 1, 2 }, std::pair{ 2, 3 } })
+  {
+    const at::Model m = lattice(nx, ny);
+    EXPECT_EQ(m.bodies.size(), static_cast<size_t>(4 * nx * ny)) << nx << "x" << ny;
+    for (const at::Body& b : m.bodies)
+      EXPECT_EQ(b.kind, at::BodyKind::kStrut);
+    // upper and bracing: 8 per cell; ties between neighbouring cells
+    const size_t ties = (nx - 1) * ny + nx * (ny - 1);
+    EXPECT_EQ(m.cables.size(), static_cast<size_t>(8 * nx * ny) + ties) << nx << "x" << ny;
+    ASSERT_EQ(m.actuators.size(), 1u);
+    EXPECT_EQ(m.actuators[0].cables.size(), static_cast<size_t>(4 * nx * ny));  // every bracing
+    EXPECT_EQ(m.analysis.type, at::AnalysisType::kDynamic);
+    EXPECT_TRUE(m.contact.enabled);
+  }
+}
+
+TEST(Lattice, NeighbouringCellsShareTheirGroundCorners)
+{
+  // 2 x 2 cells: 9 ground corners; the middle one carries a strut of each cell (four struts, joined)
+  const at::Model m = lattice(2, 2);
+  const auto ends = strutEnds(m);
+  int at_middle = 0;
+  for (const auto& [foot, top] : ends)
+  {
+    EXPECT_NEAR(foot.z(), 0.0, 1e-12);
+    EXPECT_NEAR(top.z(), 0.5, 1e-12);
+    at_middle += (foot - at::Vec3(1.0, 1.0, 0.0)).norm() < 1e-9 ? 1 : 0;
+  }
+  EXPECT_EQ(at_middle, 4);
+}
+
+TEST(Lattice, AllListsEveryPairOfStrutsThatShareNoNodeOnce)
+{
+  for (const auto& [nx, ny] : { std::pair{ 1, 1 }, std::pair{ 2, 2 }, std::pair{ 3, 3 } })
+  {
+    const at::Model m = lattice(nx, ny, tl::LatticePairs::kAll);
+    const auto expected = pairsSharingNoNode(m);
+    EXPECT_EQ(checked(m), expected) << nx << "x" << ny;
+    EXPECT_EQ(m.checked_pairs.size(), expected.size()) << "a pair listed twice";
+  }
+  EXPECT_EQ(lattice(1, 1, tl::LatticePairs::kAll).checked_pairs.size(), 6u);  // one quadruplex: all six pairs
+}
+
+TEST(Lattice, AutoChecksEveryPairOfStrutsThatShareNoNode)
+{
+  for (const auto& [nx, ny] : { std::pair{ 1, 1 }, std::pair{ 1, 3 }, std::pair{ 3, 3 } })
+  {
+    const at::Model m = lattice(nx, ny, tl::LatticePairs::kAuto);
+    const auto expected = pairsSharingNoNode(m);
+    const auto got = checked(m);
+    for (const auto& p : expected)
+      EXPECT_TRUE(got.count(p)) << nx << "x" << ny << ": " << m.bodies[p.first].name << ", " << m.bodies[p.second].name;
+    // The current core's auto also checks the struts at a shared node that are not joined to each other
+    // directly (it joins the first strut at a node to each other one): three pairs per interior corner of
+    // four struts (LatticePairs). Measured, not asserted, so that a fix in the core does not fail this test.
+    std::printf("[ measured ] %dx%d: auto checks %zu pairs, %zu of them share a node\n", nx, ny, got.size(),
+                got.size() - expected.size());
+    if (nx < 2 || ny < 2)  // no corner of more than two struts: auto is exact
+    {
+      EXPECT_EQ(got, expected) << nx << "x" << ny;
+    }
+  }
+}
+
+TEST(Lattice, NearListsOnlyPairsOfTheSameOrAdjacentCells)
+{
+  const at::Model m = lattice(3, 3, tl::LatticePairs::kNear);
+  const auto all = pairsSharingNoNode(m);
+  std::set<std::pair<int, int>> expected;
+  for (const auto& [a, b] : all)
+  {
+    const auto [ia, ja] = cellOf(m.bodies[a].name);
+    const auto [ib, jb] = cellOf(m.bodies[b].name);
+    if (std::abs(ia - ib) <= 1 && std::abs(ja - jb) <= 1)
+      expected.insert({ a, b });
+  }
+  EXPECT_EQ(checked(m), expected);
+  EXPECT_EQ(m.checked_pairs.size(), expected.size()) << "a pair listed twice";
+  EXPECT_LT(expected.size(), all.size());  // on 3 x 3 some cells are not adjacent
+  // a single cell: the same six pairs as auto
+  EXPECT_EQ(lattice(1, 1, tl::LatticePairs::kNear).checked_pairs.size(), 6u);
+}
+
+TEST(Lattice, StartsWithEveryConstraintSatisfiedAndInEquilibrium)
+{
+  for (const auto& [nx, ny] : { std::pair{ 1, 1 }, std::pair{ 2, 3 } })
+  {
+    at::Model m = lattice(nx, ny);
+    const at::State s = at::initialState(m);
+    const at::System sys(m);
+    Eigen::VectorXd phi;
+    sys.constraintValue(s.q, s.u, phi);
+    ASSERT_EQ(phi.size(), m.n_lambda);
+    EXPECT_LT(phi.lpNorm<Eigen::Infinity>(), 1e-12) << nx << "x" << ny;
+    // the prestress balances: the best multipliers leave no force residual (cables carry ~280 N)
+    m.analysis.type = at::AnalysisType::kStatic;
+    at::StaticSolver statics(m, m.solver);
+    at::State e = s;
+    e.lambda = at::leastSquaresMultipliers(statics.system(), e.q, e.u);
+    EXPECT_LT(statics.forceResidual(e), 1e-6) << nx << "x" << ny;
+  }
+  // and the check can fail: with less prestress in the upper cables the top nodes are pulled outward
+  at::Model off = at::loadSceneFromString(tl::quadruplexLatticeYaml({}), "lattice",
+                                          { at::parseOverride("cables.upper.prestress=100") });
+  off.analysis.type = at::AnalysisType::kStatic;
+  at::StaticSolver statics_off(off, off.solver);
+  at::State o = at::initialState(off);
+  o.lambda = at::leastSquaresMultipliers(statics_off.system(), o.q, o.u);
+  EXPECT_GT(statics_off.forceResidual(o), 10.0);
+}
+
+TEST(Lattice, SmallLatticeRunsDynamicStepsToConvergence)
+{
+  tl::LatticeOptions o;
+  o.nx = 1;
+  o.ny = 2;
+  o.duration = 0.02;  // 20 steps of 1 ms
+  const at::Model m = at::loadSceneFromString(tl::quadruplexLatticeYaml(o), "lattice");
+  bool finite = true;
+  const at::RunResult r = at::runAnalysis(
+      m, [](const at::State&) {}, {},
+      [&finite](const at::State& s)
+      { finite = finite && s.q.allFinite() && s.qd.allFinite() && s.lambda.allFinite(); });
+  ASSERT_TRUE(r.summary.ok()) << r.summary.message;
+  EXPECT_TRUE(finite);
+  EXPECT_GE(r.solver_steps, 20);
+  EXPECT_NEAR(r.final_state.t, 0.02, 1e-12);
+  // the bracings are being pulled in (in the 50 ms start blend: less than speed * t) and the tops come down
+  EXPECT_GT(r.final_state.u[0].value, 0.0);
+  EXPECT_LT(r.final_state.u[0].value, 0.04);
+  EXPECT_LT(at::structureHeight(m, r.final_state.q), 0.5);
+}
+
+TEST(LatticeSizes, LadderComesCloseToTheTargets)
+{
+  const std::vector<int> targets = { 10, 20, 50, 100, 200, 500 };
+  const auto sizes = tl::standardLatticeSizes();
+  ASSERT_EQ(sizes.size(), targets.size());
+  for (size_t i = 0; i < sizes.size(); ++i)
+  {
+    EXPECT_LE(sizes[i].nx, sizes[i].ny);
+    EXPECT_LE(sizes[i].ny, 2 * sizes[i].nx);
+    EXPECT_LE(std::abs(sizes[i].struts() - targets[i]), 0.25 * targets[i]) << targets[i];
+  }
+  EXPECT_EQ(tl::latticeCellsFor(100).struts(), 100);
+  EXPECT_EQ(tl::latticeCellsFor(4).struts(), 4);
+}
+
+#ifdef TENSEGRITY_BENCH_PATH
+namespace
+{
+// exit status and output (stdout and stderr) of tensegrity_bench with the arguments
+std::pair<int, std::string> bench(const std::string& args)
+{
+  FILE* pipe = popen((std::string(TENSEGRITY_BENCH_PATH) + " " + args + " 2>&1").c_str(), "r");
+  std::string out;
+  if (pipe == nullptr)
+    return { -1, out };
+  char buf[4096];
+  while (fgets(buf, sizeof buf, pipe))
+    out += buf;
+  const int status = pclose(pipe);
+  return { WIFEXITED(status) ? WEXITSTATUS(status) : -1, out };
+}
+}  // namespace
+
+TEST(LatticeCommand, RefusesBadArgumentsByNameAndValue)
+{
+  for (const auto& [args, text] : { std::pair<std::string, std::string>{ "--pairs far", "'far'" },
+                                    { "--struts 10,x", "'x'" },
+                                    { "--repeat 0", "--repeat" },
+                                    { "--duration -1", "'-1'" },
+                                    { "--bogus", "'--bogus'" },
+                                    { "--set contact.nope=1", "contact.nope" } })
+  {
+    const auto [status, out] = bench("lattice " + args);
+    EXPECT_EQ(status, 2) << args << ": " << out;
+    EXPECT_NE(out.find(text), std::string::npos) << args << ": " << out;
+  }
+}
+
+TEST(LatticeCommand, PrintsARowPerSizeAndTheExponent)
+{
+  const auto [status, out] = bench("lattice --struts 4,8 --duration 0.005 --repeat 1 --pairs near");
+  ASSERT_EQ(status, 0) << out;
+  EXPECT_NE(out.find("converged"), std::string::npos) << out;
+  EXPECT_NE(out.find("fitted exponent"), std::string::npos) << out;
+}
+#endif
