@@ -247,6 +247,7 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law)
         factorized = linear_.factorize(jac_.matrix());
       }
       ++timings_.factorizations;
+      timings_.analyses = linear_.analyses();
       factor_valid_ = factorized;
       if (!factorized)
       {

@@ -778,7 +778,17 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
         for (size_t j = i + 1; j < model.bodies.size(); ++j)
           if (model.bodies[i].kind == BodyKind::kStrut && model.bodies[j].kind == BodyKind::kStrut)
             pairs.emplace_back(static_cast<int>(i), static_cast<int>(j));
+      // struts that end at a common node: every two of them, not only those the loader joined directly
+      // (at a node where k struts meet it joins the first to each other one)
       std::set<std::pair<int, int>> jointed;
+      for (const auto& entry : nodes)
+      {
+        const std::vector<PointRef>& at = entry.second.attachments;
+        for (size_t x = 0; x < at.size(); ++x)
+          for (size_t y = x + 1; y < at.size(); ++y)
+            if (at[x].body >= 0 && at[y].body >= 0 && at[x].body != at[y].body)
+              jointed.insert({ std::min(at[x].body, at[y].body), std::max(at[x].body, at[y].body) });
+      }
       for (const Constraint& c : model.constraints)
         if (c.kind == Constraint::Kind::kPoints && c.a.body >= 0 && c.b.body >= 0)
           jointed.insert({ std::min(c.a.body, c.b.body), std::max(c.a.body, c.b.body) });

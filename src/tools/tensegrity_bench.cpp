@@ -129,7 +129,7 @@ const char* kUsage =
     "                        [--pairs all|auto|near] [--csv FILE] [--set key=value]... [--print-scene]\n"
     "  Quadruplex-cell lattices (default about 10, 20, 50, 100, 200, 500 struts) run dynamically into contact:\n"
     "  us per step (median over N runs, default 3), its breakdown, sizes, and the fitted exponent vs struts;\n"
-    "  pairs: all (default: every pair sharing no node, listed), auto (pairs: auto), near (same or adjacent cells);\n"
+    "  pairs: auto (default: every pair sharing no node), all (the same pairs listed), near (same or adjacent cells);\n"
     "  --print-scene prints the scenes (YAML) instead.\n";
 
 using Clock = std::chrono::steady_clock;
@@ -905,8 +905,8 @@ int steps(const std::string& scene, const std::vector<at::Override>& overrides, 
   if (!peaks)
     std::printf("heap allocations per step (solver and loop, after the first output): %.2f\n",
                 static_cast<double>(allocations) / std::max(1, last.solver_steps));
-  std::printf("factorizations per step: %.3f\n",
-              static_cast<double>(last.timings.factorizations) / std::max(1, last.solver_steps));
+  std::printf("factorizations per step: %.3f, symbolic analyses: %ld\n",
+              static_cast<double>(last.timings.factorizations) / std::max(1, last.solver_steps), last.timings.analyses);
   std::printf("where the time goes (last run, us per step, share of its wall time):\n");
   const int n = std::max(1, last.solver_steps);
   for (const auto& [part, seconds] : at::timeBreakdown(last))

@@ -364,6 +364,36 @@ TEST(MiniScene, Loads)
   EXPECT_EQ(m.bodies[m.checked_pairs[0].body_b].name, "S2");
 }
 
+TEST(MiniScene, AutoPairsLeaveOutEveryPairAtACommonNode)
+{
+  // three struts meeting at C (the loader joins the first to each other one, not the second to the
+  // third) and a fourth apart: auto checks only the pairs with the fourth
+  const std::string yaml = R"(name: star
+materials:
+  steel: {youngs_modulus: 210.0e9, density: 7850.0}
+nodes:
+  A: {position: [0.0, 0.0, 0.0], fixed: true}
+  B: {position: [1.0, 0.0, 0.0], fixed: true}
+  E: {position: [0.0, 1.0, 0.0], fixed: true}
+  C: {position: [0.4, 0.4, 1.0]}
+  F: {position: [2.0, 2.0, 0.0], fixed: true}
+  G: {position: [2.0, 2.0, 1.0], fixed: true}
+struts:
+  material: steel
+  radius: 0.02
+  members: {S1: [A, C], S2: [B, C], S3: [E, C], S4: [F, G]}
+contact:
+  pairs: auto
+analysis: {type: dynamic, duration: 0.01}
+)";
+  const Model m = loadSceneFromString(yaml, "star.yaml");
+  std::set<std::pair<std::string, std::string>> pairs;
+  for (const StrutPair& p : m.checked_pairs)
+    pairs.insert({ m.bodies[p.body_a].name, m.bodies[p.body_b].name });
+  const std::set<std::pair<std::string, std::string>> expected = { { "S1", "S4" }, { "S2", "S4" }, { "S3", "S4" } };
+  EXPECT_EQ(pairs, expected);
+}
+
 TEST(MiniScene, CablesAndSpringsCarryTheirPrestressInitially)
 {
   // cables: l0 = l / (1 + T / EA), k = EA / l0; springs: l0 = l - T / k

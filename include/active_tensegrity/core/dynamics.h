@@ -26,6 +26,7 @@ struct StepTimings
   double total = 0.0;          // whole step() calls (the rest is vector work and bookkeeping)
   long newton_iterations = 0;
   long factorizations = 0;
+  long analyses = 0;  // symbolic analyses of the Newton matrix (its pattern grows when a new pair touches)
 };
 
 /// What an accepted step tells a step-size controller (AdaptiveStepper).
