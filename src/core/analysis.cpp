@@ -34,10 +34,9 @@ double actuationForce(const Model& model, const State& state, int actuator)
 
 double nodesHeight(const Model& model, const std::vector<int>& nodes, const Eigen::VectorXd& q)
 {
-  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(model.nq);
   double top = -std::numeric_limits<double>::infinity();
   for (int n : nodes)
-    top = std::max(top, pointKinematics(model, model.nodes[n].point, q, zero).p.z());
+    top = std::max(top, pointPosition(model, model.nodes[n].point, q).z());
   return top - model.ground_level;
 }
 

@@ -31,6 +31,7 @@ private:
 DynamicsSolver::DynamicsSolver(const Model& model, const SolverOptions& options)
   : system_(model), options_(options), jac_(system_.makeMatrix())
 {
+  linear_.allowDense(true);
   for (const Body& b : model.bodies)
     mass_scale_ = std::max(mass_scale_, b.mass);
   if (options.integrator == Integrator::kNewmark)

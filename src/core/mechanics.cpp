@@ -25,7 +25,7 @@ Mat3 inertiaMatrix(const Body& b)
 }  // namespace
 
 PointKinematics pointKinematics(const Model& model, const PointRef& point, const Eigen::VectorXd& q,
-                                const Eigen::VectorXd& qd)
+                                const Eigen::VectorXd& qd, bool rate_jacobian)
 {
   PointKinematics k;
   k.body = point.body;
@@ -46,11 +46,28 @@ PointKinematics pointKinematics(const Model& model, const PointRef& point, const
   const Vec4 th = thetaOf(q, b);
   const Vec4 thd = thetaOf(qd, b);
   const Mat34 b_theta = pointJacobianTheta(th, point.local);
-  k.p = q.segment<3>(b.offset) + rotationMatrix(th) * point.local;
+  // R(Theta) u is quadratic in Theta, so B_Theta(Theta, u) Theta = 2 R(Theta) u (Euler)
+  k.p = q.segment<3>(b.offset) + 0.5 * (b_theta * th);
   k.v = qd.segment<3>(b.offset) + b_theta * thd;
   k.jac.rightCols<4>() = b_theta;
-  k.dv_dq.rightCols<4>() = pointJacobianTheta(thd, point.local);
+  if (rate_jacobian)
+    k.dv_dq.rightCols<4>() = pointJacobianTheta(thd, point.local);
   return k;
+}
+
+Vec3 pointPosition(const Model& model, const PointRef& point, const Eigen::VectorXd& q)
+{
+  if (point.body < 0)
+    return point.local;
+  const Body& b = model.bodies[point.body];
+  if (b.kind == BodyKind::kPointMass)
+    return q.segment<3>(b.offset) + point.local;
+  // R(Theta) u = (e0^2 - e.e) u + 2 (e.u) e + 2 e0 e x u, the same quadratic form as rotationMatrix
+  const Vec4 th = thetaOf(q, b);
+  const double e0 = th(0);
+  const Vec3 e = th.tail<3>();
+  const Vec3& u = point.local;
+  return q.segment<3>(b.offset) + (e0 * e0 - e.squaredNorm()) * u + 2.0 * e.dot(u) * e + 2.0 * e0 * e.cross(u);
 }
 
 Mat4 rotationalMass(const Body& body, const Vec4& theta)
@@ -73,7 +90,7 @@ CableState evaluateCable(const Model& model, const Cable& cable, const Eigen::Ve
   std::array<double, Cable::kMaxPoints> seg;
   CableState s;
   for (int j = 0; j < m; ++j)
-    kin[j] = pointKinematics(model, cable.points[j], q, qd);
+    kin[j] = pointKinematics(model, cable.points[j], q, qd, jac != nullptr);
   for (int k = 0; k + 1 < m; ++k)
   {
     const Vec3 d = kin[k + 1].p - kin[k].p;
@@ -376,7 +393,6 @@ void System::inertialForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, 
 void System::constraintValue(const Eigen::VectorXd& q, const ActuationValues& u, Eigen::VectorXd& phi) const
 {
   phi.setZero(n_lambda_);
-  const Eigen::VectorXd& zero = zero_q_;
   for (size_t i = 0; i < constraints_.size(); ++i)
   {
     const Constraint& c = constraints_[i];
@@ -385,8 +401,8 @@ void System::constraintValue(const Eigen::VectorXd& q, const ActuationValues& u,
     {
       case Constraint::Kind::kPoints:
       {
-        const Vec3 pa = pointKinematics(model_, c.a, q, zero).p;
-        const Vec3 pb = pointKinematics(model_, c.b, q, zero).p;
+        const Vec3 pa = pointPosition(model_, c.a, q);
+        const Vec3 pb = pointPosition(model_, c.b, q);
         const double s = c.actuator >= 0 ? u[c.actuator].value : 0.0;
         for (int k = 0; k < c.rows(); ++k)
           phi(r + k) = c.directions[k].dot(pa - pb) - c.offsets[k] - s;
@@ -448,7 +464,7 @@ void System::addConstraintJacobian(const Eigen::VectorXd& q, BlockSparseMatrix& 
       forEachBodyEnd(c,
                      [&](const PointRef& end, double sign)
                      {
-                       const PointRows rows = sign * pointRows(c, pointKinematics(model_, end, q, zero));
+                       const PointRows rows = sign * pointRows(c, pointKinematics(model_, end, q, zero, false));
                        jac.add(g, end.body, rows);
                        jac.addTransposed(g, end.body, rows);
                      });
@@ -483,7 +499,7 @@ void System::constraintForce(const Eigen::VectorXd& q, const Eigen::VectorXd& la
       forEachBodyEnd(c,
                      [&](const PointRef& end, double sign)
                      {
-                       const PointKinematics k = pointKinematics(model_, end, q, zero);
+                       const PointKinematics k = pointKinematics(model_, end, q, zero, false);
                        out.segment(model_.bodies[k.body].offset, k.nq) += sign * k.jac.leftCols(k.nq).transpose() * w;
                      });
       continue;
@@ -593,7 +609,7 @@ double System::potentialEnergy(const Eigen::VectorXd& q, const ActuationValues& 
     for (const Body& b : model_.bodies)
       e -= b.mass * model_.gravity.dot(q.segment<3>(b.offset));
   for (const PointLoad& load : model_.loads)
-    e -= load.force.dot(pointKinematics(model_, load.point, q, zero).p);
+    e -= load.force.dot(pointPosition(model_, load.point, q));
   if (model_.contact.enabled)
     for (size_t i = 0; i < model_.checked_pairs.size(); ++i)
     {

@@ -33,8 +33,11 @@ struct PointKinematics
   int nq = 0;
 };
 
+/// rate_jacobian = false leaves dv_dq zero (not needed without velocity-dependent tangents).
 PointKinematics pointKinematics(const Model& model, const PointRef& point, const Eigen::VectorXd& q,
-                                const Eigen::VectorXd& qd);
+                                const Eigen::VectorXd& qd, bool rate_jacobian = true);
+/// The world position of a material point alone (as pointKinematics(...).p, without the Jacobians).
+Vec3 pointPosition(const Model& model, const PointRef& point, const Eigen::VectorXd& q);
 
 /// Actuation values of every actuator at one instant.
 using ActuationValues = std::vector<ActuationValue>;

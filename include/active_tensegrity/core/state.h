@@ -6,6 +6,7 @@
 
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
+#include <Eigen/LU>
 #include <Eigen/SparseLU>
 
 #include "active_tensegrity/core/mechanics.h"
@@ -54,27 +55,51 @@ struct Summary
   }
 };
 
-/// Sparse LU whose symbolic analysis (ordering, elimination tree) is reused while the pattern stays.
-/// A new pattern is detected by its size and number of stored entries: the Newton matrices
-/// (BlockSparseMatrix) only ever grow, so every change of their pattern changes that number.
+/// LU of the Newton matrices. Sparse (Eigen's SparseLU, COLAMD) with the symbolic analysis reused
+/// while the pattern stays; a new pattern is detected by its size and number of stored entries (the
+/// Newton matrices, BlockSparseMatrix, only ever grow, so every change of their pattern changes that
+/// number). With allowDense(), a small matrix whose sparse factors fill at least 40 % of a dense one
+/// (the tower: 200 unknowns, 53 %) is factorized densely instead (partial pivoting): the dense
+/// triangular solves are about twice as fast there (docs/benchmarks.md). The choice is made once per
+/// pattern, from the first sparse factorization.
 class SparseLinearSolver
 {
 public:
+  /// Lets the solver choose the dense LU for small, filled matrices (dynamics; statics keeps the sparse
+  /// factors its mechanism detection and damped Newton were validated with).
+  void allowDense(bool allow)
+  {
+    allow_dense_ = allow;
+  }
+  /// False when the matrix is singular: sparse, an exact zero pivot (round-off can hide a numerically
+  /// singular matrix); dense, a reciprocal condition estimate below 1e-14.
   bool factorize(const Eigen::SparseMatrix<double>& a);
   /// Symbolic analyses done so far (one per pattern seen).
   int analyses() const
   {
     return analyses_;
   }
+  bool dense() const
+  {
+    return dense_mode_;
+  }
   void solve(const Eigen::VectorXd& b, Eigen::VectorXd& x) const
   {
-    x = lu_.solve(b);
+    if (dense_mode_)
+      x = dense_lu_.solve(b);
+    else
+      x = lu_.solve(b);
   }
 
 private:
   Eigen::SparseLU<Eigen::SparseMatrix<double>, Eigen::COLAMDOrdering<int>> lu_;
   Eigen::Index analyzed_rows_ = -1, analyzed_nonzeros_ = -1;
   int analyses_ = 0;
+  bool allow_dense_ = false;
+  bool decided_ = false;  // whether dense_mode_ was chosen for the current pattern
+  bool dense_mode_ = false;
+  Eigen::MatrixXd dense_;
+  Eigen::PartialPivLU<Eigen::MatrixXd> dense_lu_;
 };
 
 }  // namespace active_tensegrity::core
