@@ -445,6 +445,8 @@ int runLattice(const std::vector<std::string>& args)
   LatticeOptions base;
   base.pairs = LatticePairs::kAuto;  // what a user writes; `all` lists the same pairs
   std::vector<LatticeCells> sizes = standardLatticeSizes();
+  std::vector<int> strut_counts;  // --struts
+  int width = 0;                  // --width: strips of this many cells across (0: nx <= ny <= 2 nx)
   std::vector<at::Override> overrides;
   int repeat = 3, max_struts = 0;
   bool print_scene = false;
@@ -462,10 +464,12 @@ int runLattice(const std::vector<std::string>& args)
     {
       sizes.clear();
       for (const std::string& s : splitList(value()))
-        sizes.push_back(latticeCellsFor(positiveInt("--struts", s)));
-      if (sizes.empty())
+        strut_counts.push_back(positiveInt("--struts", s));
+      if (strut_counts.empty())
         throw BadArgument("--struts: expected a list of strut counts, got ''");
     }
+    else if (a == "--width")
+      width = positiveInt(a, value());
     else if (a == "--max-struts")
       max_struts = positiveInt(a, value());
     else if (a == "--duration")
@@ -502,6 +506,26 @@ int runLattice(const std::vector<std::string>& args)
     }
     else
       throw BadArgument("unknown argument '" + a + "'");
+  }
+  if (strut_counts.empty() && width > 0)
+    for (const LatticeCells& cells : sizes)
+      strut_counts.push_back(cells.struts());
+  if (!strut_counts.empty())
+  {
+    sizes.clear();
+    for (int n : strut_counts)
+    {
+      if (width == 0)
+      {
+        sizes.push_back(latticeCellsFor(n));
+        continue;
+      }
+      // a strip: `width` cells across, as many along as give the nearest strut count (at least one)
+      LatticeCells cells;
+      cells.nx = width;
+      cells.ny = std::max(1, static_cast<int>(std::lround(n / (4.0 * width))));
+      sizes.push_back(cells);
+    }
   }
   if (max_struts > 0)
     sizes.erase(std::remove_if(sizes.begin(), sizes.end(),

@@ -125,12 +125,12 @@ const char* kUsage =
     "  stiffness from F, default the reference's peak force).\n"
     "       tensegrity_bench stress [--quick]\n"
     "  The stability stress cases (docs/benchmarks.md): one row per case; --quick runs the short ones.\n"
-    "       tensegrity_bench lattice [--struts a,b,..] [--max-struts N] [--duration S] [--repeat N]\n"
+    "       tensegrity_bench lattice [--struts a,b,..] [--width W] [--max-struts N] [--duration S] [--repeat N]\n"
     "                        [--pairs all|auto|near] [--csv FILE] [--set key=value]... [--print-scene]\n"
     "  Quadruplex-cell lattices (default about 10, 20, 50, 100, 200, 500 struts) run dynamically into contact:\n"
     "  us per step (median over N runs, default 3), its breakdown, sizes, and the fitted exponent vs struts;\n"
     "  pairs: auto (default: every pair sharing no node), all (the same pairs listed), near (same or adjacent cells);\n"
-    "  --print-scene prints the scenes (YAML) instead.\n";
+    "  --width W: strips W cells across instead of nearly square lattices; --print-scene prints the scenes (YAML).\n";
 
 using Clock = std::chrono::steady_clock;
 
