@@ -57,7 +57,7 @@ double maxStrutBendingStress(const Model& model, const Eigen::VectorXd& q, const
     for (int k = 0; k < 2; ++k)
     {
       const Body& b = model.bodies[bodies[k]];
-      const Vec3 axis = rotationMatrix(q.segment<4>(b.offset + 3)).col(2);
+      const Vec3 axis = bodyZAxis(q.segment<4>(b.offset + 3));
       const double s = std::clamp(axis.dot(points[k] - q.segment<3>(b.offset)) + 0.5 * b.length, 0.0, b.length);
       const Vec3 f = k == 0 ? c.force_on_a : Vec3(-c.force_on_a);
       loads[bodies[k]].emplace_back(s, f - axis * axis.dot(f));

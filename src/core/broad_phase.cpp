@@ -48,7 +48,7 @@ void BroadPhase::boxes(const Eigen::VectorXd& q, double margin) const
   {
     const Body& b = model_.bodies[struts_[k]];
     const Vec3 c = q.segment<3>(b.offset);
-    const Vec3 half = 0.5 * b.length * (rotationMatrix(q.segment<4>(b.offset + 3)) * Vec3::UnitZ());
+    const Vec3 half = 0.5 * b.length * bodyZAxis(q.segment<4>(b.offset + 3));
     const Vec3 grow = Vec3::Constant(b.radius() + margin) + half.cwiseAbs();
     boxes_[k].lo = c - grow;
     boxes_[k].hi = c + grow;

@@ -22,7 +22,7 @@ struct StrutAxis
   Vec3 centre, centre_rate;
   Vec4 theta, theta_rate;
   Vec3 axis;       // A(Theta) z (unit on the unit sphere)
-  Mat34 axis_jac;  // B_Theta(Theta, z) = d axis / d Theta
+  Mat34 axis_jac;  // B_Theta(Theta, z) = d axis / d Theta (only with rates; NaN for a geometry-only axis)
   double half_length = 0.0;
   double radius = 0.0;
 };
@@ -32,8 +32,16 @@ StrutAxis strutAxis(const Body& b, const Eigen::VectorXd& q, const Eigen::Vector
   StrutAxis s;
   s.centre = q.segment<3>(b.offset);
   s.theta = q.segment<4>(b.offset + 3);
-  s.axis = rotationMatrix(s.theta) * kAxis;
-  s.axis_jac = pointJacobianTheta(s.theta, kAxis);
+  if (qd)
+  {
+    s.axis_jac = pointJacobianTheta(s.theta, kAxis);
+    s.axis = 0.5 * (s.axis_jac * s.theta);  // A(Theta) z is quadratic in Theta: B_Theta Theta = 2 A z
+  }
+  else
+  {
+    s.axis = bodyZAxis(s.theta);
+    s.axis_jac.setConstant(std::numeric_limits<double>::quiet_NaN());
+  }
   s.half_length = 0.5 * b.length;
   s.radius = b.radius();
   if (qd)

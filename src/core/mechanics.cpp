@@ -321,8 +321,8 @@ int System::firstPassedThrough(const Eigen::VectorXd& q0, const Eigen::VectorXd&
   for (const Body& b : model_.bodies)
     if (b.kind == BodyKind::kStrut)
     {
-      const Vec3 z0 = rotationMatrix(q0.segment<4>(b.offset + 3)) * Vec3::UnitZ();
-      const Vec3 z1 = rotationMatrix(q1.segment<4>(b.offset + 3)) * Vec3::UnitZ();
+      const Vec3 z0 = bodyZAxis(q0.segment<4>(b.offset + 3));
+      const Vec3 z1 = bodyZAxis(q1.segment<4>(b.offset + 3));
       reach = std::max(reach,
                        (q1.segment<3>(b.offset) - q0.segment<3>(b.offset)).norm() + 0.5 * b.length * (z1 - z0).norm());
     }

@@ -53,6 +53,8 @@ TEST(Rotation, PointJacobianIsExactDerivativeForAnyTheta)
                     .isApprox(-2.0 * at::rotationMatrix(tu) * at::skew(u) * at::lMatrix(tu), 1e-12));
     // homogeneous quadratic: B(Theta) Theta = 2 A(Theta) u
     EXPECT_TRUE((at::pointJacobianTheta(th, u) * th).isApprox(2.0 * at::rotationMatrix(th) * u, 1e-12));
+    // the body z axis, written out, is the matrix's third column for any Theta
+    EXPECT_TRUE(at::bodyZAxis(th).isApprox(at::rotationMatrix(th).col(2), 1e-14));
   }
 }
 

@@ -21,6 +21,9 @@ Mat3 skew(const Vec3& a);
 /// A(Theta) = (e0^2 - e.e) I + 2 e e^T + 2 e0 skew(e); the exact quadratic form, valid for any Theta
 /// (orthonormal only when |Theta| = 1).
 Mat3 rotationMatrix(const Vec4& theta);
+/// rotationMatrix(theta) * (0, 0, 1): the body z axis in the world (the same quadratic form, so it is
+/// scaled by |theta|^2 when theta is not unit).
+Vec3 bodyZAxis(const Vec4& theta);
 
 /// L(Theta) = [-e, -skew(e) + e0 I] (3x4); body angular velocity omega_bar = 2 L(Theta) Theta_dot.
 Mat34 lMatrix(const Vec4& theta);
