@@ -46,6 +46,7 @@
 
 #include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/scene.h"
+#include "cli.h"
 
 namespace at = active_tensegrity::core;
 
@@ -277,15 +278,6 @@ struct BadArgument : std::invalid_argument
 {
   using std::invalid_argument::invalid_argument;
 };
-
-std::vector<std::string> splitList(const std::string& s)
-{
-  std::vector<std::string> out;
-  std::stringstream ss(s);
-  for (std::string item; std::getline(ss, item, ',');)
-    out.push_back(item);
-  return out;
-}
 
 int positiveInt(const std::string& option, const std::string& text)
 {

@@ -56,11 +56,13 @@
 #include "active_tensegrity/core/scene.h"
 #include "active_tensegrity/core/statics.h"
 #include "active_tensegrity/planning/folding_planner.h"
+#include "cli.h"
 #include "lattice.h"
 #include "mujoco_peer.h"
 
 namespace at = active_tensegrity::core;
 namespace tools = active_tensegrity::tools;
+using tools::splitList;
 
 // Heap allocations are counted by interposing glibc's malloc family in this executable (the core and
 // Eigen allocate through them; operator new does too): `steps` reports them per step.
@@ -367,15 +369,6 @@ int broadPhase(int repeat)
                 1e3 * setup, 1e6 * t_cand, 1e6 * t_direct, 1e6 * t_narrow, 1e6 * t_all);
   }
   return 0;
-}
-
-std::vector<std::string> splitList(const std::string& s)
-{
-  std::vector<std::string> out;
-  std::stringstream ss(s);
-  for (std::string item; std::getline(ss, item, ',');)
-    out.push_back(item);
-  return out;
 }
 
 /// "--option value" arguments, walked in order: option() takes the next one, value() the value after it.
