@@ -408,8 +408,48 @@ Summary DynamicsSolver::initialize(State& s, const ActuationLaw& law)
   const int nl = system_.nLambda();
   Eigen::VectorXd rhs(system_.size()), x, tmp;
 
+  factor_valid_ = false;  // linear_ now holds other matrices
+  // positions: the nearest (in the mass metric) to the given ones where Phi(q, t) = 0, by Newton on
+  // [M Phi_q^T; Phi_q 0] [dq; mu] = [0; -Phi] (a state assembled by hand, or a scene whose joints do not
+  // quite meet, would otherwise be pulled together by the first step's constraint forces)
+  const double phi_tol = 1e-12 * (1.0 + s.q.lpNorm<Eigen::Infinity>());
+  for (int it = 0;; ++it)
+  {
+    system_.constraintValue(s.q, s.u, phi_);
+    if (!phi_.allFinite())
+    {
+      sum.status = SolveStatus::kNonFinite;
+      sum.message = "non-finite constraint values at the initial state";
+      return sum;
+    }
+    if (phi_.lpNorm<Eigen::Infinity>() <= phi_tol)
+      break;
+    if (it == options_.max_iterations)
+    {
+      std::ostringstream msg;
+      msg << "the initial positions could not be brought onto the constraints (|Phi| = "
+          << phi_.lpNorm<Eigen::Infinity>() << " after " << it << " iterations)";
+      sum.status = SolveStatus::kMaxIterations;
+      sum.message = msg.str();
+      return sum;
+    }
+    jac_.setZero();
+    system_.addMass(s.q, jac_, 1.0);
+    system_.addConstraintJacobian(s.q, jac_);
+    if (!linear_.factorize(jac_.matrix()))
+    {
+      sum.status = SolveStatus::kSingular;
+      sum.message = "singular mass/constraint matrix at the initial state";
+      return sum;
+    }
+    rhs.head(nq).setZero();
+    rhs.tail(nl) = -phi_;
+    linear_.solve(rhs, x);
+    s.q += x.head(nq);
+    ++sum.iterations;
+  }
+
   // velocities: min |qd - qd0|_M subject to Phi_q qd = -Phi_t
-  factor_valid_ = false;  // linear_ now holds another matrix
   jac_.setZero();
   system_.addMass(s.q, jac_, 1.0);
   system_.addConstraintJacobian(s.q, jac_);

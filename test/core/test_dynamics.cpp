@@ -350,6 +350,34 @@ TEST(Dynamics, InitializationProjectsVelocitiesOntoTheConstraints)
   EXPECT_LT((solver.system().constraintJacobianDense(s.q) * s.qd - rhs).lpNorm<Eigen::Infinity>(), 1e-10);
 }
 
+TEST(Dynamics, InitializationProjectsPositionsOntoTheConstraints)
+{
+  Quadruplex quad;
+  DynamicsSolver solver(quad.model, options(Integrator::kNewmark, 1e-3));
+  const ActuationLaw law = constantLaw(1);
+  // a consistent start is left as it is
+  State s = quad.start(0.0, 9);
+  const Eigen::VectorXd q0 = s.q;
+  ASSERT_TRUE(solver.initialize(s, law).ok());
+  EXPECT_EQ(s.q, q0);
+  // a strut moved off its joints by 1 mm and a quaternion off the unit sphere: brought back, nearby
+  State bad = quad.start(0.0, 9);
+  const Body& b = quad.model.bodies[0];
+  bad.q.segment<3>(b.offset) += Vec3(1e-3, -5e-4, 2e-4);
+  bad.q.segment<4>(b.offset + 3) *= 1.001;
+  const Summary sum = solver.initialize(bad, law);
+  ASSERT_TRUE(sum.ok()) << sum.message;
+  EXPECT_GT(sum.iterations, 0);
+  Eigen::VectorXd phi;
+  solver.system().constraintValue(bad.q, bad.u, phi);
+  EXPECT_LT(phi.lpNorm<Eigen::Infinity>(), 1e-12 * (1.0 + bad.q.lpNorm<Eigen::Infinity>()));
+  EXPECT_NEAR(bad.q.segment<4>(b.offset + 3).norm(), 1.0, 1e-12);
+  EXPECT_LT((bad.q - q0).lpNorm<Eigen::Infinity>(), 2e-3);
+  // and the first step from it is an ordinary one (no violent correction)
+  ASSERT_TRUE(solver.step(bad, 1e-3, law).ok());
+  EXPECT_LT((bad.q - q0).lpNorm<Eigen::Infinity>(), 2e-3);
+}
+
 namespace
 {
 struct NewtonRun

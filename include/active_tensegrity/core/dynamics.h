@@ -47,8 +47,9 @@ class DynamicsSolver
 public:
   DynamicsSolver(const Model& model, const SolverOptions& options);
 
-  /// Makes velocities and accelerations of `state` consistent with the constraints at state.t
-  /// (velocities projected in the mass metric, accelerations and multipliers solved).
+  /// Makes `state` consistent with the constraints at state.t: positions and velocities projected
+  /// onto them in the mass metric (positions by Newton to |Phi| <= 1e-12 (1 + |q|)), accelerations and
+  /// multipliers solved.
   Summary initialize(State& state, const ActuationLaw& law);
   /// Advances by h (halving it on failure); on failure `state` is left at the last good instant.
   Summary step(State& state, double h, const ActuationLaw& law);
