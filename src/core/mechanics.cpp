@@ -24,34 +24,50 @@ Mat3 inertiaMatrix(const Body& b)
 }
 }  // namespace
 
-PointKinematics pointKinematics(const Model& model, const PointRef& point, const Eigen::VectorXd& q,
-                                const Eigen::VectorXd& qd, bool rate_jacobian)
+void pointKinematics(const Model& model, const PointRef& point, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                     bool rate_jacobian, PointKinematics& k)
 {
-  PointKinematics k;
+  // every member written once (no zero-filled temporary to copy: this runs for every cable point of
+  // every residual)
   k.body = point.body;
   if (point.body < 0)
   {
     k.p = point.local;
-    return k;
+    k.v.setZero();
+    k.jac.setZero();
+    k.dv_dq.setZero();
+    k.nq = 0;
+    return;
   }
   const Body& b = model.bodies[point.body];
   k.nq = b.nq;
   k.jac.leftCols<3>().setIdentity();
+  k.dv_dq.leftCols<3>().setZero();
   if (b.kind == BodyKind::kPointMass)
   {
     k.p = q.segment<3>(b.offset) + point.local;
     k.v = qd.segment<3>(b.offset);
-    return k;
+    k.jac.rightCols<4>().setZero();
+    k.dv_dq.rightCols<4>().setZero();
+    return;
   }
   const Vec4 th = thetaOf(q, b);
   const Vec4 thd = thetaOf(qd, b);
-  const Mat34 b_theta = pointJacobianTheta(th, point.local);
+  k.jac.rightCols<4>() = pointJacobianTheta(th, point.local);
   // R(Theta) u is quadratic in Theta, so B_Theta(Theta, u) Theta = 2 R(Theta) u (Euler)
-  k.p = q.segment<3>(b.offset) + 0.5 * (b_theta * th);
-  k.v = qd.segment<3>(b.offset) + b_theta * thd;
-  k.jac.rightCols<4>() = b_theta;
+  k.p = q.segment<3>(b.offset) + 0.5 * (k.jac.rightCols<4>() * th);
+  k.v = qd.segment<3>(b.offset) + k.jac.rightCols<4>() * thd;
   if (rate_jacobian)
     k.dv_dq.rightCols<4>() = pointJacobianTheta(thd, point.local);
+  else
+    k.dv_dq.rightCols<4>().setZero();
+}
+
+PointKinematics pointKinematics(const Model& model, const PointRef& point, const Eigen::VectorXd& q,
+                                const Eigen::VectorXd& qd, bool rate_jacobian)
+{
+  PointKinematics k;
+  pointKinematics(model, point, q, qd, rate_jacobian, k);
   return k;
 }
 
@@ -90,7 +106,7 @@ CableState evaluateCable(const Model& model, const Cable& cable, const Eigen::Ve
   std::array<double, Cable::kMaxPoints> seg;
   CableState s;
   for (int j = 0; j < m; ++j)
-    kin[j] = pointKinematics(model, cable.points[j], q, qd, jac != nullptr);
+    pointKinematics(model, cable.points[j], q, qd, jac != nullptr, kin[j]);
   for (int k = 0; k + 1 < m; ++k)
   {
     const Vec3 d = kin[k + 1].p - kin[k].p;

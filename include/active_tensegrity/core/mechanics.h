@@ -36,6 +36,9 @@ struct PointKinematics
 /// rate_jacobian = false leaves dv_dq zero (not needed without velocity-dependent tangents).
 PointKinematics pointKinematics(const Model& model, const PointRef& point, const Eigen::VectorXd& q,
                                 const Eigen::VectorXd& qd, bool rate_jacobian = true);
+/// The same into `out` (every member written), for loops that keep their kinematics in a buffer.
+void pointKinematics(const Model& model, const PointRef& point, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                     bool rate_jacobian, PointKinematics& out);
 /// The world position of a material point alone (as pointKinematics(...).p, without the Jacobians).
 Vec3 pointPosition(const Model& model, const PointRef& point, const Eigen::VectorXd& q);
 
