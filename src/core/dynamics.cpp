@@ -409,6 +409,18 @@ Summary DynamicsSolver::initialize(State& s, const ActuationLaw& law)
   Eigen::VectorXd rhs(system_.size()), x, tmp;
 
   factor_valid_ = false;  // linear_ now holds other matrices
+  // [M Phi_q^T; Phi_q 0] at s.q into linear_ (false, with sum's status set, when singular)
+  const auto factorizeMassAndConstraints = [&]
+  {
+    jac_.setZero();
+    system_.addMass(s.q, jac_, 1.0);
+    system_.addConstraintJacobian(s.q, jac_);
+    if (linear_.factorize(jac_.matrix()))
+      return true;
+    sum.status = SolveStatus::kSingular;
+    sum.message = "singular mass/constraint matrix at the initial state";
+    return false;
+  };
   // positions: the nearest (in the mass metric) to the given ones where Phi(q, t) = 0, by Newton on
   // [M Phi_q^T; Phi_q 0] [dq; mu] = [0; -Phi] (a state assembled by hand, or a scene whose joints do not
   // quite meet, would otherwise be pulled together by the first step's constraint forces)
@@ -433,15 +445,8 @@ Summary DynamicsSolver::initialize(State& s, const ActuationLaw& law)
       sum.message = msg.str();
       return sum;
     }
-    jac_.setZero();
-    system_.addMass(s.q, jac_, 1.0);
-    system_.addConstraintJacobian(s.q, jac_);
-    if (!linear_.factorize(jac_.matrix()))
-    {
-      sum.status = SolveStatus::kSingular;
-      sum.message = "singular mass/constraint matrix at the initial state";
+    if (!factorizeMassAndConstraints())
       return sum;
-    }
     rhs.head(nq).setZero();
     rhs.tail(nl) = -phi_;
     linear_.solve(rhs, x);
@@ -450,15 +455,8 @@ Summary DynamicsSolver::initialize(State& s, const ActuationLaw& law)
   }
 
   // velocities: min |qd - qd0|_M subject to Phi_q qd = -Phi_t
-  jac_.setZero();
-  system_.addMass(s.q, jac_, 1.0);
-  system_.addConstraintJacobian(s.q, jac_);
-  if (!linear_.factorize(jac_.matrix()))
-  {
-    sum.status = SolveStatus::kSingular;
-    sum.message = "singular mass/constraint matrix at the initial state";
+  if (!factorizeMassAndConstraints())
     return sum;
-  }
   const Eigen::VectorXd no_velocity = Eigen::VectorXd::Zero(nq);
   system_.inertialForce(s.q, no_velocity, s.qd, inertial_, nullptr, 0.0, 0.0, 0.0);  // M qd
   rhs.head(nq) = inertial_;
