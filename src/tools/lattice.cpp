@@ -273,46 +273,6 @@ namespace
 {
 using Clock = std::chrono::steady_clock;
 
-/// A bad command-line argument: reported with its name and value, exit status 2.
-struct BadArgument : std::invalid_argument
-{
-  using std::invalid_argument::invalid_argument;
-};
-
-int positiveInt(const std::string& option, const std::string& text)
-{
-  size_t used = 0;
-  int v = 0;
-  try
-  {
-    v = std::stoi(text, &used);
-  }
-  catch (const std::exception&)
-  {
-    used = 0;
-  }
-  if (used != text.size() || text.empty() || v < 1)
-    throw BadArgument(option + ": expected a positive integer, got '" + text + "'");
-  return v;
-}
-
-double positiveNumber(const std::string& option, const std::string& text)
-{
-  size_t used = 0;
-  double v = 0.0;
-  try
-  {
-    v = std::stod(text, &used);
-  }
-  catch (const std::exception&)
-  {
-    used = 0;
-  }
-  if (used != text.size() || text.empty() || !std::isfinite(v) || v <= 0.0)
-    throw BadArgument(option + ": expected a positive number, got '" + text + "'");
-  return v;
-}
-
 struct Row
 {
   LatticeCells cells;
@@ -456,18 +416,18 @@ int runLattice(const std::vector<std::string>& args)
     {
       sizes.clear();
       for (const std::string& s : splitList(value()))
-        strut_counts.push_back(positiveInt("--struts", s));
+        strut_counts.push_back(parsePositive<int>("--struts", s));
       if (strut_counts.empty())
         throw BadArgument("--struts: expected a list of strut counts, got ''");
     }
     else if (a == "--width")
-      width = positiveInt(a, value());
+      width = parsePositive<int>(a, value());
     else if (a == "--max-struts")
-      max_struts = positiveInt(a, value());
+      max_struts = parsePositive<int>(a, value());
     else if (a == "--duration")
-      base.duration = positiveNumber(a, value());
+      base.duration = parsePositive<double>(a, value());
     else if (a == "--repeat")
-      repeat = positiveInt(a, value());
+      repeat = parsePositive<int>(a, value());
     else if (a == "--pairs")
     {
       const std::string v = value();

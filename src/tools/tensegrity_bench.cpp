@@ -1,4 +1,6 @@
 // tensegrity_bench: measurements that print numbers (never timed tests).
+// Exit status: 0; 1 when a scene is refused or a run throws; 2 on bad arguments (usage, or an option value
+// that is not what it must be, named with the value); 3 when a measured run does not converge.
 //   tensegrity_bench steps SCENE [--set key=value]... [--repeat N] [--peaks]
 // runs the scene's analysis N times and prints the wall time per solver step (median and minimum
 // over the runs), Newton iterations per step, for dynamic runs the real-time factor, and where the
@@ -625,13 +627,7 @@ int workPrecision(const std::string& scene, const std::vector<std::string>& args
   {
     const std::string a = in.option();
     const auto next = [&]() { return in.value(a); };
-    const auto numbers = [&]()
-    {
-      std::vector<double> v;
-      for (const std::string& x : splitList(next()))
-        v.push_back(std::stod(x));
-      return v;
-    };
+    const auto numbers = [&]() { return tools::parsePositiveList(a, next()); };
     if (a == "--set")
       overrides.push_back(at::parseOverride(next()));
     else if (a == "--dts")
@@ -641,16 +637,15 @@ int workPrecision(const std::string& scene, const std::vector<std::string>& args
     else if (a == "--schemes")
       names = splitList(next());
     else if (a == "--ref-dt")
-      ref_dt = std::stod(next());
+      ref_dt = tools::parsePositive<double>(a, next());
     else if (a == "--csv")
       csv_path = next();
     else if (a == "--mujoco-dts")
-      for (const std::string& v : splitList(next()))
-        mujoco_dts.push_back(std::stod(v));
+      mujoco_dts = numbers();
     else if (a == "--mujoco-integrators")
       mujoco_integrators = splitList(next());
     else if (a == "--mujoco-contact-force")
-      mujoco_force = std::stod(next());
+      mujoco_force = tools::parsePositive<double>(a, next());
     else
       throw std::invalid_argument("unknown argument '" + a + "'");
   }
@@ -956,6 +951,11 @@ int main(int argc, char** argv)
     if (command == "broad-phase")
       return broadPhase(repeat);
     return steps(scene, overrides, repeat, peaks);
+  }
+  catch (const tools::BadArgument& e)
+  {
+    std::cerr << "tensegrity_bench: " << e.what() << "\n";
+    return 2;
   }
   catch (const std::exception& e)
   {

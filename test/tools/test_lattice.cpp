@@ -12,6 +12,7 @@
 #include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/scene.h"
 #include "active_tensegrity/core/statics.h"
+#include "cli.h"
 #include "lattice.h"
 
 namespace at = active_tensegrity::core;
@@ -257,3 +258,25 @@ TEST(LatticeCommand, PrintsARowPerSizeAndTheExponent)
   EXPECT_NE(out.find("fitted exponent"), std::string::npos) << out;
 }
 #endif
+
+TEST(CommandLine, PositiveNumbersAreReadWholeOrRefusedByNameAndValue)
+{
+  namespace tl = active_tensegrity::tools;
+  EXPECT_EQ(tl::parsePositive<int>("--repeat", "3"), 3);
+  EXPECT_DOUBLE_EQ(tl::parsePositive<double>("--ref-dt", "2.5e-5"), 2.5e-5);
+  EXPECT_EQ(tl::parsePositiveList("--dts", "1e-3,5e-4"), (std::vector<double>{ 1e-3, 5e-4 }));
+  for (const char* bad : { "", "x", "1e-3x", "-1", "0", "nan", "inf" })
+    EXPECT_THROW(tl::parsePositive<double>("--dts", bad), tl::BadArgument) << bad;
+  for (const char* bad : { "3.5", "0", "-2", "2x" })
+    EXPECT_THROW(tl::parsePositive<int>("--repeat", bad), tl::BadArgument) << bad;
+  EXPECT_THROW(tl::parsePositiveList("--dts", "1e-3,,5e-4"), tl::BadArgument);
+  try
+  {
+    tl::parsePositive<double>("--mujoco-dts", "1e-3x");
+    FAIL() << "no exception";
+  }
+  catch (const tl::BadArgument& e)
+  {
+    EXPECT_EQ(std::string(e.what()), "--mujoco-dts: expected a positive number, got '1e-3x'");
+  }
+}
