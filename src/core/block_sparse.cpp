@@ -15,7 +15,6 @@ void BlockSparseMatrix::init(const std::vector<int>& group_sizes, const std::vec
   for (size_t g = 0; g < sizes_.size(); ++g)
     all.emplace_back(static_cast<int>(g), static_cast<int>(g));
   build(std::move(all));
-  pattern_version_ = 0;
 }
 
 void BlockSparseMatrix::build(std::vector<std::pair<int, int>> all)
@@ -73,7 +72,6 @@ void BlockSparseMatrix::reserve(int gr, int gc)
       matrix_.valuePtr()[k] = it.value();
     }
   }
-  ++pattern_version_;
 }
 
 void BlockSparseMatrix::setZero()

@@ -779,7 +779,8 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
           if (model.bodies[i].kind == BodyKind::kStrut && model.bodies[j].kind == BodyKind::kStrut)
             pairs.emplace_back(static_cast<int>(i), static_cast<int>(j));
       // struts that end at a common node: every two of them, not only those the loader joined directly
-      // (at a node where k struts meet it joins the first to each other one)
+      // (at a node where k struts meet it joins the first to each other one; joints are made at nodes
+      // only, so this covers every jointed pair)
       std::set<std::pair<int, int>> jointed;
       for (const auto& entry : nodes)
       {
@@ -789,9 +790,6 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
             if (at[x].body >= 0 && at[y].body >= 0 && at[x].body != at[y].body)
               jointed.insert({ std::min(at[x].body, at[y].body), std::max(at[x].body, at[y].body) });
       }
-      for (const Constraint& c : model.constraints)
-        if (c.kind == Constraint::Kind::kPoints && c.a.body >= 0 && c.b.body >= 0)
-          jointed.insert({ std::min(c.a.body, c.b.body), std::max(c.a.body, c.b.body) });
       std::vector<std::pair<int, int>> kept;
       for (const auto& p : pairs)
         if (!jointed.count(p))

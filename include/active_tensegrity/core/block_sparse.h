@@ -1,7 +1,8 @@
 /// A sparse matrix made of dense blocks. Its pattern is set once for the blocks a scene always has
 /// (bodies coupled by cables, joints and constraint rows), so that values are added in place and the
 /// symbolic factorization is reused; blocks that only some states need (a strut pair in contact) are
-/// added when first needed by reserve(), and the pattern then only grows (patternVersion() counts it).
+/// added when first needed by reserve(), and the pattern then only grows (so its number of stored
+/// entries tells a changed pattern: SparseLinearSolver analyzes it again then).
 #pragma once
 
 #include <cstdint>
@@ -30,11 +31,6 @@ public:
   /// Makes (gr, gc) and (gc, gr) part of the pattern, keeping every value; a no-op when they are.
   /// Growing costs a rebuild of the matrix (O(non-zeros)); it happens once per block.
   void reserve(int gr, int gc);
-  /// Incremented whenever reserve() changes the pattern (a factorization must then be analyzed again).
-  int patternVersion() const
-  {
-    return pattern_version_;
-  }
 
   const Eigen::SparseMatrix<double>& matrix() const
   {
@@ -62,7 +58,6 @@ private:
 
   std::vector<int> sizes_, offsets_;
   std::vector<std::pair<int, int>> blocks_;  // the pattern's blocks (diagonal ones included), sorted
-  int pattern_version_ = 0;
   Eigen::SparseMatrix<double> matrix_;
   // for each block, the index in valuePtr() of its first row in each of its columns (contiguous rows)
   std::unordered_map<std::uint64_t, int> block_index_;
