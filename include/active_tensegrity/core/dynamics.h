@@ -127,11 +127,20 @@ private:
   double theta_ = 0.0;                 // largest contraction rate seen with it
   bool theta_known_ = false;           // whether theta_ was measured (two increments above round-off)
   double mass_scale_ = 0.0;            // largest body mass (kg): the multipliers' round-off scale
-  // the last accepted step, for the first guess of the next one: accelerations and multipliers at its
-  // start, its length, and where it ended (the next step extrapolates only from that state)
-  bool extrapolate_ = false;
-  Eigen::VectorXd last_start_qdd_, last_start_lambda_, last_end_qdd_;
-  double last_h_ = 0.0, last_end_t_ = 0.0;
+  // the first guess of a step: accelerations and multipliers extrapolated by the polynomial through the
+  // ends of the last accepted steps; history_[0] is where the last step started, history_[1] where the one
+  // before started; history_count_ of them belong to the chain ending at last_end_ (0: no extrapolation)
+  struct Sample
+  {
+    double t = 0.0;
+    Eigen::VectorXd qdd, lambda;
+  };
+  void firstGuess(const State& s, double h, Eigen::VectorXd& qdd, Eigen::VectorXd& lambda) const;
+  void rememberStep(const State& start, double t_end, const Eigen::VectorXd& qdd_end);
+  Sample history_[2];
+  int history_count_ = 0;
+  double last_end_t_ = 0.0;
+  Eigen::VectorXd last_end_qdd_;
 };
 
 }  // namespace active_tensegrity::core
