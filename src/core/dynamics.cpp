@@ -32,6 +32,8 @@ DynamicsSolver::DynamicsSolver(const Model& model, const SolverOptions& options)
   : system_(model), options_(options), jac_(system_.makeMatrix())
 {
   linear_.allowDense(true);
+  // the approximate symmetric factorization is for modified Newton only (its contraction test)
+  linear_.allowSymmetric(options.reuse_jacobian);
   for (const Body& b : model.bodies)
     mass_scale_ = std::max(mass_scale_, b.mass);
   if (options.integrator == Integrator::kNewmark)
@@ -280,6 +282,8 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law)
         factorized = linear_.factorize(jac_.matrix());
       }
       ++timings_.factorizations;
+      if (linear_.symmetric())
+        ++timings_.symmetric_factorizations;
       timings_.analyses = linear_.analyses();
       factor_valid_ = factorized;
       if (!factorized)
@@ -328,7 +332,12 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law)
       theta_ = std::max(theta_, scaled / previous);
       theta_known_ = true;
       if (theta_ > 0.5)
+      {
         rebuild = true;
+        // slow already with the matrix of this step: the symmetric approximation is too rough here
+        if (built_this_step && !linear_.exact())
+          linear_.refuseSymmetric();
+      }
     }
     previous = scaled;
     // Full Newton, or a matrix built in this step (Newton's own step): the increment is the error
@@ -338,7 +347,7 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law)
     // (Hairer & Wanner, Solving ODEs II, Sec. IV.8), theta the largest rate measured with this matrix
     // (floored at kRateFloor); it is accepted only while the iteration contracts (theta <= 0.5), and its
     // multipliers must settle too: an older matrix can shrink the q increments while they are still off.
-    const bool newton_step = !reuse || built_this_step;
+    const bool newton_step = !reuse || (built_this_step && linear_.exact());
     const double rate = std::max(theta_, kRateFloor);
     const double left = newton_step ? q_part : (theta_known_ ? rate / (1.0 - rate) : 1.0) * scaled;
     if (left <= 1.0 && !(reuse && theta_ > 0.5))
@@ -435,14 +444,18 @@ Summary DynamicsSolver::initialize(State& s, const ActuationLaw& law)
   const int nl = system_.nLambda();
   Eigen::VectorXd rhs(system_.size()), x, tmp;
 
-  factor_valid_ = false;  // linear_ now holds other matrices
-  // [M Phi_q^T; Phi_q 0] at s.q into linear_ (false, with sum's status set, when singular)
+  factor_valid_ = false;  // jac_ now holds other matrices
+  // these solves must be exact (linear_ may hold the approximate symmetric factorization of modified
+  // Newton): a solver of their own, dense or sparse LU
+  SparseLinearSolver exact;
+  exact.allowDense(true);
+  // [M Phi_q^T; Phi_q 0] at s.q into `exact` (false, with sum's status set, when singular)
   const auto factorizeMassAndConstraints = [&]
   {
     jac_.setZero();
     system_.addMass(s.q, jac_, 1.0);
     system_.addConstraintJacobian(s.q, jac_);
-    if (linear_.factorize(jac_.matrix()))
+    if (exact.factorize(jac_.matrix()))
       return true;
     sum.status = SolveStatus::kSingular;
     sum.message = "singular mass/constraint matrix at the initial state";
@@ -476,7 +489,7 @@ Summary DynamicsSolver::initialize(State& s, const ActuationLaw& law)
       return sum;
     rhs.head(nq).setZero();
     rhs.tail(nl) = -phi_;
-    linear_.solve(rhs, x);
+    exact.solve(rhs, x);
     s.q += x.head(nq);
     ++sum.iterations;
   }
@@ -489,7 +502,7 @@ Summary DynamicsSolver::initialize(State& s, const ActuationLaw& law)
   rhs.head(nq) = inertial_;
   system_.velocityRhs(s.u, tmp);
   rhs.tail(nl) = tmp;
-  linear_.solve(rhs, x);
+  exact.solve(rhs, x);
   s.qd = x.head(nq);
 
   // accelerations and multipliers: M qdd + Phi_q^T lambda = F - Qv,  Phi_q qdd = gamma
@@ -502,7 +515,7 @@ Summary DynamicsSolver::initialize(State& s, const ActuationLaw& law)
   rhs.head(nq) = applied_ - inertial_;
   system_.accelerationRhs(s.q, s.qd, s.u, tmp);
   rhs.tail(nl) = tmp;
-  linear_.solve(rhs, x);
+  exact.solve(rhs, x);
   s.qdd = x.head(nq);
   s.acc = s.qdd;
   s.lambda = x.tail(nl);

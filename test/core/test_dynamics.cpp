@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <random>
+#include <set>
 
 #include <gtest/gtest.h>
 
@@ -591,4 +592,113 @@ TEST(LinearSolver, DenseAndSparseFactorsSolveAlikeAndTellASingularMatrix)
   s.makeCompressed();
   EXPECT_FALSE(dense.factorize(s));
   EXPECT_TRUE(dense.dense());
+}
+
+namespace
+{
+/// A saddle-point matrix [A Phi^T; Phi 0] like the Newton matrices: A (nq x nq) banded, diagonally
+/// dominant and symmetric plus `skew` times an antisymmetric band; Phi (nl x nq) with six entries a row,
+/// one of them a unit entry on a coordinate of the row's own (well-conditioned, as joint rows are).
+Eigen::SparseMatrix<double> saddleMatrix(int nq, int nl, double skew, std::mt19937& rng)
+{
+  std::uniform_real_distribution<double> value(-1.0, 1.0);
+  std::vector<Eigen::Triplet<double>> e;
+  for (int i = 0; i < nq; ++i)
+  {
+    e.emplace_back(i, i, 20.0 + value(rng));
+    for (int k = 1; k <= 3 && i + k < nq; ++k)
+    {
+      const double s = value(rng);
+      const double w = skew * value(rng);
+      e.emplace_back(i, i + k, s + w);
+      e.emplace_back(i + k, i, s - w);
+    }
+  }
+  std::uniform_int_distribution<int> column(0, nq - 1);
+  for (int r = 0; r < nl; ++r)
+  {
+    // a coordinate of its own (3 r) with a unit entry, as a joint row has, and five others: well posed
+    std::set<int> cols;
+    while (cols.size() < 5)
+    {
+      const int c = column(rng);
+      if (c % 3 != 0 || c / 3 >= nl)
+        cols.insert(c);
+    }
+    e.emplace_back(nq + r, 3 * r, 1.0);
+    e.emplace_back(3 * r, nq + r, 1.0);
+    for (int c : cols)
+    {
+      const double v = 0.3 * value(rng);
+      e.emplace_back(nq + r, c, v);
+      e.emplace_back(c, nq + r, v);
+    }
+  }
+  Eigen::SparseMatrix<double> a(nq + nl, nq + nl);
+  a.setFromTriplets(e.begin(), e.end());
+  a.makeCompressed();
+  return a;
+}
+}  // namespace
+
+TEST(LinearSolver, SymmetricFactorsOfALargeSaddleMatrixContractAndAStronglySkewedOneGetsTheLu)
+{
+  // above 400 unknowns, allowSymmetric gives the LDL^T of the symmetric part with the constraint block
+  // shifted: an approximation (exact() false) that iterative refinement, as modified Newton does, takes
+  // to the LU's solution at a small rate. A matrix with an antisymmetric part 50 times larger fails the
+  // check (its multipliers would come out off by about their size) and gets the sparse LU (exact); the
+  // LDL^T is tried again after four factorizations.
+  std::mt19937 rng(5);
+  const Eigen::SparseMatrix<double> a = saddleMatrix(450, 150, 0.02, rng);
+  Eigen::VectorXd b = Eigen::VectorXd::Random(a.rows());
+  SparseLinearSolver lu, sym;
+  sym.allowSymmetric(true);
+  ASSERT_TRUE(lu.factorize(a));
+  ASSERT_TRUE(sym.factorize(a));
+  EXPECT_TRUE(sym.symmetric());
+  EXPECT_FALSE(sym.exact());
+  EXPECT_TRUE(lu.exact());
+  Eigen::VectorXd exact, x = Eigen::VectorXd::Zero(a.rows()), dx;
+  lu.solve(b, exact);
+  ASSERT_LT((a * exact - b).lpNorm<Eigen::Infinity>(), 1e-10);
+  double previous = 0.0, worst_rate = 0.0;
+  for (int k = 0; k < 12; ++k)
+  {
+    sym.solve(b - a * x, dx);
+    x += dx;
+    const double size = dx.lpNorm<Eigen::Infinity>();
+    if (k > 0 && size > 1e-12)
+      worst_rate = std::max(worst_rate, size / previous);
+    previous = size;
+  }
+  EXPECT_GT(worst_rate, 0.0);  // an approximation: refinement has work to do
+  EXPECT_LT(worst_rate, 0.5);
+  EXPECT_LT((x - exact).lpNorm<Eigen::Infinity>(), 1e-9);
+
+  // skewed: refused, the LU instead, and the solve is exact
+  std::mt19937 same_a(11), same_b(11);  // one pattern, two skews
+  const Eigen::SparseMatrix<double> skewed = saddleMatrix(450, 150, 1.0, same_a);
+  const Eigen::SparseMatrix<double> mild = saddleMatrix(450, 150, 0.02, same_b);
+  ASSERT_EQ(mild.nonZeros(), skewed.nonZeros());
+  SparseLinearSolver fallback;
+  fallback.allowSymmetric(true);
+  ASSERT_TRUE(fallback.factorize(skewed));
+  EXPECT_FALSE(fallback.symmetric());
+  EXPECT_TRUE(fallback.exact());
+  EXPECT_EQ(fallback.symmetricRefusals(), 1);
+  fallback.solve(b, x);
+  EXPECT_LT((skewed * x - b).lpNorm<Eigen::Infinity>(), 1e-10);
+  for (int k = 0; k < 4; ++k)
+    ASSERT_TRUE(fallback.factorize(skewed));  // the pause: LU without trying
+  EXPECT_EQ(fallback.symmetricRefusals(), 5);
+  // the same pattern with a mild skew again: after the pause the LDL^T is tried and kept
+  ASSERT_TRUE(fallback.factorize(mild));
+  EXPECT_TRUE(fallback.symmetric());
+  EXPECT_EQ(fallback.symmetricRefusals(), 5);
+
+  // below 400 unknowns the choice is never made
+  SparseLinearSolver small;
+  small.allowSymmetric(true);
+  ASSERT_TRUE(small.factorize(saddleMatrix(200, 60, 0.02, rng)));
+  EXPECT_FALSE(small.symmetric());
 }
