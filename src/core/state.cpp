@@ -95,11 +95,8 @@ bool SparseLinearSolver::factorizeSymmetric(const Eigen::SparseMatrix<double>& a
   sym_ = a.transpose();
   sym_ += a;
   sym_ *= 0.5;
-  double diag = 0.0, phi = 0.0;
-  for (Eigen::Index k = 0; k < sym_.outerSize(); ++k)
-    for (Eigen::SparseMatrix<double>::InnerIterator it(sym_, k); it; ++it)
-      if (it.row() == it.col())
-        diag = std::max(diag, std::abs(it.value()));
+  const double diag = sym_.diagonal().cwiseAbs().maxCoeff();
+  double phi = 0.0;
   for (int r : no_diagonal_)
     for (Eigen::SparseMatrix<double>::InnerIterator it(sym_, r); it; ++it)
       phi = std::max(phi, std::abs(it.value()));
