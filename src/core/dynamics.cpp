@@ -198,13 +198,18 @@ void setTouching(std::vector<bool>& t, const State& s)
 }
 }  // namespace
 
+bool DynamicsSolver::continuesHistory(const State& s) const
+{
+  return history_count_ > 0 && s.t == last_end_t_ && s.qdd == last_end_qdd_;
+}
+
 void DynamicsSolver::firstGuess(const State& s, double h, Eigen::VectorXd& qdd, Eigen::VectorXd& lambda) const
 {
   // Only from the state the last accepted step ended in (a step cut retries from it too). Through the
   // last three step ends the guess is quadratic: in smooth motion at the tower's dt it is 10-30 times
   // closer to the solution than the linear one, and modified Newton then often accepts its first iterate
   // (docs/physics.md). Through two it is linear, else constant.
-  const int n = s.t == last_end_t_ && s.qdd == last_end_qdd_ ? history_count_ : 0;
+  const int n = continuesHistory(s) ? history_count_ : 0;
   if (n == 0)
   {
     qdd = s.qdd;
@@ -232,7 +237,7 @@ void DynamicsSolver::firstGuess(const State& s, double h, Eigen::VectorXd& qdd, 
 
 void DynamicsSolver::rememberStep(const State& start, double t_end, const Eigen::VectorXd& qdd_end)
 {
-  const bool chained = history_count_ > 0 && start.t == last_end_t_ && start.qdd == last_end_qdd_;
+  const bool chained = continuesHistory(start);
   if (chained)
     std::swap(history_[0], history_[1]);  // (swaps the vectors' buffers: no allocation)
   history_[0].t = start.t;

@@ -153,7 +153,6 @@ bool SparseLinearSolver::factorize(const Eigen::SparseMatrix<double>& a)
   }
   if (symmetric_pattern_)
   {
-    decided_ = true;
     if (symmetric_skip_ > 0)
       --symmetric_skip_;
     else if (factorizeSymmetric(a))
@@ -172,12 +171,10 @@ bool SparseLinearSolver::factorize(const Eigen::SparseMatrix<double>& a)
   {
     if (!factorizeSparse(a))
       return false;
-    if (decided_ || !allow_dense_)
-    {
-      decided_ = true;
-      return true;
-    }
+    const bool choose = !decided_ && allow_dense_;  // the first factorization of this pattern decides
     decided_ = true;
+    if (!choose)
+      return true;
     const double n = static_cast<double>(a.rows());
     const bool dense = a.rows() <= kDenseMaxRows && static_cast<double>(lu_.nnzL() + lu_.nnzU()) >= kDenseFill * n * n;
     if (!dense)

@@ -136,6 +136,8 @@ private:
     double t = 0.0;
     Eigen::VectorXd qdd, lambda;
   };
+  /// Whether `s` is where the last accepted step ended (the history extends to it).
+  bool continuesHistory(const State& s) const;
   void firstGuess(const State& s, double h, Eigen::VectorXd& qdd, Eigen::VectorXd& lambda) const;
   void rememberStep(const State& start, double t_end, const Eigen::VectorXd& qdd_end);
   Sample history_[2];

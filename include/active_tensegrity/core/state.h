@@ -111,7 +111,7 @@ public:
   {
     return symmetric_refusals_;
   }
-  /// The next kSymmetricSkip factorizations use the sparse LU (modified Newton: the symmetric factors
+  /// The next four factorizations use the sparse LU (modified Newton: the symmetric factors
   /// of this step contracted too slowly although they passed their check).
   void refuseSymmetric();
   /// Whether solve() solves the factorized matrix to round-off (false: the symmetric approximation).
@@ -155,7 +155,7 @@ private:
   int analyses_ = 0;
   bool allow_dense_ = false;
   bool allow_symmetric_ = false;
-  bool decided_ = false;  // whether method_ was chosen for the current pattern
+  bool decided_ = false;  // whether the dense LU was chosen or not for the current pattern
   Method method_ = Method::kSparse;
   Eigen::MatrixXd dense_;
   Eigen::PartialPivLU<Eigen::MatrixXd> dense_lu_;
