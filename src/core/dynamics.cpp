@@ -32,8 +32,8 @@ DynamicsSolver::DynamicsSolver(const Model& model, const SolverOptions& options)
   : system_(model), options_(options), jac_(system_.makeMatrix())
 {
   linear_.allowDense(true);
-  // the approximate symmetric factorization is for modified Newton only (its contraction test)
-  linear_.allowSymmetric(options.reuse_jacobian);
+  // the approximate static-pivot factorization is for modified Newton only (its contraction test)
+  linear_.allowStaticPivot(options.reuse_jacobian);
   for (const Body& b : model.bodies)
     mass_scale_ = std::max(mass_scale_, b.mass);
   if (options.integrator == Integrator::kNewmark)
@@ -287,8 +287,8 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law)
         factorized = linear_.factorize(jac_.matrix());
       }
       ++timings_.factorizations;
-      if (linear_.symmetric())
-        ++timings_.symmetric_factorizations;
+      if (linear_.staticPivot())
+        ++timings_.static_pivot_factorizations;
       timings_.analyses = linear_.analyses();
       factor_valid_ = factorized;
       if (!factorized)
@@ -339,9 +339,9 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law)
       if (theta_ > 0.5)
       {
         rebuild = true;
-        // slow already with the matrix of this step: the symmetric approximation is too rough here
+        // slow already with the matrix of this step: the static-pivot approximation is too rough here
         if (built_this_step && !linear_.exact())
-          linear_.refuseSymmetric();
+          linear_.refuseStaticPivot();
       }
     }
     previous = scaled;
@@ -450,7 +450,7 @@ Summary DynamicsSolver::initialize(State& s, const ActuationLaw& law)
   Eigen::VectorXd rhs(system_.size()), x, tmp;
 
   factor_valid_ = false;  // jac_ now holds other matrices
-  // these solves must be exact (linear_ may hold the approximate symmetric factorization of modified
+  // these solves must be exact (linear_ may hold the approximate static-pivot factorization of modified
   // Newton): a solver of their own, dense or sparse LU
   SparseLinearSolver exact;
   exact.allowDense(true);

@@ -43,21 +43,21 @@ namespace
 constexpr Eigen::Index kDenseMaxRows = 400;
 /// ... and when the sparse factors fill at least this share of a dense matrix.
 constexpr double kDenseFill = 0.4;
-/// The symmetric LDL^T above this many unknowns.
-constexpr Eigen::Index kSymmetricMinRows = 400;
+/// The static-pivot LU above this many unknowns.
+constexpr Eigen::Index kStaticPivotMinRows = 400;
 /// delta = kShift phi^2 / d: phi the largest entry of the constraint rows, d the largest diagonal entry
-/// (the Schur complement of the constraint block is about phi^2 / d at its smallest). Measured on the
-/// Newton matrix of the 504-strut lattice (phi^2 / d about 0.04): delta from 1e-12 to 1e-6 gives the
-/// same contraction (1e-4 .. 1e-2, set by the antisymmetric part); 1e-14 lets the pivots grow until the
-/// solve is useless (rate 0.3), and 0.04 itself makes the approximation useless (the check fails).
-/// kShift sits in the middle of that band on a log scale.
-constexpr double kShift = 1e-8;
-/// After a refused LDL^T, this many factorizations use the sparse LU before the LDL^T is tried again.
-constexpr int kSymmetricSkip = 4;
-/// The check of each LDL^T: A 1 solved must come back within this of 1, the largest contraction rate
-/// modified Newton keeps a matrix for. On the 504-strut lattice 0.5 rather than 0.1 took 9.96 to 9.30 ms
-/// per step (fewer LU factorizations in the steel impacts, the same Newton iterations).
-constexpr double kSymmetricCheck = 0.5;
+/// (the Schur complement of the constraint block is about phi^2 / d at its smallest). Two effects pull
+/// against each other, measured on the Newton matrix of the 504-strut lattice (phi^2 / d about 0.04),
+/// as the contraction rate of refinement with these factors: the shift itself (rate about 0.8 kShift)
+/// and the pivots' growth as delta shrinks (relative residual of the factors' own solve 2e-12, 2e-10,
+/// 2e-8, 2e-6 at kShift 1e-2, 1e-4, 1e-6, 1e-8). At 1e-6 both are about 1e-5: modified Newton cannot
+/// tell these factors from exact ones.
+constexpr double kShift = 1e-6;
+/// After a refused factorization, this many factorizations use the sparse LU before it is tried again.
+constexpr int kStaticPivotSkip = 4;
+/// The check of each factorization: A 1 solved must come back within this of 1, the largest
+/// contraction rate modified Newton keeps a matrix for (measured: about 3e-6 on the lattices).
+constexpr double kStaticPivotCheck = 0.5;
 
 bool hasSymmetricPattern(const Eigen::SparseMatrix<double>& a)
 {
@@ -89,16 +89,13 @@ bool SparseLinearSolver::factorizeSparse(const Eigen::SparseMatrix<double>& a)
   return lu_.info() == Eigen::Success;
 }
 
-bool SparseLinearSolver::factorizeSymmetric(const Eigen::SparseMatrix<double>& a)
+bool SparseLinearSolver::factorizeStaticPivot(const Eigen::SparseMatrix<double>& a)
 {
   const Eigen::Index n = a.rows();
-  sym_ = a.transpose();
-  sym_ += a;
-  sym_ *= 0.5;
-  const double diag = sym_.diagonal().cwiseAbs().maxCoeff();
+  const double diag = a.diagonal().cwiseAbs().maxCoeff();
   double phi = 0.0;
-  for (int r : no_diagonal_)
-    for (Eigen::SparseMatrix<double>::InnerIterator it(sym_, r); it; ++it)
+  for (int r : no_diagonal_)  // (column r holds the row's entries: the pattern is symmetric)
+    for (Eigen::SparseMatrix<double>::InnerIterator it(a, r); it; ++it)
       phi = std::max(phi, std::abs(it.value()));
   if (!(diag > 0.0) || !(phi > 0.0) || !std::isfinite(diag) || !std::isfinite(phi))
     return false;
@@ -109,25 +106,24 @@ bool SparseLinearSolver::factorizeSymmetric(const Eigen::SparseMatrix<double>& a
     shift.emplace_back(r, r, -delta);
   shift_.resize(n, n);
   shift_.setFromTriplets(shift.begin(), shift.end());
-  sym_ += shift_;
-  if (!ldlt_analyzed_)
+  shifted_ = a + shift_;
+  if (!static_analyzed_)
   {
-    ldlt_.analyzePattern(sym_);
-    ldlt_analyzed_ = true;
+    static_lu_.analyzePattern(shifted_);
+    static_analyzed_ = true;
     ++analyses_;
   }
-  ldlt_.factorize(sym_);
-  if (ldlt_.info() != Eigen::Success || !ldlt_.vectorD().allFinite() || (ldlt_.vectorD().array() == 0.0).any())
+  if (!static_lu_.factorize(shifted_))
     return false;
   check_b_ = a * Eigen::VectorXd::Ones(n);
-  check_x_ = ldlt_.solve(check_b_);
-  return check_x_.allFinite() && (check_x_.array() - 1.0).abs().maxCoeff() <= kSymmetricCheck;
+  static_lu_.solve(check_b_, check_x_);
+  return check_x_.allFinite() && (check_x_.array() - 1.0).abs().maxCoeff() <= kStaticPivotCheck;
 }
 
-void SparseLinearSolver::refuseSymmetric()
+void SparseLinearSolver::refuseStaticPivot()
 {
-  if (symmetric_pattern_)
-    symmetric_skip_ = kSymmetricSkip;
+  if (static_pivot_pattern_)
+    static_pivot_skip_ = kStaticPivotSkip;
 }
 
 bool SparseLinearSolver::factorize(const Eigen::SparseMatrix<double>& a)
@@ -137,34 +133,34 @@ bool SparseLinearSolver::factorize(const Eigen::SparseMatrix<double>& a)
     analyzed_rows_ = a.rows();
     analyzed_nonzeros_ = a.nonZeros();
     lu_analyzed_ = false;
-    ldlt_analyzed_ = false;
+    static_analyzed_ = false;
     decided_ = false;
-    symmetric_pattern_ = false;
-    symmetric_skip_ = 0;
+    static_pivot_pattern_ = false;
+    static_pivot_skip_ = 0;
     method_ = Method::kSparse;
-    if (allow_symmetric_ && a.rows() > kSymmetricMinRows && hasSymmetricPattern(a))
+    if (allow_static_pivot_ && a.rows() > kStaticPivotMinRows && hasSymmetricPattern(a))
     {
       no_diagonal_.clear();
       for (Eigen::Index k = 0; k < a.outerSize(); ++k)
         if (a.coeff(k, k) == 0.0)
           no_diagonal_.push_back(static_cast<int>(k));
-      symmetric_pattern_ = !no_diagonal_.empty();
+      static_pivot_pattern_ = !no_diagonal_.empty();
     }
   }
-  if (symmetric_pattern_)
+  if (static_pivot_pattern_)
   {
-    if (symmetric_skip_ > 0)
-      --symmetric_skip_;
-    else if (factorizeSymmetric(a))
+    if (static_pivot_skip_ > 0)
+      --static_pivot_skip_;
+    else if (factorizeStaticPivot(a))
     {
-      method_ = Method::kSymmetric;
+      method_ = Method::kStaticPivot;
       return true;
     }
     else
-      symmetric_skip_ = kSymmetricSkip;
-    // refused: the sparse LU, for this and the next kSymmetricSkip factorizations
+      static_pivot_skip_ = kStaticPivotSkip;
+    // refused: the sparse LU, for this and the next kStaticPivotSkip factorizations
     method_ = Method::kSparse;
-    ++symmetric_refusals_;
+    ++static_pivot_refusals_;
     return factorizeSparse(a);
   }
   if (method_ == Method::kSparse)

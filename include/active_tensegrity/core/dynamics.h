@@ -21,13 +21,13 @@ struct StepTimings
   double forces = 0.0;         // inertial and applied (cable, spring, actuator) forces with their tangents
   double contact = 0.0;        // broad phase, impact speeds, contact forces and tangents, pass-through check
   double constraints = 0.0;    // constraint values, forces, Jacobian and lambda-Hessian
-  double factorization = 0.0;  // numeric factorization of the Newton matrix (LU, dense LU or LDL^T)
+  double factorization = 0.0;  // numeric factorization of the Newton matrix (sparse, dense or static-pivot LU)
   double solve = 0.0;          // triangular solves
   double total = 0.0;          // whole step() calls (the rest is vector work and bookkeeping)
   long newton_iterations = 0;
   long factorizations = 0;
   long analyses = 0;  // symbolic analyses of the Newton matrix (its pattern grows when a new pair touches)
-  long symmetric_factorizations = 0;  // of them, the approximate symmetric LDL^T (SparseLinearSolver)
+  long static_pivot_factorizations = 0;  // of them, the approximate static-pivot LU (SparseLinearSolver)
 };
 
 /// What an accepted step tells a step-size controller (AdaptiveStepper).

@@ -7,10 +7,10 @@
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
 #include <Eigen/LU>
-#include <Eigen/SparseCholesky>
 #include <Eigen/SparseLU>
 
 #include "active_tensegrity/core/mechanics.h"
+#include "active_tensegrity/core/static_lu.h"
 
 namespace active_tensegrity::core
 {
@@ -63,17 +63,16 @@ struct Summary
 /// - allowDense(): a small matrix whose sparse factors fill at least 40 % of a dense one (the tower:
 ///   200 unknowns, 53 %) is factorized densely instead (partial pivoting): the dense triangular solves
 ///   are about twice as fast there (docs/benchmarks.md).
-/// - allowSymmetric(): a large matrix (over 400 unknowns) with a symmetric pattern gets an *approximate*
-///   factorization: the LDL^T of its symmetric part, with -delta on the diagonal of the rows that have none
-///   (the constraint rows), in Eigen's SimplicialLDLT with an AMD ordering. The constraint block made
-///   negative definite, the matrix is quasi-definite, whose LDL^T exists for any symmetric ordering
-///   (Vanderbei 1995), so the ordering can follow the fill alone; sparse LU's row pivoting cannot. On a
-///   lattice of 504 struts its factors hold 7x fewer entries than the LU's (docs/benchmarks.md). It solves
-///   the matrix only approximately (the antisymmetric part of friction and the quaternion terms, delta):
-///   for modified Newton only, whose contraction test sees the difference (exact() is false). Each
+/// - allowStaticPivot(): a large matrix (over 400 unknowns) with a symmetric pattern is factorized
+///   without pivoting (StaticPivotLU) in an AMD order, after -delta is put on the diagonal of the rows
+///   that have none (the constraint rows), delta about 1e-6 of the constraint block's Schur complement.
+///   Shifted so, the Newton matrix is nearly quasi-definite (a dominant positive block, a negative one),
+///   whose pivots stay away from zero in any symmetric order, so the order can follow the fill alone;
+///   sparse LU's row pivoting spoils it. On a lattice of 504 struts the factors hold 7x fewer entries than
+///   the LU's (docs/benchmarks.md). The shift makes the solve approximate (a contraction of about 1e-5
+///   when refined): for modified Newton only, whose contraction test sees it (exact() is false). Each
 ///   factorization is checked on one right-hand side (A 1 must come back within 0.5 of 1); a matrix
-///   failing that, or a failed LDL^T, gets the sparse LU, and so do the next four factorizations
-///   (steel impacts on the lattices: a large antisymmetric friction and damping tangent for a while).
+///   failing that, or with a zero pivot, gets the sparse LU, and so do the next four factorizations.
 class SparseLinearSolver
 {
 public:
@@ -83,16 +82,16 @@ public:
   {
     allow_dense_ = allow;
   }
-  /// Lets the solver choose the approximate symmetric LDL^T for large matrices (modified Newton).
-  void allowSymmetric(bool allow)
+  /// Lets the solver choose the static-pivot LU for large matrices (modified Newton).
+  void allowStaticPivot(bool allow)
   {
-    allow_symmetric_ = allow;
+    allow_static_pivot_ = allow;
   }
   /// False when the matrix is singular: sparse, an exact zero pivot (round-off can hide a numerically
-  /// singular matrix); dense, a reciprocal condition estimate below 1e-14; symmetric, a zero pivot in
-  /// both the LDL^T and the sparse LU.
+  /// singular matrix); dense, a reciprocal condition estimate below 1e-14; static pivots, a zero pivot
+  /// in both them and the sparse LU.
   bool factorize(const Eigen::SparseMatrix<double>& a);
-  /// Symbolic analyses done so far (one per pattern seen, two when the LDL^T was refused).
+  /// Symbolic analyses done so far (one per pattern seen, two when the static pivots were refused).
   int analyses() const
   {
     return analyses_;
@@ -101,23 +100,23 @@ public:
   {
     return method_ == Method::kDense;
   }
-  bool symmetric() const
+  bool staticPivot() const
   {
-    return method_ == Method::kSymmetric;
+    return method_ == Method::kStaticPivot;
   }
-  /// Factorizations that fell back from the symmetric LDL^T to the sparse LU (refused, or in the
+  /// Factorizations that fell back from the static pivots to the sparse LU (refused, or in the
   /// pause after a refusal).
-  int symmetricRefusals() const
+  int staticPivotRefusals() const
   {
-    return symmetric_refusals_;
+    return static_pivot_refusals_;
   }
-  /// The next four factorizations use the sparse LU (modified Newton: the symmetric factors
+  /// The next four factorizations use the sparse LU (modified Newton: the static-pivot factors
   /// of this step contracted too slowly although they passed their check).
-  void refuseSymmetric();
-  /// Whether solve() solves the factorized matrix to round-off (false: the symmetric approximation).
+  void refuseStaticPivot();
+  /// Whether solve() solves the factorized matrix to round-off (false: the shifted static pivots).
   bool exact() const
   {
-    return method_ != Method::kSymmetric;
+    return method_ != Method::kStaticPivot;
   }
   void solve(const Eigen::VectorXd& b, Eigen::VectorXd& x) const
   {
@@ -126,8 +125,8 @@ public:
       case Method::kDense:
         x = dense_lu_.solve(b);
         break;
-      case Method::kSymmetric:
-        x = ldlt_.solve(b);
+      case Method::kStaticPivot:
+        static_lu_.solve(b, x);
         break;
       case Method::kSparse:
         x = lu_.solve(b);
@@ -140,28 +139,28 @@ private:
   {
     kSparse,
     kDense,
-    kSymmetric
+    kStaticPivot
   };
   bool factorizeSparse(const Eigen::SparseMatrix<double>& a);
-  bool factorizeSymmetric(const Eigen::SparseMatrix<double>& a);
+  bool factorizeStaticPivot(const Eigen::SparseMatrix<double>& a);
 
   Eigen::SparseLU<Eigen::SparseMatrix<double>, Eigen::COLAMDOrdering<int>> lu_;
-  bool lu_analyzed_ = false;        // lu_ holds the analysis of the current pattern
-  bool ldlt_analyzed_ = false;      // ldlt_ likewise
-  bool symmetric_pattern_ = false;  // the current pattern gets the symmetric LDL^T when it passes
-  int symmetric_skip_ = 0;          // factorizations left before the LDL^T is tried again
-  int symmetric_refusals_ = 0;
+  bool lu_analyzed_ = false;           // lu_ holds the analysis of the current pattern
+  bool static_analyzed_ = false;       // static_lu_ likewise
+  bool static_pivot_pattern_ = false;  // the current pattern gets the static pivots when they pass
+  int static_pivot_skip_ = 0;          // factorizations left before they are tried again
+  int static_pivot_refusals_ = 0;
   Eigen::Index analyzed_rows_ = -1, analyzed_nonzeros_ = -1;
   int analyses_ = 0;
   bool allow_dense_ = false;
-  bool allow_symmetric_ = false;
+  bool allow_static_pivot_ = false;
   bool decided_ = false;  // whether the dense LU was chosen or not for the current pattern
   Method method_ = Method::kSparse;
   Eigen::MatrixXd dense_;
   Eigen::PartialPivLU<Eigen::MatrixXd> dense_lu_;
-  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>, Eigen::Lower, Eigen::AMDOrdering<int>> ldlt_;
-  Eigen::SparseMatrix<double> sym_, shift_;  // the symmetric part and -delta on the constraint rows
-  std::vector<int> no_diagonal_;             // rows of the pattern without a diagonal entry
+  StaticPivotLU static_lu_;
+  Eigen::SparseMatrix<double> shift_, shifted_;  // -delta on the constraint rows; the matrix plus it
+  std::vector<int> no_diagonal_;                 // rows of the pattern without a diagonal entry
   Eigen::VectorXd check_b_, check_x_;
 };
 
