@@ -337,12 +337,7 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law)
       theta_ = std::max(theta_, scaled / previous);
       theta_known_ = true;
       if (theta_ > 0.5)
-      {
         rebuild = true;
-        // slow already with the matrix of this step: the static-pivot approximation is too rough here
-        if (built_this_step && !linear_.exact())
-          linear_.refuseStaticPivot();
-      }
     }
     previous = scaled;
     // Full Newton, or a matrix built in this step (Newton's own step): the increment is the error

@@ -120,12 +120,6 @@ bool SparseLinearSolver::factorizeStaticPivot(const Eigen::SparseMatrix<double>&
   return check_x_.allFinite() && (check_x_.array() - 1.0).abs().maxCoeff() <= kStaticPivotCheck;
 }
 
-void SparseLinearSolver::refuseStaticPivot()
-{
-  if (static_pivot_pattern_)
-    static_pivot_skip_ = kStaticPivotSkip;
-}
-
 bool SparseLinearSolver::factorize(const Eigen::SparseMatrix<double>& a)
 {
   if (a.rows() != analyzed_rows_ || a.nonZeros() != analyzed_nonzeros_)

@@ -110,9 +110,6 @@ public:
   {
     return static_pivot_refusals_;
   }
-  /// The next four factorizations use the sparse LU (modified Newton: the static-pivot factors
-  /// of this step contracted too slowly although they passed their check).
-  void refuseStaticPivot();
   /// Whether solve() solves the factorized matrix to round-off (false: the shifted static pivots).
   bool exact() const
   {
