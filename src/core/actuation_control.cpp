@@ -1,5 +1,7 @@
 #include "active_tensegrity/core/actuation_control.h"
 
+#include "active_tensegrity/core/text.h"
+
 #include <algorithm>
 #include <cmath>
 #include <set>
@@ -14,10 +16,6 @@ constexpr double kStartTolerance = 1e-6;
 // values may leave [min, max] by this much (m) through rounding
 constexpr double kBoundSlack = 1e-9;
 
-std::string quoted(const std::string& s)
-{
-  return "'" + s + "'";
-}
 }  // namespace
 
 // ---------------------------------------------------------------------------------------------
@@ -267,7 +265,7 @@ std::string ActuationController::checkNames(const std::vector<std::string>& name
       for (const std::string& known : names_)
         msg << " " << known;
       msg << ")";
-      return msg.str();
+      return clipped(msg.str(), 4 * kMaxEchoLength);
     }
     if (!seen.insert(n).second)
       return "actuator " + quoted(n) + " named twice";

@@ -31,7 +31,9 @@ Summary AdaptiveStepper::advanceTo(State& s, double t_end, const ActuationLaw& l
     const double remaining = t_end - s.t;
     double h = std::min(h_, options_.dt_max);
     bool clipped = false;
-    if (remaining <= 1.05 * h)
+    // (what is left is never split into pieces below dt_min: the callers' stops are dt_min apart at least)
+    const bool indivisible = 0.5 * remaining < options_.dt_min;
+    if (remaining <= 1.05 * h || indivisible)
     {
       clipped = remaining < h;
       h = remaining;
@@ -41,7 +43,7 @@ Summary AdaptiveStepper::advanceTo(State& s, double t_end, const ActuationLaw& l
       h = 0.5 * remaining;
       clipped = true;
     }
-    const bool at_min = h <= options_.dt_min * (1.0 + 1e-9);
+    const bool at_min = h <= options_.dt_min * (1.0 + 1e-9) || (indivisible && h == remaining);
     trial_ = s;
     const Summary r = solver_.tryStep(trial_, h, law);
     total.iterations += r.iterations;

@@ -221,13 +221,21 @@ void runAdaptive(const Model& model, DynamicsSolver& solver, const ActuationLaw&
 {
   const AnalysisSettings& an = model.analysis;
   const double eps = 1e-12 * std::max(1.0, an.duration);
+  const double interval = an.output_interval;  // 0 or at least dt_min (the loader sees to it)
+  // no step is shorter than dt_min: a breakpoint closer than that to an output time, the end or the
+  // breakpoint before is left to the step that lands there (the actuation law is evaluated exactly anyway)
+  const double gap = model.solver.dt_min;
   std::vector<double> stops;
   for (double t : an.schedule.breakpoints())
-    if (t > eps && t < an.duration - eps)
+  {
+    const double to_output = interval > 0.0 ? std::abs(t - interval * std::round(t / interval)) : gap;
+    if (t >= gap && t <= an.duration - gap && to_output >= gap && (stops.empty() || t - stops.back() >= gap))
       stops.push_back(t);
-  const double interval = an.output_interval;
+  }
   const int every = interval > 0.0 ? 0 : 1;  // no output interval: a row per accepted step
-  double next_output = interval > 0.0 ? std::min(interval, an.duration) : an.duration;
+  // an output time closer than dt_min to the end is the end's
+  const auto output_after = [&](double t) { return t > an.duration - gap ? an.duration : t; };
+  double next_output = interval > 0.0 ? output_after(std::min(interval, an.duration)) : an.duration;
   size_t next_stop = 0;
   AdaptiveStepper stepper(solver, model.solver);
   long accepted = 0;
@@ -275,7 +283,7 @@ void runAdaptive(const Model& model, DynamicsSolver& solver, const ActuationLaw&
     {
       timed([&]() { on_output(state); });
       ++result.steps;
-      next_output += interval > 0.0 ? interval : an.duration;
+      next_output = output_after(next_output + (interval > 0.0 ? interval : an.duration));
     }
   }
   result.adaptive = stepper.stats();
@@ -346,12 +354,15 @@ RunResult runAnalysis(const Model& model, const std::function<void(const State&)
     else
     {
       const double dt = model.solver.dt;
-      const long n_steps = std::lround(std::ceil(an.duration / dt - 1e-9));
+      long n_steps = std::lround(std::ceil(an.duration / dt - 1e-9));
+      // a last step shorter than dt_min is merged into the one before
+      if (n_steps > 1 && an.duration - static_cast<double>(n_steps - 1) * dt < model.solver.dt_min)
+        --n_steps;
       const double interval = an.output_interval > 0.0 ? an.output_interval : dt;
       double next_output = interval;
       for (long k = 1; k <= n_steps; ++k)
       {
-        const double t_target = std::min(an.duration, k * dt);
+        const double t_target = k == n_steps ? an.duration : std::min(an.duration, k * dt);
         const Summary s = solver.step(state, t_target - state.t, law);
         result.summary.iterations += s.iterations;
         result.summary.step_cuts += s.step_cuts;

@@ -389,36 +389,47 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law)
   return sum;
 }
 
-Summary DynamicsSolver::advance(State& s, double h, const ActuationLaw& law, int depth)
+Summary DynamicsSolver::advance(State& s, double h, const ActuationLaw& law)
 {
-  Summary sum = attempt(s, h, law);  // changes s only when it succeeds
-  if (sum.ok())
-    return sum;
-  if (depth >= options_.max_step_cuts)
-  {
-    sum.crossings_refused = sum.status == SolveStatus::kPassedThrough ? 1 : 0;
-    std::ostringstream msg;
-    msg << sum.message << " at t = " << s.t << " s with the step cut to " << h << " s";
-    sum.message = msg.str();
-    return sum;
-  }
+  // A failed step is halved, and each half may be halved again, up to max_step_cuts levels: the
+  // recursion of halving, kept as a binary counter. `depth` is the level of the current piece (its
+  // length is h / 2^depth) and `done` the pieces of that length behind it; two finished pieces of one
+  // level make one of the level above.
   Summary total;
-  total.iterations = sum.iterations;
-  total.step_cuts = 1;
-  total.crossings_refused = sum.status == SolveStatus::kPassedThrough ? 1 : 0;
-  for (int half = 0; half < 2; ++half)
+  int depth = 0;
+  long long done = 0;
+  while (depth > 0 || done == 0)
   {
-    const Summary part = advance(s, 0.5 * h, law, depth + 1);
-    total.iterations += part.iterations;
-    total.step_cuts += part.step_cuts;
-    total.crossings_refused += part.crossings_refused;
-    total.residual = part.residual;
-    if (!part.ok())
+    const double piece = std::ldexp(h, -depth);
+    const Summary sum = attempt(s, piece, law);  // changes s only when it succeeds
+    total.iterations += sum.iterations;
+    total.residual = sum.residual;
+    if (sum.ok())
     {
-      total.status = part.status;
-      total.message = part.message;
+      ++done;
+      while (depth > 0 && done % 2 == 0)
+      {
+        done /= 2;
+        --depth;
+      }
+      continue;
+    }
+    if (sum.status == SolveStatus::kPassedThrough)
+      ++total.crossings_refused;
+    const bool below_min = 0.5 * piece < options_.dt_min;
+    if (depth >= options_.max_step_cuts || below_min)
+    {
+      std::ostringstream msg;
+      msg << sum.message << " at t = " << s.t << " s with the step cut to " << piece << " s";
+      if (below_min && depth < options_.max_step_cuts)
+        msg << " (a further cut would go below solver.dt_min = " << options_.dt_min << " s)";
+      total.status = sum.status;
+      total.message = msg.str();
       return total;
     }
+    ++total.step_cuts;
+    ++depth;
+    done *= 2;
   }
   return total;
 }
@@ -432,7 +443,7 @@ Summary DynamicsSolver::tryStep(State& s, double h, const ActuationLaw& law)
 Summary DynamicsSolver::step(State& s, double h, const ActuationLaw& law)
 {
   const ScopeTimer timer(timings_.total);
-  return advance(s, h, law, 0);
+  return advance(s, h, law);
 }
 
 Summary DynamicsSolver::initialize(State& s, const ActuationLaw& law)

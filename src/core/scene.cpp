@@ -1,7 +1,5 @@
 #include "active_tensegrity/core/scene.h"
 
-#include "active_tensegrity/core/contact.h"
-
 #include <algorithm>
 #include <cmath>
 #include <fstream>
@@ -9,58 +7,98 @@
 #include <map>
 #include <set>
 #include <sstream>
+#include <unordered_map>
+#include <unordered_set>
 
 #include <yaml-cpp/yaml.h>
 
+#include "active_tensegrity/core/contact.h"
 #include "active_tensegrity/core/mechanics.h"
+#include "active_tensegrity/core/text.h"
 
 namespace active_tensegrity::core
 {
 namespace
 {
+// bounds of the integer keys and of the work a scene may ask for
+constexpr int kMaxNewtonIterations = 1000;
+constexpr int kMaxStepCuts = 60;  // halvings: 2^-60 of a step is far below any dt_min
+constexpr int kMaxJacobianAge = 1000000;
+constexpr int kMaxLoadSteps = 10000000;
+constexpr double kMaxTimeSteps = 1e8;    // duration / dt (fixed steps), duration / output_interval
+constexpr double kMaxOutputSteps = 1e8;  // output rows of a dynamic run
+
 std::string show(const YAML::Node& n)
 {
   if (!n.IsDefined() || n.IsNull())
     return "null";
   if (n.IsScalar())
-    return "'" + n.Scalar() + "'";
+    return quoted(n.Scalar());
   YAML::Emitter e;
   e << YAML::Flow << n;
-  return e.c_str();
+  return clipped(e.c_str());
 }
 
+std::string showVec3(const Vec3& v)
+{
+  return "[" + shortestNumber(v.x()) + ", " + shortestNumber(v.y()) + ", " + shortestNumber(v.z()) + "]";
+}
+
+/// Where a scene's text came from: the file, and the command-line overrides applied on top of it. A
+/// key an override set (or a key under it, or one it created on its way) is blamed on that override.
+struct Source
+{
+  std::string file;
+  std::vector<Override> overrides;
+
+  std::string blame(const std::string& key) const
+  {
+    const auto under = [](const std::string& a, const std::string& b)
+    { return a.size() > b.size() && a.compare(0, b.size(), b) == 0 && a[b.size()] == '.'; };
+    for (auto o = overrides.rbegin(); o != overrides.rend(); ++o)
+      if (!key.empty() && (o->key == key || under(key, o->key) || under(o->key, key)))
+        return "--set " + clipped(o->key + "=" + o->value) + " (on " + file + ")";
+    return file;
+  }
+  [[noreturn]] void fail(const std::string& key, const std::string& what) const
+  {
+    throw SceneError(blame(key), key, what);
+  }
+};
+
 /// A YAML map read under a dotted path; remembers which keys were used so that unknown ones
-/// (typos) are refused.
+/// (typos) are refused. Keys are indexed once, so a lookup does not scan the map.
 class Reader
 {
 public:
-  Reader(const YAML::Node& node, std::string path, std::string file)
-    : node_(node), path_(std::move(path)), file_(std::move(file))
+  Reader(const YAML::Node& node, std::string path, const Source& source)
+    : node_(node), path_(std::move(path)), source_(&source)
   {
     if (!node_.IsMap())
       fail(path_, "expected a map, got " + show(node_));
+    for (const auto& kv : node_)
+    {
+      if (!kv.first.IsScalar())
+        fail(path_, "expected names as keys, got the key " + show(kv.first));
+      const std::string& k = kv.first.Scalar();
+      if (index_.emplace(k, kv.second).second)
+        order_.push_back(k);
+    }
   }
 
   [[noreturn]] void fail(const std::string& key, const std::string& what) const
   {
-    throw SceneError(file_, key, what);
+    source_->fail(key, what);
   }
   std::string key(const std::string& k) const
   {
     return path_.empty() ? k : path_ + "." + k;
   }
-  const std::string& file() const
-  {
-    return file_;
-  }
-  const std::string& path() const
-  {
-    return path_;
-  }
 
   bool has(const std::string& k) const
   {
-    return node_[k].IsDefined() && !node_[k].IsNull();
+    const auto it = index_.find(k);
+    return it != index_.end() && !it->second.IsNull();
   }
   /// Marks an optional key as known (so an explicit null there is accepted).
   void optional(const std::string& k)
@@ -71,10 +109,14 @@ public:
   YAML::Node raw(const std::string& k)
   {
     used_.insert(k);
-    const YAML::Node n = node_[k];
-    if (!n.IsDefined() || n.IsNull())
+    if (!has(k))
       fail(key(k), "missing required key");
-    return n;
+    return index_.at(k);
+  }
+  YAML::Node get(const std::string& k) const
+  {
+    const auto it = index_.find(k);
+    return it == index_.end() ? YAML::Node() : it->second;
   }
 
   double number(const std::string& k)
@@ -90,7 +132,7 @@ public:
   {
     const double v = number(k);
     if (!(v > 0.0))
-      fail(key(k), "must be positive, got " + show(node_[k]));
+      fail(key(k), "must be positive, got " + show(get(k)));
     return v;
   }
   double positive(const std::string& k, double fallback)
@@ -104,37 +146,30 @@ public:
       return fallback;
     const double v = number(k);
     if (v < 0.0)
-      fail(key(k), "must not be negative, got " + show(node_[k]));
+      fail(key(k), "must not be negative, got " + show(get(k)));
     return v;
   }
-  int integer(const std::string& k, int fallback, int min_value)
+  int integer(const std::string& k, int fallback, int min_value, int max_value)
   {
     used_.insert(k);
     if (!has(k))
       return fallback;
-    const YAML::Node n = node_[k];
-    int v = 0;
-    try
-    {
-      const double d = toNumber(n, key(k));
-      if (d != std::floor(d) || std::abs(d) > 1e9)
-        fail(key(k), "expected an integer, got " + show(n));
-      v = static_cast<int>(d);
-    }
-    catch (const YAML::Exception&)
-    {
+    const YAML::Node n = get(k);
+    const double d = toNumber(n, key(k));
+    if (d != std::floor(d))
       fail(key(k), "expected an integer, got " + show(n));
-    }
-    if (v < min_value)
+    if (d < min_value)
       fail(key(k), "must be at least " + std::to_string(min_value) + ", got " + show(n));
-    return v;
+    if (d > max_value)
+      fail(key(k), "must be at most " + std::to_string(max_value) + ", got " + show(n));
+    return static_cast<int>(d);
   }
   bool boolean(const std::string& k, bool fallback)
   {
     used_.insert(k);
     if (!has(k))
       return fallback;
-    const YAML::Node n = node_[k];
+    const YAML::Node n = get(k);
     try
     {
       if (n.IsScalar())
@@ -181,26 +216,20 @@ public:
   }
   Reader map(const std::string& k)
   {
-    return Reader(raw(k), key(k), file_);
+    return Reader(raw(k), key(k), *source_);
   }
 
   /// Keys of this map in file order.
-  std::vector<std::string> keys() const
+  const std::vector<std::string>& keys() const
   {
-    std::vector<std::string> out;
-    for (const auto& kv : node_)
-      out.push_back(kv.first.Scalar());
-    return out;
+    return order_;
   }
 
   void finish() const
   {
-    for (const auto& kv : node_)
-    {
-      const std::string k = kv.first.Scalar();
+    for (const std::string& k : order_)
       if (!used_.count(k))
         fail(key(k), "unknown key (misspelt, or not valid here)");
-    }
   }
 
   double toNumber(const YAML::Node& n, const std::string& full_key) const
@@ -235,9 +264,41 @@ public:
 private:
   YAML::Node node_;
   std::string path_;
-  std::string file_;
+  const Source* source_;
+  std::unordered_map<std::string, YAML::Node> index_;
+  std::vector<std::string> order_;
   std::set<std::string> used_;
 };
+
+/// Refuses a key that appears twice in one map, anywhere in the tree, with both lines (yaml-cpp keeps
+/// both and reads the first). Nodes reached twice through YAML aliases are checked once.
+void refuseRepeatedKeys(const YAML::Node& n, const std::string& path, const std::string& file,
+                        std::unordered_set<int>& seen)
+{
+  const int pos = n.Mark().pos;
+  if (pos >= 0 && !seen.insert(pos).second)
+    return;
+  if (n.IsMap())
+  {
+    std::unordered_map<std::string, int> lines;
+    for (const auto& kv : n)
+    {
+      if (!kv.first.IsScalar())
+        continue;  // refused by name where the map is read
+      const std::string& k = kv.first.Scalar();
+      const std::string full = path.empty() ? k : path + "." + k;
+      const auto [it, fresh] = lines.emplace(k, kv.first.Mark().line + 1);
+      if (!fresh)
+        throw SceneError(file, clipped(full),
+                         "repeated key: given on line " + std::to_string(it->second) + " and again on line " +
+                             std::to_string(kv.first.Mark().line + 1));
+      refuseRepeatedKeys(kv.second, full, file, seen);
+    }
+  }
+  else if (n.IsSequence())
+    for (size_t i = 0; i < n.size(); ++i)
+      refuseRepeatedKeys(n[i], path + "[" + std::to_string(i) + "]", file, seen);
+}
 
 struct Material
 {
@@ -248,49 +309,65 @@ struct Material
 
 struct NodeInfo
 {
+  std::string name;
   Vec3 position;
   bool fixed = false;
   double mass = 0.0;
   std::vector<PointRef> attachments;
 };
 
-void checkName(const Reader& r, const std::string& key, const std::string& name, std::set<std::string>& names,
-               const std::string& what)
+/// Builds a Model from a scene's YAML tree, one reader per section, each validating what it reads.
+class SceneBuilder
 {
-  if (!names.insert(name).second)
-    r.fail(key, "duplicate " + what + " name '" + name + "'");
-}
+public:
+  SceneBuilder(const YAML::Node& root, const Source& source) : source_(source), root_(root, "", source) {}
 
-StrutLayer makeLayer(const Reader& r, const std::string& key, const std::map<std::string, Material>& materials,
-                     const std::string& material, double inner, double outer)
-{
-  const auto it = materials.find(material);
-  if (it == materials.end())
-    r.fail(key, "unknown material '" + material + "'");
-  if (!(outer > inner))
-    r.fail(key, "the outer radius must exceed the inner radius");
-  StrutLayer l;
-  l.material = material;
-  l.inner_radius = inner;
-  l.outer_radius = outer;
-  l.density = it->second.density;
-  l.youngs_modulus = it->second.youngs_modulus;
-  l.poisson_ratio = it->second.poisson_ratio;
-  return l;
-}
-
-Model buildModel(const YAML::Node& root_node, const std::string& file)
-{
-  Reader root(root_node, "", file);
-  Model model;
-  model.source = file;
-  model.name = root.string("name");
-  root.string("description", "");
-
-  // materials
-  std::map<std::string, Material> materials;
+  Model build()
   {
-    Reader mats = root.map("materials");
+    model_.source = source_.file;
+    model_.name = root_.string("name");
+    root_.string("description", "");
+    readMaterials();
+    readNodes();
+    readStruts();
+    addPointMasses();
+    if (model_.bodies.empty())
+      root_.fail("struts.members", "nothing to simulate: the scene has no strut and no node with a mass "
+                                   "(every node is fixed)");
+    finalizeModel(model_);
+    placeBodies();
+    addNodesAndJoints();
+    readTensionFamilies("cables", false);
+    readTensionFamilies("springs", true);
+    readLoads();
+    readActuators();
+    readSwitches();
+    readContact();
+    readSolver();
+    readAnalysis();
+    readOutputs();
+    root_.finish();
+    finalizeModel(model_);  // sizes again, now that every constraint is in
+    return std::move(model_);
+  }
+
+private:
+  NodeInfo& nodeRef(const Reader& r, const std::string& key, const std::string& name)
+  {
+    const auto it = node_index_.find(name);
+    if (it == node_index_.end())
+      r.fail(key, "unknown node " + quoted(name));
+    return nodes_[it->second];
+  }
+  void checkName(const Reader& r, const std::string& key, const std::string& name, std::set<std::string>& names,
+                 const std::string& what)
+  {
+    if (!names.insert(name).second)
+      r.fail(key, "duplicate " + what + " name " + quoted(name));
+  }
+  void readMaterials()
+  {
+    Reader mats = root_.map("materials");
     for (const std::string& name : mats.keys())
     {
       Reader m = mats.map(name);
@@ -298,46 +375,60 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
       mat.youngs_modulus = m.positive("youngs_modulus");
       mat.poisson_ratio = m.number("poisson_ratio", 0.3);
       if (mat.poisson_ratio < 0.0 || mat.poisson_ratio >= 0.5)
-        m.fail(m.key("poisson_ratio"), "must lie in [0, 0.5), got " + std::to_string(mat.poisson_ratio));
+        m.fail(m.key("poisson_ratio"), "must lie in [0, 0.5), got " + shortestNumber(mat.poisson_ratio));
       mat.density = m.nonNegative("density", 0.0);
       m.finish();
-      materials[name] = mat;
+      materials_[name] = mat;
     }
   }
 
-  // nodes
-  std::map<std::string, NodeInfo> nodes;
-  std::vector<std::string> node_order;
+  void readNodes()
   {
-    Reader rn = root.map("nodes");
+    Reader rn = root_.map("nodes");
     for (const std::string& name : rn.keys())
     {
       Reader n = rn.map(name);
       NodeInfo info;
+      info.name = name;
       info.position = n.vec3("position");
       info.fixed = n.boolean("fixed", false);
       info.mass = n.nonNegative("mass", 0.0);
       if (info.fixed && info.mass > 0.0)
         n.fail(n.key("mass"), "a fixed node cannot carry a mass");
       n.finish();
-      nodes[name] = info;
-      node_order.push_back(name);
+      node_index_[name] = static_cast<int>(nodes_.size());
+      nodes_.push_back(info);
     }
-    if (nodes.empty())
+    if (nodes_.empty())
       rn.fail("nodes", "a scene needs at least one node");
   }
-  auto nodeRef = [&](const Reader& r, const std::string& key, const std::string& name) -> NodeInfo&
-  {
-    const auto it = nodes.find(name);
-    if (it == nodes.end())
-      r.fail(key, "unknown node '" + name + "'");
-    return it->second;
-  };
-  std::set<std::string> member_names;
 
-  // struts
+  StrutLayer makeLayer(const Reader& r, const std::string& material_key, const std::string& radius_key,
+                       const std::string& material, double inner, double outer)
   {
-    Reader rs = root.map("struts");
+    const auto it = materials_.find(material);
+    if (it == materials_.end())
+      r.fail(material_key, "unknown material " + quoted(material));
+    if (!(outer > inner))
+      r.fail(radius_key, "the outer radius must exceed the inner radius");
+    // the section must be representable: pi (r_o^2 - r_i^2) neither underflows to 0 nor overflows
+    const double area = M_PI * (outer * outer - inner * inner);
+    if (!(area >= std::numeric_limits<double>::min()) || !std::isfinite(area))
+      r.fail(radius_key, "a radius of " + shortestNumber(outer) + " m gives a cross-section area of " +
+                             shortestNumber(area) + " m^2, which floating point cannot use");
+    StrutLayer l;
+    l.material = material;
+    l.inner_radius = inner;
+    l.outer_radius = outer;
+    l.density = it->second.density;
+    l.youngs_modulus = it->second.youngs_modulus;
+    l.poisson_ratio = it->second.poisson_ratio;
+    return l;
+  }
+
+  void readStruts()
+  {
+    Reader rs = root_.map("struts");
     const std::string material = rs.string("material");
     const double radius = rs.positive("radius");
     double core_radius = 0.0;
@@ -349,32 +440,38 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
       core_radius = core.positive("radius");
       core.finish();
       if (!(core_radius < radius))
-        rs.fail(rs.key("core.radius"), "must be smaller than struts.radius (" + std::to_string(radius) + ")");
+        rs.fail(rs.key("core.radius"), "must be smaller than struts.radius (" + shortestNumber(radius) + "), got " +
+                                           shortestNumber(core_radius));
     }
+    else
+      rs.optional("core");
     Reader members = rs.map("members");
     for (const std::string& name : members.keys())
     {
       const std::string key = members.key(name);
       const std::vector<std::string> ends = members.names(name);
       if (ends.size() != 2)
-        members.fail(key, "expected two node names [from, to]");
-      checkName(members, key, name, member_names, "member");
+        members.fail(key, "expected two node names [from, to], got " + show(members.get(name)));
+      checkName(members, key, name, member_names_, "member");
       if (ends[0] == ends[1])
-        members.fail(key, "a strut needs two different nodes, got '" + ends[0] + "' twice");
+        members.fail(key, "a strut needs two different nodes, got " + quoted(ends[0]) + " twice");
       NodeInfo& n1 = nodeRef(members, key, ends[0]);
       NodeInfo& n2 = nodeRef(members, key, ends[1]);
       const Vec3 axis = n2.position - n1.position;
       const double length = axis.norm();
-      if (!(length > 1e-9))
-        members.fail(key, "the strut has zero length (its nodes coincide)");
+      if (!(length > 1e-9) || !std::isfinite(length))
+        members.fail(key, std::string(length > 1e-9 ? "the strut's length is not finite" : "the strut has zero length") +
+                              ": its nodes " + quoted(ends[0]) + " at " + showVec3(n1.position) + " and " +
+                              quoted(ends[1]) + " at " + showVec3(n2.position));
 
       Body b;
       b.name = name;
       b.kind = BodyKind::kStrut;
       b.length = length;
       if (core_radius > 0.0)
-        b.layers.push_back(makeLayer(rs, rs.key("core.material"), materials, core_material, 0.0, core_radius));
-      b.layers.push_back(makeLayer(rs, rs.key("material"), materials, material, core_radius, radius));
+        b.layers.push_back(
+            makeLayer(rs, rs.key("core.material"), rs.key("core.radius"), core_material, 0.0, core_radius));
+      b.layers.push_back(makeLayer(rs, rs.key("material"), rs.key("radius"), material, core_radius, radius));
       double mass = 0.0, jt = 0.0, ja = 0.0;
       for (const StrutLayer& l : b.layers)
       {
@@ -385,12 +482,21 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
         jt += m * (3.0 * r2 + length * length) / 12.0;
         ja += m * r2 / 2.0;
       }
-      if (!(mass > 0.0))
-        rs.fail(rs.key("material"), "strut '" + name + "' has zero mass (the material's density is 0)");
+      bool any_density = false;
+      for (const StrutLayer& l : b.layers)
+        any_density = any_density || l.density > 0.0;
+      if (!any_density)
+        rs.fail(rs.key("material"), "strut " + quoted(name) + " has zero mass (the material's density is 0)");
+      if (!(mass >= std::numeric_limits<double>::min() && std::isfinite(mass) && ja > 0.0 && std::isfinite(jt)))
+        rs.fail(rs.key("radius"), "strut " + quoted(name) + " of length " + shortestNumber(length) + " m and radius " +
+                                      shortestNumber(radius) + " m has a mass of " + shortestNumber(mass) +
+                                      " kg and an axial inertia of " + shortestNumber(ja) +
+                                      " kg m^2, which floating point cannot use");
       b.mass = mass;
       b.inertia = Vec3(jt, jt, ja);
-      const int index = static_cast<int>(model.bodies.size());
-      model.bodies.push_back(b);
+      const int index = static_cast<int>(model_.bodies.size());
+      model_.bodies.push_back(b);
+      body_index_[name] = index;
       n1.attachments.push_back(PointRef{ index, Vec3(0.0, 0.0, -0.5 * length) });
       n2.attachments.push_back(PointRef{ index, Vec3(0.0, 0.0, 0.5 * length) });
     }
@@ -398,415 +504,432 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
     rs.finish();
   }
 
-  // point masses for free nodes that carry one
-  for (const std::string& name : node_order)
+  /// A body for every free node that carries a mass.
+  void addPointMasses()
   {
-    NodeInfo& n = nodes[name];
-    if (n.mass > 0.0)
-    {
-      Body b;
-      b.name = name;
-      b.kind = BodyKind::kPointMass;
-      b.mass = n.mass;
-      const int index = static_cast<int>(model.bodies.size());
-      model.bodies.push_back(b);
-      n.attachments.insert(n.attachments.begin(), PointRef{ index, Vec3::Zero() });
-    }
+    for (NodeInfo& n : nodes_)
+      if (n.mass > 0.0)
+      {
+        Body b;
+        b.name = n.name;
+        b.kind = BodyKind::kPointMass;
+        b.mass = n.mass;
+        const int index = static_cast<int>(model_.bodies.size());
+        model_.bodies.push_back(b);
+        n.attachments.insert(n.attachments.begin(), PointRef{ index, Vec3::Zero() });
+      }
   }
-  finalizeModel(model);
 
-  // initial configuration
-  model.q0.setZero(model.nq);
-  for (const std::string& name : node_order)
-    for (const PointRef& p : nodes[name].attachments)
-    {
-      const Body& b = model.bodies[p.body];
-      if (b.kind == BodyKind::kPointMass)
-        model.q0.segment<3>(b.offset) = nodes[name].position;
-    }
+  /// The initial configuration: point masses at their nodes, strut centres and orientations from their ends.
+  void placeBodies()
   {
-    // strut centres and orientations from their end nodes
-    std::map<int, Vec3> lower, upper;
-    for (const std::string& name : node_order)
-      for (const PointRef& p : nodes[name].attachments)
-        if (model.bodies[p.body].kind == BodyKind::kStrut)
-          (p.local.z() < 0.0 ? lower : upper)[p.body] = nodes[name].position;
-    for (size_t i = 0; i < model.bodies.size(); ++i)
+    model_.q0.setZero(model_.nq);
+    std::vector<Vec3> lower(model_.bodies.size()), upper(model_.bodies.size());
+    for (const NodeInfo& n : nodes_)
+      for (const PointRef& p : n.attachments)
+      {
+        const Body& b = model_.bodies[p.body];
+        if (b.kind == BodyKind::kPointMass)
+          model_.q0.segment<3>(b.offset) = n.position;
+        else
+          (p.local.z() < 0.0 ? lower : upper)[p.body] = n.position;
+      }
+    for (size_t i = 0; i < model_.bodies.size(); ++i)
     {
-      const Body& b = model.bodies[i];
+      const Body& b = model_.bodies[i];
       if (b.kind != BodyKind::kStrut)
         continue;
-      const Vec3 a = lower[static_cast<int>(i)], c = upper[static_cast<int>(i)];
-      model.q0.segment<3>(b.offset) = 0.5 * (a + c);
-      model.q0.segment<4>(b.offset + 3) = thetaFromZAxis(c - a);
+      model_.q0.segment<3>(b.offset) = 0.5 * (lower[i] + upper[i]);
+      model_.q0.segment<4>(b.offset + 3) = thetaFromZAxis(upper[i] - lower[i]);
     }
   }
 
-  // node points, joints, pins
-  double ground_sum = 0.0;
-  int ground_count = 0;
-  for (const std::string& name : node_order)
+  /// Node points, ground pins at fixed nodes, ball joints where bodies share a node, quaternion norms;
+  /// the ground level.
+  void addNodesAndJoints()
   {
-    const NodeInfo& n = nodes[name];
-    Node node;
-    node.name = name;
-    if (n.attachments.empty())
+    double ground_sum = 0.0;
+    double lowest = std::numeric_limits<double>::infinity();
+    for (const NodeInfo& n : nodes_)
     {
-      if (!n.fixed)
-        root.fail("nodes." + name,
-                  "the node is attached to nothing: make it fixed, give it a mass, or end a strut there");
-      node.point = PointRef{ -1, n.position };
+      Node node;
+      node.name = n.name;
+      if (n.attachments.empty())
+      {
+        if (!n.fixed)
+          root_.fail("nodes." + n.name,
+                     "the node is attached to nothing: make it fixed, give it a mass, or end a strut there");
+        node.point = PointRef{ -1, n.position };
+      }
+      else
+        node.point = n.attachments.front();
+      lowest = std::min(lowest, n.position.z());
+      if (n.fixed)
+      {
+        ground_sum += n.position.z();
+        ++ground_count_;
+      }
+      model_.nodes.push_back(node);
+      if (n.fixed && !n.attachments.empty())
+      {
+        Constraint c;
+        c.name = n.name + ".pin";
+        c.a = n.attachments.front();
+        c.b = PointRef{ -1, n.position };
+        c.directions = { Vec3::UnitX(), Vec3::UnitY(), Vec3::UnitZ() };
+        c.offsets = { 0.0, 0.0, 0.0 };
+        model_.constraints.push_back(c);
+      }
+      for (size_t k = 1; k < n.attachments.size(); ++k)
+      {
+        Constraint c;
+        c.name = n.name + ".joint" + std::to_string(k);
+        c.a = n.attachments.front();
+        c.b = n.attachments[k];
+        c.directions = { Vec3::UnitX(), Vec3::UnitY(), Vec3::UnitZ() };
+        c.offsets = { 0.0, 0.0, 0.0 };
+        model_.constraints.push_back(c);
+      }
+    }
+    // a free-floating scene is fine for dynamics; the ground level is then its lowest node
+    model_.ground_level = ground_count_ > 0 ? ground_sum / ground_count_ : lowest;
+    if (!std::isfinite(model_.ground_level))
+      root_.fail("nodes", "the mean height of the fixed nodes overflows: " + shortestNumber(model_.ground_level));
+    for (size_t i = 0; i < model_.bodies.size(); ++i)
+      if (model_.bodies[i].kind == BodyKind::kStrut)
+      {
+        Constraint c;
+        c.kind = Constraint::Kind::kQuatNorm;
+        c.name = model_.bodies[i].name + ".norm";
+        c.body = static_cast<int>(i);
+        model_.constraints.push_back(c);
+      }
+  }
+
+  /// Cables (a material and a radius: k = EA / l0) or springs (a stiffness k), by family.
+  void readTensionFamilies(const std::string& section_name, bool springs)
+  {
+    section(root_, section_name,
+            [&](Reader& fams)
+            {
+              for (const std::string& fam : fams.keys())
+              {
+                Reader f = fams.map(fam);
+                readTensionFamily(f, springs);
+                f.finish();
+              }
+            });
+  }
+
+  void readTensionFamily(Reader& f, bool springs)
+  {
+    double ea = 0.0, k_spring = 0.0, area = 0.0;
+    if (springs)
+      k_spring = f.positive("stiffness");
+    else
+    {
+      const std::string mat = f.string("material");
+      const auto it = materials_.find(mat);
+      if (it == materials_.end())
+        f.fail(f.key("material"), "unknown material " + quoted(mat));
+      const double radius = f.positive("radius");
+      area = M_PI * radius * radius;
+      ea = it->second.youngs_modulus * area;
+      if (!(area >= std::numeric_limits<double>::min()) || !(ea >= std::numeric_limits<double>::min()) ||
+          !std::isfinite(ea))
+        f.fail(f.key("radius"), "a radius of " + shortestNumber(radius) + " m gives a section of " +
+                                    shortestNumber(area) + " m^2 and an axial stiffness EA of " + shortestNumber(ea) +
+                                    " N, which floating point cannot use");
+    }
+    const bool has_prestress = f.has("prestress");
+    const bool has_rest = f.has("rest_length");
+    if (has_prestress && has_rest)
+      f.fail(f.key("rest_length"), "give either prestress or rest_length, not both");
+    const double prestress = f.nonNegative("prestress", 0.0);
+    const double rest = has_rest ? f.positive("rest_length") : (f.optional("rest_length"), 0.0);
+    const double damping = f.nonNegative("damping", 0.0);
+    const bool tension_only = f.boolean("tension_only", true);
+    Reader members = f.map("members");
+    for (const std::string& name : members.keys())
+    {
+      const std::string key = members.key(name);
+      const std::vector<std::string> ends = members.names(name);
+      if (ends.size() < 2 || ends.size() > static_cast<size_t>(Cable::kMaxPoints))
+        members.fail(key, "expected two node names [a, b], or up to " + std::to_string(Cable::kMaxPoints) +
+                              " for a sliding cable [a, via..., b], got " + std::to_string(ends.size()));
+      checkName(members, key, name, member_names_, "member");
+      Cable c;
+      c.name = name;
+      double l = 0.0;
+      for (size_t k = 0; k < ends.size(); ++k)
+      {
+        const NodeInfo& nk = nodeRef(members, key, ends[k]);
+        if (k > 0)
+        {
+          if (ends[k] == ends[k - 1])
+            members.fail(key, "a cable needs two different nodes in a row, got " + quoted(ends[k]) + " twice");
+          const double lk = (nk.position - nodes_[node_index_.at(ends[k - 1])].position).norm();
+          if (!(lk > 1e-9))
+            members.fail(key, "nodes " + quoted(ends[k - 1]) + " and " + quoted(ends[k]) + " coincide");
+          l += lk;
+        }
+        c.points.push_back(model_.nodes[node_index_.at(ends[k])].point);
+      }
+      if (!std::isfinite(l))
+        members.fail(key, "the member's length is not finite (" + shortestNumber(l) + ")");
+      c.damping = damping;
+      c.tension_only = tension_only;
+      c.area = area;
+      if (springs)
+      {
+        c.rest_length = has_rest ? rest : l - prestress / k_spring;  // T = k (l - l0)
+        if (!(c.rest_length > 0.0))
+          f.fail(f.key("prestress"), "member " + quoted(name) + ": the prestress would need a rest length <= 0");
+        c.stiffness = k_spring;
+      }
+      else
+      {
+        c.rest_length = has_rest ? rest : l / (1.0 + prestress / ea);
+        c.stiffness = ea / c.rest_length;
+        if (!(c.rest_length > 0.0) || !std::isfinite(c.stiffness))
+          f.fail(f.key(has_rest ? "rest_length" : "prestress"),
+                 "member " + quoted(name) + ": rest length " + shortestNumber(c.rest_length) +
+                     " m gives a stiffness EA / l0 of " + shortestNumber(c.stiffness) + " N/m");
+      }
+      cable_index_[name] = static_cast<int>(model_.cables.size());
+      model_.cables.push_back(c);
+    }
+    members.finish();
+  }
+
+  void readLoads()
+  {
+    section(root_, "loads",
+            [&](Reader& loads)
+            {
+              for (const std::string& name : loads.keys())
+              {
+                Reader l = loads.map(name);
+                checkName(loads, loads.key(name), name, member_names_, "member");
+                PointLoad load;
+                load.name = name;
+                const std::string node = l.string("node");
+                const NodeInfo& info = nodeRef(l, l.key("node"), node);
+                if (info.fixed)
+                  l.fail(l.key("node"), "node " + quoted(node) + " is fixed: a load there does nothing");
+                load.point = model_.nodes[node_index_.at(node)].point;
+                load.force = l.vec3("force");
+                l.finish();
+                model_.loads.push_back(load);
+              }
+            });
+  }
+
+  void readActuators()
+  {
+    section(root_, "actuators",
+            [&](Reader& acts)
+            {
+              std::set<std::string> actuator_names;
+              for (const std::string& name : acts.keys())
+              {
+                Reader a = acts.map(name);
+                checkName(acts, acts.key(name), name, actuator_names, "actuator");
+                readActuator(a, name);
+                a.finish();
+              }
+            });
+  }
+
+  void readActuator(Reader& a, const std::string& name)
+  {
+    Actuator act;
+    act.name = name;
+    const YAML::Node range = a.raw("range");
+    if (!range.IsSequence() || range.size() != 2)
+      a.fail(a.key("range"), "expected [min, max], got " + show(range));
+    act.min_value = a.toNumber(range[0], a.key("range"));
+    act.max_value = a.toNumber(range[1], a.key("range"));
+    if (!(act.min_value <= 0.0 && act.max_value > 0.0))
+      a.fail(a.key("range"), "expected min <= 0 < max, got " + show(range));
+    const int index = static_cast<int>(model_.actuators.size());
+    if (a.has("nodes") == a.has("cables"))
+      a.fail(a.key(a.has("nodes") ? "cables" : "nodes"),
+             "give either nodes (driven along a direction) or cables (pulled in), not both or neither");
+    if (a.has("cables"))
+    {
+      // pull-in: each cable's rest length becomes l0 - s
+      a.optional("nodes");
+      for (const std::string& cn : a.names("cables"))
+      {
+        const auto it = cable_index_.find(cn);
+        if (it == cable_index_.end())
+          a.fail(a.key("cables"), "unknown cable " + quoted(cn));
+        Cable& cable = model_.cables[it->second];
+        if (cable.actuator >= 0)
+          a.fail(a.key("cables"), "cable " + quoted(cn) + " is already pulled by actuator " +
+                                      quoted(model_.actuators[cable.actuator].name));
+        if (!(act.max_value < cable.rest_length))
+          a.fail(a.key("range"), "the largest pull-in " + show(range[1]) + " m would leave cable " + quoted(cn) +
+                                     " (rest length " + shortestNumber(cable.rest_length) + " m) no length");
+        cable.actuator = index;
+        act.cables.push_back(it->second);
+      }
+      for (const char* k : { "direction", "guided" })
+        if (a.has(k))
+          a.fail(a.key(k), "an actuator that pulls cables in has no direction or guide (those are for nodes)");
     }
     else
-      node.point = n.attachments.front();
-    if (n.fixed)
     {
-      ground_sum += n.position.z();
-      ++ground_count;
-    }
-    model.nodes.push_back(node);
-    if (n.fixed && !n.attachments.empty())
-    {
-      Constraint c;
-      c.name = name + ".pin";
-      c.a = n.attachments.front();
-      c.b = PointRef{ -1, n.position };
-      c.directions = { Vec3::UnitX(), Vec3::UnitY(), Vec3::UnitZ() };
-      c.offsets = { 0.0, 0.0, 0.0 };
-      model.constraints.push_back(c);
-    }
-    for (size_t k = 1; k < n.attachments.size(); ++k)
-    {
-      Constraint c;
-      c.name = name + ".joint" + std::to_string(k);
-      c.a = n.attachments.front();
-      c.b = n.attachments[k];
-      c.directions = { Vec3::UnitX(), Vec3::UnitY(), Vec3::UnitZ() };
-      c.offsets = { 0.0, 0.0, 0.0 };
-      model.constraints.push_back(c);
-    }
-  }
-  // a free-floating scene is fine for dynamics; the ground level is then its lowest node
-  double lowest = std::numeric_limits<double>::infinity();
-  for (const std::string& name : node_order)
-    lowest = std::min(lowest, nodes[name].position.z());
-  model.ground_level = ground_count > 0 ? ground_sum / ground_count : lowest;
-  for (size_t i = 0; i < model.bodies.size(); ++i)
-    if (model.bodies[i].kind == BodyKind::kStrut)
-    {
-      Constraint c;
-      c.kind = Constraint::Kind::kQuatNorm;
-      c.name = model.bodies[i].name + ".norm";
-      c.body = static_cast<int>(i);
-      model.constraints.push_back(c);
-    }
-
-  // cables and springs, by family
-  auto readTensionFamilies = [&](const std::string& section, bool springs)
-  {
-    if (!root.has(section))
-    {
-      root.optional(section);
-      return;
-    }
-    Reader fams = root.map(section);
-    for (const std::string& fam : fams.keys())
-    {
-      Reader f = fams.map(fam);
-      double ea = 0.0, k_spring = 0.0, area = 0.0;
-      if (springs)
-        k_spring = f.positive("stiffness");
-      else
+      a.optional("cables");
+      const Vec3 dir = a.vec3("direction");
+      if (!(dir.norm() > 1e-12) || !std::isfinite(dir.norm()))
+        a.fail(a.key("direction"), "must be a nonzero vector of finite length, got " + showVec3(dir));
+      const Vec3 d = dir.normalized();
+      // guided: the node cannot move across the direction either (a slider), e.g. a driven body
+      const bool guided = a.boolean("guided", false);
+      const Vec3 any = std::abs(d.x()) < 0.9 ? Vec3::UnitX() : Vec3::UnitY();
+      const Vec3 across1 = d.cross(any).normalized();
+      const Vec3 across2 = d.cross(across1);
+      for (const std::string& nn : a.names("nodes"))
       {
-        const std::string mat = f.string("material");
-        const auto it = materials.find(mat);
-        if (it == materials.end())
-          f.fail(f.key("material"), "unknown material '" + mat + "'");
-        const double radius = f.positive("radius");
-        area = M_PI * radius * radius;
-        ea = it->second.youngs_modulus * area;
-      }
-      const bool has_prestress = f.has("prestress");
-      const bool has_rest = f.has("rest_length");
-      if (has_prestress && has_rest)
-        f.fail(f.key("rest_length"), "give either prestress or rest_length, not both");
-      const double prestress = f.nonNegative("prestress", 0.0);
-      const double rest = has_rest ? f.positive("rest_length") : (f.optional("rest_length"), 0.0);
-      const double damping = f.nonNegative("damping", 0.0);
-      const bool tension_only = f.boolean("tension_only", true);
-      Reader members = f.map("members");
-      for (const std::string& name : members.keys())
-      {
-        const std::string key = members.key(name);
-        const std::vector<std::string> ends = members.names(name);
-        if (ends.size() < 2 || ends.size() > static_cast<size_t>(Cable::kMaxPoints))
-          members.fail(key, "expected two node names [a, b], or up to " + std::to_string(Cable::kMaxPoints) +
-                                " for a sliding cable [a, via..., b], got " + std::to_string(ends.size()));
-        checkName(members, key, name, member_names, "member");
-        Cable c;
-        c.name = name;
-        double l = 0.0;
-        for (size_t k = 0; k < ends.size(); ++k)
+        const NodeInfo& info = nodeRef(a, a.key("nodes"), nn);
+        if (info.fixed)
+          a.fail(a.key("nodes"), "node " + quoted(nn) + " is fixed and cannot be actuated");
+        Constraint c;
+        c.name = name + "." + nn;
+        c.a = model_.nodes[node_index_.at(nn)].point;
+        c.b = PointRef{ -1, Vec3::Zero() };
+        c.directions = { d };
+        c.offsets = { d.dot(info.position) };
+        c.actuator = index;
+        act.constraints.push_back(static_cast<int>(model_.constraints.size()));
+        model_.constraints.push_back(c);
+        if (guided)
         {
-          const NodeInfo& nk = nodeRef(members, key, ends[k]);
-          if (k > 0)
-          {
-            if (ends[k] == ends[k - 1])
-              members.fail(key, "a cable needs two different nodes in a row, got '" + ends[k] + "' twice");
-            const double lk = (nk.position - nodes[ends[k - 1]].position).norm();
-            if (!(lk > 1e-9))
-              members.fail(key, "nodes '" + ends[k - 1] + "' and '" + ends[k] + "' coincide");
-            l += lk;
-          }
-          c.points.push_back(model.nodes[model.findNode(ends[k])].point);
-        }
-        c.damping = damping;
-        c.tension_only = tension_only;
-        c.area = area;
-        if (springs)
-        {
-          c.rest_length = has_rest ? rest : l - prestress / k_spring;  // T = k (l - l0)
-          if (!(c.rest_length > 0.0))
-            f.fail(f.key("prestress"), "member '" + name + "': the prestress would need a rest length <= 0");
-          c.stiffness = k_spring;
-        }
-        else
-        {
-          c.rest_length = has_rest ? rest : l / (1.0 + prestress / ea);
-          c.stiffness = ea / c.rest_length;
-        }
-        model.cables.push_back(c);
-      }
-      members.finish();
-      f.finish();
-    }
-  };
-  readTensionFamilies("cables", false);
-  readTensionFamilies("springs", true);
-
-  // constant point loads
-  if (root.has("loads"))
-  {
-    Reader loads = root.map("loads");
-    for (const std::string& name : loads.keys())
-    {
-      Reader l = loads.map(name);
-      checkName(loads, loads.key(name), name, member_names, "member");
-      PointLoad load;
-      load.name = name;
-      const std::string node = l.string("node");
-      const NodeInfo& info = nodeRef(l, l.key("node"), node);
-      if (info.fixed)
-        l.fail(l.key("node"), "node '" + node + "' is fixed: a load there does nothing");
-      load.point = model.nodes[model.findNode(node)].point;
-      load.force = l.vec3("force");
-      l.finish();
-      model.loads.push_back(load);
-    }
-  }
-  else
-    root.optional("loads");
-
-  // actuators
-  if (root.has("actuators"))
-  {
-    Reader acts = root.map("actuators");
-    std::set<std::string> actuator_names;
-    for (const std::string& name : acts.keys())
-    {
-      Reader a = acts.map(name);
-      checkName(acts, acts.key(name), name, actuator_names, "actuator");
-      Actuator act;
-      act.name = name;
-      const YAML::Node range = a.raw("range");
-      if (!range.IsSequence() || range.size() != 2)
-        a.fail(a.key("range"), "expected [min, max], got " + show(range));
-      act.min_value = a.toNumber(range[0], a.key("range"));
-      act.max_value = a.toNumber(range[1], a.key("range"));
-      if (!(act.min_value <= 0.0 && act.max_value > 0.0))
-        a.fail(a.key("range"), "expected min <= 0 < max, got " + show(range));
-      const int index = static_cast<int>(model.actuators.size());
-      if (a.has("nodes") == a.has("cables"))
-        a.fail(a.key(a.has("nodes") ? "cables" : "nodes"),
-               "give either nodes (driven along a direction) or cables (pulled in), not both or neither");
-      if (a.has("cables"))
-      {
-        // pull-in: each cable's rest length becomes l0 - s
-        for (const std::string& cn : a.names("cables"))
-        {
-          int ci = -1;
-          for (size_t k = 0; k < model.cables.size(); ++k)
-            if (model.cables[k].name == cn)
-              ci = static_cast<int>(k);
-          if (ci < 0)
-            a.fail(a.key("cables"), "unknown cable '" + cn + "'");
-          Cable& cable = model.cables[ci];
-          if (cable.actuator >= 0)
-            a.fail(a.key("cables"),
-                   "cable '" + cn + "' is already pulled by actuator '" + model.actuators[cable.actuator].name + "'");
-          if (!(act.max_value < cable.rest_length))
-            a.fail(a.key("range"), "the largest pull-in " + show(range[1]) + " m would leave cable '" + cn +
-                                       "' (rest length " + std::to_string(cable.rest_length) + " m) no length");
-          cable.actuator = index;
-          act.cables.push_back(ci);
-        }
-        for (const char* k : { "direction", "guided" })
-          if (a.has(k))
-            a.fail(a.key(k), "an actuator that pulls cables in has no direction or guide (those are for nodes)");
-      }
-      else
-      {
-        const Vec3 dir = a.vec3("direction");
-        if (!(dir.norm() > 1e-12))
-          a.fail(a.key("direction"), "must not be the zero vector");
-        const Vec3 d = dir.normalized();
-        // guided: the node cannot move across the direction either (a slider), e.g. a driven body
-        const bool guided = a.boolean("guided", false);
-        const Vec3 any = std::abs(d.x()) < 0.9 ? Vec3::UnitX() : Vec3::UnitY();
-        const Vec3 across1 = d.cross(any).normalized();
-        const Vec3 across2 = d.cross(across1);
-        for (const std::string& nn : a.names("nodes"))
-        {
-          const NodeInfo& info = nodeRef(a, a.key("nodes"), nn);
-          if (info.fixed)
-            a.fail(a.key("nodes"), "node '" + nn + "' is fixed and cannot be actuated");
-          Constraint c;
-          c.name = name + "." + nn;
-          c.a = model.nodes[model.findNode(nn)].point;
-          c.b = PointRef{ -1, Vec3::Zero() };
-          c.directions = { d };
-          c.offsets = { d.dot(info.position) };
-          c.actuator = index;
-          act.constraints.push_back(static_cast<int>(model.constraints.size()));
-          model.constraints.push_back(c);
-          if (guided)
-          {
-            c.name = name + "." + nn + ".guide";
-            c.directions = { across1, across2 };
-            c.offsets = { across1.dot(info.position), across2.dot(info.position) };
-            c.actuator = -1;
-            model.constraints.push_back(c);
-          }
+          c.name = name + "." + nn + ".guide";
+          c.directions = { across1, across2 };
+          c.offsets = { across1.dot(info.position), across2.dot(info.position) };
+          c.actuator = -1;
+          model_.constraints.push_back(c);
         }
       }
-      a.finish();
-      model.actuators.push_back(act);
     }
-    acts.finish();
+    model_.actuators.push_back(act);
   }
-  else
-    root.optional("actuators");
 
-  // switches
-  if (root.has("gravity"))
+  void readSwitches()
   {
-    Reader g = root.map("gravity");
-    model.gravity_enabled = g.boolean("enabled", false);
-    model.gravity = g.vec3("vector", model.gravity);
-    g.finish();
+    section(root_, "gravity",
+            [&](Reader& g)
+            {
+              model_.gravity_enabled = g.boolean("enabled", false);
+              model_.gravity = g.vec3("vector", model_.gravity);
+            });
+    section(root_, "damping", [&](Reader& d) { model_.damping_enabled = d.boolean("enabled", true); });
   }
-  else
-    root.optional("gravity");
-  if (root.has("damping"))
-  {
-    Reader d = root.map("damping");
-    model.damping_enabled = d.boolean("enabled", true);
-    d.finish();
-  }
-  else
-    root.optional("damping");
 
-  // contact: pairs whose gap is measured (forces come with the contact model)
+  /// Contact settings and the pairs whose gap is measured (forces come with the contact model).
+  void readContact()
   {
     std::vector<std::pair<int, int>> pairs;
     bool pairs_given = false;
-    if (root.has("contact"))
-    {
-      Reader c = root.map("contact");
-      ContactSettings& cs = model.contact;
-      cs.enabled = c.boolean("enabled", false);
-      cs.restitution = c.nonNegative("restitution", cs.restitution);
-      if (cs.restitution > 1.0)
-        c.fail(c.key("restitution"), "must be in [0, 1], got " + show(c.raw("restitution")));
-      cs.friction = c.nonNegative("friction", cs.friction);
-      cs.stick_velocity = c.positive("stick_velocity", cs.stick_velocity);
-      cs.slip_velocity = c.positive("slip_velocity", cs.slip_velocity);
-      if (cs.slip_velocity <= cs.stick_velocity)
-        c.fail(c.key("slip_velocity"), "must exceed stick_velocity (" + std::to_string(cs.stick_velocity) +
-                                           " m/s), got " + show(c.raw("slip_velocity")));
-      const double min_angle_deg = c.positive("min_crossing_angle", cs.min_crossing_angle * 180.0 / M_PI);
-      if (min_angle_deg >= 90.0)
-        c.fail(c.key("min_crossing_angle"), "must be below 90 degrees, got " + show(c.raw("min_crossing_angle")));
-      cs.min_crossing_angle = min_angle_deg * M_PI / 180.0;
-      cs.min_impact_speed = c.positive("min_impact_speed", cs.min_impact_speed);
-      if (c.has("pairs"))
-      {
-        const YAML::Node p = c.raw("pairs");
-        if (p.IsScalar() && p.Scalar() == "auto")
-          pairs_given = false;
-        else if (p.IsSequence())
-        {
-          pairs_given = true;
-          for (size_t i = 0; i < p.size(); ++i)
-          {
-            if (!p[i].IsSequence() || p[i].size() != 2)
-              c.fail(c.key("pairs"), "expected 'auto' or a list of [strut, strut] pairs, got " + show(p[i]));
-            const int a = model.findBody(p[i][0].Scalar());
-            const int b = model.findBody(p[i][1].Scalar());
-            if (a < 0 || model.bodies[a].kind != BodyKind::kStrut)
-              c.fail(c.key("pairs"), "unknown strut '" + p[i][0].Scalar() + "'");
-            if (b < 0 || model.bodies[b].kind != BodyKind::kStrut)
-              c.fail(c.key("pairs"), "unknown strut '" + p[i][1].Scalar() + "'");
-            if (a == b)
-              c.fail(c.key("pairs"), "a strut cannot be paired with itself: " + show(p[i]));
-            pairs.emplace_back(std::min(a, b), std::max(a, b));
-          }
-        }
-        else
-          c.fail(c.key("pairs"), "expected 'auto' or a list of [strut, strut] pairs, got " + show(p));
-      }
-      else
-        c.optional("pairs");
-      c.finish();
-    }
-    else
-      root.optional("contact");
+    section(root_, "contact", [&](Reader& c) { pairs_given = readContactSettings(c, pairs); });
     if (!pairs_given)
-    {
-      // every pair of struts that share no node
-      for (size_t i = 0; i < model.bodies.size(); ++i)
-        for (size_t j = i + 1; j < model.bodies.size(); ++j)
-          if (model.bodies[i].kind == BodyKind::kStrut && model.bodies[j].kind == BodyKind::kStrut)
-            pairs.emplace_back(static_cast<int>(i), static_cast<int>(j));
-      // struts that end at a common node: every two of them, not only those the loader joined directly
-      // (at a node where k struts meet it joins the first to each other one; joints are made at nodes
-      // only, so this covers every jointed pair)
-      std::set<std::pair<int, int>> jointed;
-      for (const auto& entry : nodes)
-      {
-        const std::vector<PointRef>& at = entry.second.attachments;
-        for (size_t x = 0; x < at.size(); ++x)
-          for (size_t y = x + 1; y < at.size(); ++y)
-            if (at[x].body >= 0 && at[y].body >= 0 && at[x].body != at[y].body)
-              jointed.insert({ std::min(at[x].body, at[y].body), std::max(at[x].body, at[y].body) });
-      }
-      std::vector<std::pair<int, int>> kept;
-      for (const auto& p : pairs)
-        if (!jointed.count(p))
-          kept.push_back(p);
-      pairs = kept;
-    }
+      pairs = autoPairs();
     std::sort(pairs.begin(), pairs.end());
     pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
     for (const auto& [a, b] : pairs)
-      model.checked_pairs.push_back(makeStrutPair(model, a, b));
+    {
+      const StrutPair p = makeStrutPair(model_, a, b);
+      if (!std::isfinite(p.stiffness90))
+        root_.fail("materials", "the contact stiffness of struts " + quoted(model_.bodies[a].name) + " and " +
+                                    quoted(model_.bodies[b].name) + " overflows: " + shortestNumber(p.stiffness90));
+      model_.checked_pairs.push_back(p);
+    }
   }
 
-  // solver
-  if (root.has("solver"))
+  /// Returns whether the pairs were listed (else they are found automatically).
+  bool readContactSettings(Reader& c, std::vector<std::pair<int, int>>& pairs)
   {
-    Reader s = root.map("solver");
-    SolverOptions& o = model.solver;
+    ContactSettings& cs = model_.contact;
+    cs.enabled = c.boolean("enabled", false);
+    cs.restitution = c.nonNegative("restitution", cs.restitution);
+    if (cs.restitution > 1.0)
+      c.fail(c.key("restitution"), "must be in [0, 1], got " + show(c.get("restitution")));
+    cs.friction = c.nonNegative("friction", cs.friction);
+    cs.stick_velocity = c.positive("stick_velocity", cs.stick_velocity);
+    cs.slip_velocity = c.positive("slip_velocity", cs.slip_velocity);
+    if (cs.slip_velocity <= cs.stick_velocity)
+      c.fail(c.key("slip_velocity"), "must exceed stick_velocity (" + shortestNumber(cs.stick_velocity) +
+                                         " m/s), got " + shortestNumber(cs.slip_velocity));
+    const double min_angle_deg = c.positive("min_crossing_angle", cs.min_crossing_angle * 180.0 / M_PI);
+    if (min_angle_deg >= 90.0)
+      c.fail(c.key("min_crossing_angle"), "must be below 90 degrees, got " + show(c.get("min_crossing_angle")));
+    cs.min_crossing_angle = min_angle_deg * M_PI / 180.0;
+    cs.min_impact_speed = c.positive("min_impact_speed", cs.min_impact_speed);
+    if (!c.has("pairs"))
+    {
+      c.optional("pairs");
+      return false;
+    }
+    const YAML::Node p = c.raw("pairs");
+    if (p.IsScalar() && p.Scalar() == "auto")
+      return false;
+    if (!p.IsSequence())
+      c.fail(c.key("pairs"), "expected 'auto' or a list of [strut, strut] pairs, got " + show(p));
+    const auto strut = [&](const YAML::Node& n)
+    {
+      const auto it = n.IsScalar() ? body_index_.find(n.Scalar()) : body_index_.end();
+      if (it == body_index_.end())
+        c.fail(c.key("pairs"), "unknown strut " + (n.IsScalar() ? quoted(n.Scalar()) : show(n)));
+      return it->second;
+    };
+    for (size_t i = 0; i < p.size(); ++i)
+    {
+      if (!p[i].IsSequence() || p[i].size() != 2)
+        c.fail(c.key("pairs"), "expected 'auto' or a list of [strut, strut] pairs, got " + show(p[i]));
+      const int a = strut(p[i][0]);
+      const int b = strut(p[i][1]);
+      if (a == b)
+        c.fail(c.key("pairs"), "a strut cannot be paired with itself: " + show(p[i]));
+      pairs.emplace_back(std::min(a, b), std::max(a, b));
+    }
+    return true;
+  }
+
+  /// Every pair of struts that share no node.
+  std::vector<std::pair<int, int>> autoPairs() const
+  {
+    // struts that end at a common node: every two of them, not only those the loader joined directly
+    // (at a node where k struts meet it joins the first to each other one; joints are made at nodes
+    // only, so this covers every jointed pair)
+    std::set<std::pair<int, int>> jointed;
+    for (const NodeInfo& n : nodes_)
+    {
+      const std::vector<PointRef>& at = n.attachments;
+      for (size_t x = 0; x < at.size(); ++x)
+        for (size_t y = x + 1; y < at.size(); ++y)
+          if (at[x].body >= 0 && at[y].body >= 0 && at[x].body != at[y].body)
+            jointed.insert({ std::min(at[x].body, at[y].body), std::max(at[x].body, at[y].body) });
+    }
+    std::vector<std::pair<int, int>> pairs;
+    for (size_t i = 0; i < model_.bodies.size(); ++i)
+      for (size_t j = i + 1; j < model_.bodies.size(); ++j)
+        if (model_.bodies[i].kind == BodyKind::kStrut && model_.bodies[j].kind == BodyKind::kStrut &&
+            !jointed.count({ static_cast<int>(i), static_cast<int>(j) }))
+          pairs.emplace_back(static_cast<int>(i), static_cast<int>(j));
+    return pairs;
+  }
+
+  void readSolver()
+  {
+    section(root_, "solver", [&](Reader& s) { readSolverOptions(s); });
+  }
+
+  void readSolverOptions(Reader& s)
+  {
+    SolverOptions& o = model_.solver;
     o.dt = s.positive("dt", o.dt);
     const std::string integrator = s.string("integrator", "newmark");
     if (integrator == "newmark")
@@ -814,7 +937,7 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
     else if (integrator == "generalized_alpha")
       o.integrator = Integrator::kGeneralizedAlpha;
     else
-      s.fail(s.key("integrator"), "expected 'newmark' or 'generalized_alpha', got '" + integrator + "'");
+      s.fail(s.key("integrator"), "expected 'newmark' or 'generalized_alpha', got " + quoted(integrator));
     if (s.has("newmark"))
     {
       Reader n = s.map("newmark");
@@ -823,22 +946,22 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
       n.finish();
       if (o.newmark_gamma < 0.5)
         s.fail(s.key("newmark.gamma"),
-               "must be at least 0.5 (Newmark is unstable below), got " + std::to_string(o.newmark_gamma));
+               "must be at least 0.5 (Newmark is unstable below), got " + shortestNumber(o.newmark_gamma));
       const double beta_min = 0.25 * (o.newmark_gamma + 0.5) * (o.newmark_gamma + 0.5);
       if (o.newmark_beta < beta_min - 1e-12)
-        s.fail(s.key("newmark.beta"), "must be at least (gamma + 1/2)^2 / 4 = " + std::to_string(beta_min) +
-                                          " for unconditional stability, got " + std::to_string(o.newmark_beta));
+        s.fail(s.key("newmark.beta"), "must be at least (gamma + 1/2)^2 / 4 = " + shortestNumber(beta_min) +
+                                          " for unconditional stability, got " + shortestNumber(o.newmark_beta));
     }
     else
       s.optional("newmark");
     o.rho_infinity = s.number("rho_infinity", o.rho_infinity);
     if (o.rho_infinity < 0.0 || o.rho_infinity > 1.0)
-      s.fail(s.key("rho_infinity"), "must lie in [0, 1], got " + std::to_string(o.rho_infinity));
+      s.fail(s.key("rho_infinity"), "must lie in [0, 1], got " + shortestNumber(o.rho_infinity));
     o.newton_tolerance = s.positive("newton_tolerance", o.newton_tolerance);
-    o.max_iterations = s.integer("max_iterations", o.max_iterations, 1);
-    o.max_step_cuts = s.integer("max_step_cuts", o.max_step_cuts, 0);
+    o.max_iterations = s.integer("max_iterations", o.max_iterations, 1, kMaxNewtonIterations);
+    o.max_step_cuts = s.integer("max_step_cuts", o.max_step_cuts, 0, kMaxStepCuts);
     o.reuse_jacobian = s.boolean("reuse_jacobian", o.reuse_jacobian);
-    o.max_jacobian_age = s.integer("max_jacobian_age", o.max_jacobian_age, 1);
+    o.max_jacobian_age = s.integer("max_jacobian_age", o.max_jacobian_age, 1, kMaxJacobianAge);
     o.adaptive = s.boolean("adaptive", o.adaptive);
     o.error_tolerance = s.positive("error_tolerance", o.error_tolerance);
     o.dt_min = s.positive("dt_min", o.dt_min);
@@ -846,33 +969,30 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
     o.onset_depth = s.positive("onset_depth", o.onset_depth);
     if (o.dt_min > o.dt_max)
       s.fail(s.key("dt_min"),
-             "must not exceed dt_max = " + std::to_string(o.dt_max) + ", got " + std::to_string(o.dt_min));
-    s.finish();
+             "must not exceed dt_max = " + shortestNumber(o.dt_max) + ", got " + shortestNumber(o.dt_min));
   }
-  else
-    root.optional("solver");
 
-  // analysis
+  void readAnalysis()
   {
-    Reader a = root.map("analysis");
-    AnalysisSettings& an = model.analysis;
+    Reader a = root_.map("analysis");
+    AnalysisSettings& an = model_.analysis;
     const std::string type = a.string("type");
     if (type == "static")
       an.type = AnalysisType::kStatic;
     else if (type == "dynamic")
       an.type = AnalysisType::kDynamic;
     else
-      a.fail(a.key("type"), "expected 'static' or 'dynamic', got '" + type + "'");
+      a.fail(a.key("type"), "expected 'static' or 'dynamic', got " + quoted(type));
     // a scene without actuators (free motion, e.g. a drop) needs no actuation travel or speed
-    const bool actuated = !model.actuators.empty();
+    const bool actuated = !model_.actuators.empty();
     an.max_actuation = actuated ? a.positive("max_actuation") : a.nonNegative("max_actuation", 0.0);
-    an.steps = a.integer("steps", an.steps, 1);
+    an.steps = a.integer("steps", an.steps, 1, kMaxLoadSteps);
     an.duration = a.positive("duration", 1.0);
     an.output_interval = a.nonNegative("output_interval", 0.0);
     an.schedule.final_value = an.max_actuation;
-    if (root.has("actuation"))
+    if (root_.has("actuation"))
     {
-      Reader s = root.map("actuation");
+      Reader s = root_.map("actuation");
       an.schedule.speed = s.positive("speed");
       an.schedule.start_time = s.nonNegative("start_time", 0.0);
       an.schedule.blend_time = s.nonNegative("blend_time", 0.0);
@@ -880,111 +1000,166 @@ Model buildModel(const YAML::Node& root_node, const std::string& file)
     }
     else
     {
-      root.optional("actuation");
+      root_.optional("actuation");
       if (an.type == AnalysisType::kDynamic && actuated)
-        root.fail("actuation", "a dynamic analysis needs actuation.speed (m/s)");
+        root_.fail("actuation", "a dynamic analysis needs actuation.speed (m/s)");
     }
-    if (an.type == AnalysisType::kStatic && ground_count == 0)
+    if (an.type == AnalysisType::kStatic && ground_count_ == 0)
       a.fail(a.key("type"), "a static analysis needs at least one fixed node (this structure floats freely)");
-    for (const Actuator& act : model.actuators)
+    for (const Actuator& act : model_.actuators)
       if (an.max_actuation > act.max_value + 1e-12)
-        a.fail(a.key("max_actuation"), "exceeds the range of actuator '" + act.name + "' (max " +
-                                           std::to_string(act.max_value) + " m), got " +
-                                           std::to_string(an.max_actuation));
+        a.fail(a.key("max_actuation"), "exceeds the range of actuator " + quoted(act.name) + " (max " +
+                                           shortestNumber(act.max_value) + " m), got " +
+                                           shortestNumber(an.max_actuation));
+    if (an.type == AnalysisType::kDynamic)
+      checkDynamicWork(a);
     a.finish();
   }
 
-  // outputs
-  if (root.has("outputs"))
+  /// A dynamic run's steps and output rows stay countable, and no step is shorter than solver.dt_min.
+  void checkDynamicWork(const Reader& a) const
   {
-    Reader o = root.map("outputs");
-    if (o.has("height_nodes"))
-      for (const std::string& n : o.names("height_nodes"))
-      {
-        nodeRef(o, o.key("height_nodes"), n);
-        model.height_nodes.push_back(model.findNode(n));
-      }
-    else
-      o.optional("height_nodes");
-    if (o.has("layers"))
+    const AnalysisSettings& an = model_.analysis;
+    const SolverOptions& o = model_.solver;
+    if (o.dt < o.dt_min)
+      root_.fail("solver.dt",
+                 "must be at least solver.dt_min = " + shortestNumber(o.dt_min) + " s, got " + shortestNumber(o.dt));
+    if (an.duration < o.dt_min)
+      a.fail(a.key("duration"),
+             "must be at least solver.dt_min = " + shortestNumber(o.dt_min) + " s, got " + shortestNumber(an.duration));
+    if (!o.adaptive && an.duration / o.dt > kMaxTimeSteps)
+      root_.fail("solver.dt", "analysis.duration " + shortestNumber(an.duration) + " s / solver.dt " +
+                                  shortestNumber(o.dt) + " s = " + shortestNumber(std::ceil(an.duration / o.dt)) +
+                                  " time steps, more than the " + shortestNumber(kMaxTimeSteps) + " a run may take");
+    if (an.output_interval > 0.0 && an.output_interval < o.dt_min)
+      a.fail(a.key("output_interval"), "must be 0 (a row per step) or at least solver.dt_min = " +
+                                           shortestNumber(o.dt_min) + " s, got " + shortestNumber(an.output_interval));
+    if (an.output_interval > 0.0 && an.duration / an.output_interval > kMaxOutputSteps)
+      a.fail(a.key("output_interval"),
+             "analysis.duration " + shortestNumber(an.duration) + " s / output_interval " +
+                 shortestNumber(an.output_interval) + " s = " + shortestNumber(std::ceil(an.duration / an.output_interval)) +
+                 " output rows, more than the " + shortestNumber(kMaxOutputSteps) + " a run may write");
+  }
+
+  void readOutputs()
+  {
+    section(root_, "outputs",
+            [&](Reader& o)
+            {
+              if (o.has("height_nodes"))
+                for (const std::string& n : o.names("height_nodes"))
+                {
+                  nodeRef(o, o.key("height_nodes"), n);
+                  model_.height_nodes.push_back(node_index_.at(n));
+                }
+              else
+                o.optional("height_nodes");
+              section(o, "layers",
+                      [&](Reader& layers)
+                      {
+                        for (const std::string& name : layers.keys())
+                        {
+                          OutputLayer layer;
+                          layer.name = name;
+                          for (const std::string& n : layers.names(name))
+                          {
+                            nodeRef(layers, layers.key(name), n);
+                            layer.nodes.push_back(node_index_.at(n));
+                          }
+                          if (layer.nodes.empty())
+                            layers.fail(layers.key(name), "expected a list of node names, got []");
+                          model_.layers.push_back(layer);
+                        }
+                      });
+            });
+    // the height is that of the free nodes; of every node when all are fixed (a strut pinned at both ends)
+    if (model_.height_nodes.empty())
+      for (size_t i = 0; i < nodes_.size(); ++i)
+        if (!nodes_[i].fixed)
+          model_.height_nodes.push_back(static_cast<int>(i));
+    if (model_.height_nodes.empty())
+      for (size_t i = 0; i < nodes_.size(); ++i)
+        model_.height_nodes.push_back(static_cast<int>(i));
+  }
+  /// Reads the optional map `name` of `parent` with `read`, or marks it as known when it is absent.
+  template <typename F>
+  static void section(Reader& parent, const std::string& name, F read)
+  {
+    if (!parent.has(name))
     {
-      Reader layers = o.map("layers");
-      for (const std::string& name : layers.keys())
-      {
-        OutputLayer layer;
-        layer.name = name;
-        for (const std::string& n : layers.names(name))
-        {
-          nodeRef(layers, layers.key(name), n);
-          layer.nodes.push_back(model.findNode(n));
-        }
-        if (layer.nodes.empty())
-          layers.fail(layers.key(name), "expected a list of node names");
-        model.layers.push_back(layer);
-      }
-      layers.finish();
+      parent.optional(name);
+      return;
     }
-    else
-      o.optional("layers");
-    o.finish();
+    Reader r = parent.map(name);
+    read(r);
+    r.finish();
   }
-  else
-    root.optional("outputs");
-  if (model.height_nodes.empty())
-    for (size_t i = 0; i < model.nodes.size(); ++i)
-      if (!nodes[model.nodes[i].name].fixed)
-        model.height_nodes.push_back(static_cast<int>(i));
 
-  root.finish();
-  finalizeModel(model);  // sizes again, now that every constraint is in
-  return model;
-}
+  const Source& source_;
+  Reader root_;
+  Model model_;
+  std::map<std::string, Material> materials_;
+  std::vector<NodeInfo> nodes_;  // in file order, as Model::nodes
+  std::unordered_map<std::string, int> node_index_, body_index_, cable_index_;
+  std::set<std::string> member_names_;
+  int ground_count_ = 0;
+};
 
-void setPath(YAML::Node node, const std::vector<std::string>& parts, size_t i, const YAML::Node& value,
-             const std::string& file, const std::string& key)
+/// The dotted parts of an override's key; every part non-empty ("a..b", ".a" and "a." are refused).
+std::vector<std::string> keyParts(const Override& o)
 {
-  if (!node.IsMap())
-    throw SceneError(file, key, "override: '" + parts[i - 1] + "' is not a map");
-  if (i + 1 == parts.size())
+  std::vector<std::string> parts;
+  size_t begin = 0;
+  while (true)
   {
-    node[parts[i]] = value;
-    return;
+    const size_t dot = o.key.find('.', begin);
+    const std::string part = o.key.substr(begin, dot == std::string::npos ? std::string::npos : dot - begin);
+    if (part.empty())
+      throw SceneError("--set " + clipped(o.key + "=" + o.value), clipped(o.key),
+                       "override: malformed key (an empty part between dots)");
+    parts.push_back(part);
+    if (dot == std::string::npos)
+      return parts;
+    begin = dot + 1;
   }
-  // a missing intermediate map is created: the schema check refuses it later if it is not a valid key
-  if (!node[parts[i]].IsDefined() || node[parts[i]].IsNull())
-    node[parts[i]] = YAML::Node(YAML::NodeType::Map);
-  setPath(node[parts[i]], parts, i + 1, value, file, key);
 }
 
-Model loadFromNode(YAML::Node root, const std::string& name, const std::vector<Override>& overrides)
+void applyOverride(const YAML::Node& root, const Override& o, const Source& source)
+{
+  const std::vector<std::string> parts = keyParts(o);
+  YAML::Node value;
+  try
+  {
+    value = YAML::Load(o.value);
+  }
+  catch (const YAML::Exception&)
+  {
+    source.fail(o.key, "override: cannot parse value " + quoted(o.value));
+  }
+  // the maps on the way, each a new handle (assigning one YAML::Node to another would rebind the first's
+  // content); a missing intermediate map is created: the schema check refuses it later if it is not a key
+  std::vector<YAML::Node> chain{ root };
+  for (size_t i = 0; i + 1 < parts.size(); ++i)
+  {
+    YAML::Node parent = chain.back();
+    if (!parent[parts[i]].IsDefined() || parent[parts[i]].IsNull())
+      parent[parts[i]] = YAML::Node(YAML::NodeType::Map);
+    chain.push_back(parent[parts[i]]);
+    if (!chain.back().IsMap())
+      source.fail(o.key, "override: " + quoted(parts[i]) + " is not a map");
+  }
+  chain.back()[parts.back()] = value;
+}
+
+Model loadFromNode(YAML::Node root, const Source& source)
 {
   if (!root.IsMap())
-    throw SceneError(name, "", "the scene must be a YAML map");
-  for (const Override& o : overrides)
-  {
-    std::vector<std::string> parts;
-    std::stringstream ss(o.key);
-    std::string part;
-    while (std::getline(ss, part, '.'))
-    {
-      if (part.empty())
-        throw SceneError(name, o.key, "override: malformed key");
-      parts.push_back(part);
-    }
-    if (parts.empty())
-      throw SceneError(name, o.key, "override: empty key");
-    YAML::Node value;
-    try
-    {
-      value = YAML::Load(o.value);
-    }
-    catch (const YAML::Exception& e)
-    {
-      throw SceneError(name, o.key, "override: cannot parse value '" + o.value + "'");
-    }
-    setPath(root, parts, 0, value, name, o.key);
-  }
-  return buildModel(root, name);
+    throw SceneError(source.file, "", "the scene must be a YAML map");
+  std::unordered_set<int> seen;
+  refuseRepeatedKeys(root, "", source.file, seen);
+  for (const Override& o : source.overrides)
+    applyOverride(root, o, source);
+  return SceneBuilder(root, source).build();
 }
 }  // namespace
 
@@ -992,7 +1167,7 @@ Override parseOverride(const std::string& text)
 {
   const size_t eq = text.find('=');
   if (eq == std::string::npos || eq == 0)
-    throw SceneError("--set", text, "expected key=value");
+    throw SceneError("--set", clipped(text), "expected key=value, got " + quoted(text));
   return Override{ text.substr(0, eq), text.substr(eq + 1) };
 }
 
@@ -1003,21 +1178,29 @@ Model loadScene(const std::string& path, const std::vector<Override>& overrides)
     throw SceneError(path, "", "cannot open the scene file");
   std::stringstream buffer;
   buffer << in.rdbuf();
+  if (in.bad())
+    throw SceneError(path, "", "cannot read the scene file");
   return loadSceneFromString(buffer.str(), path, overrides);
 }
 
 Model loadSceneFromString(const std::string& yaml, const std::string& name, const std::vector<Override>& overrides)
 {
-  YAML::Node root;
+  std::vector<YAML::Node> documents;
   try
   {
-    root = YAML::Load(yaml);
+    documents = YAML::LoadAll(yaml);
   }
-  catch (const YAML::ParserException& e)
+  catch (const YAML::Exception& e)
   {
-    throw SceneError(name, "", std::string("YAML syntax error: ") + e.what());
+    throw SceneError(name, "", std::string("YAML syntax error: ") + clipped(e.what()));
   }
-  return loadFromNode(root, name, overrides);
+  if (documents.size() > 1)
+    throw SceneError(name, "",
+                     "the file holds " + std::to_string(documents.size()) +
+                         " YAML documents (a second one starts on line " +
+                         std::to_string(documents[1].Mark().line + 1) + "); a scene is one document");
+  Source source{ name, overrides };
+  return loadFromNode(documents.empty() ? YAML::Node() : documents.front(), source);
 }
 
 }  // namespace active_tensegrity::core

@@ -47,6 +47,7 @@
 #include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/contact.h"
 #include "active_tensegrity/core/dynamics.h"
+#include "active_tensegrity/core/text.h"
 
 namespace ob = ompl::base;
 namespace og = ompl::geometric;
@@ -294,14 +295,14 @@ std::string checkRequest(const core::Model& model, const PlanRequest& r, std::ve
     const int i = model.findActuator(n);
     if (i < 0)
     {
-      msg << "unknown actuator '" << n << "' (the scene has:";
+      msg << "unknown actuator " << core::quoted(n) << " (the scene has:";
       for (const core::Actuator& a : model.actuators)
         msg << " " << a.name;
       msg << ")";
       return msg.str();
     }
     if (!seen.insert(n).second)
-      return "actuator '" + n + "' named twice";
+      return "actuator " + core::quoted(n) + " named twice";
     idx.push_back(i);
   }
   const size_t n = idx.size();
@@ -378,7 +379,7 @@ std::string checkRequest(const core::Model& model, const PlanRequest& r, std::ve
     }
   if (!planners().count(r.planner))
   {
-    msg << "unknown planner '" << r.planner << "' (known:";
+    msg << "unknown planner " << core::quoted(r.planner) << " (known:";
     for (const std::string& p : plannerNames())
       msg << " " << p;
     msg << ")";

@@ -9,6 +9,7 @@
 
 #include "active_tensegrity/core/scene.h"
 #include "active_tensegrity/core/statics.h"
+#include "active_tensegrity/core/text.h"
 #include "active_tensegrity/planning/folding_planner.h"
 
 namespace active_tensegrity::ros_layer
@@ -71,7 +72,8 @@ ros::Time SimNode::stamp(double t) const
 void SimNode::reject(const std::string& what, const std::string& reason)
 {
   ++rejected_;
-  last_rejection_ = what + ": " + reason;
+  // a command's text (a name of a megabyte, say) reaches the latched status and the log only cut
+  last_rejection_ = core::clipped(what + ": " + reason, 4 * core::kMaxEchoLength);
   ROS_WARN_STREAM("tensegrity_sim: rejected " << last_rejection_ << " (nothing applied; " << rejected_
                                               << " rejected so far)");
   publishStatus();
@@ -91,7 +93,7 @@ void SimNode::onActuation(const active_tensegrity::ActuationCommand::ConstPtr& m
   ++accepted_;
   std::ostringstream s;
   for (size_t i = 0; i < msg->names.size(); ++i)
-    s << (i ? ", " : "") << msg->names[i] << " -> " << msg->targets[i] << " m";
+    s << (i ? ", " : "") << core::clipped(msg->names[i]) << " -> " << msg->targets[i] << " m";
   ROS_INFO_STREAM("tensegrity_sim: actuation at t = " << state_.t << " s: " << s.str());
   publishStatus();
 }

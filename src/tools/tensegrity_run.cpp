@@ -35,10 +35,11 @@ const char* kContactColumns = "t,strut_a,strut_b,point_a_x,point_a_y,point_a_z,p
                               "normal_x,normal_y,normal_z,penetration,penetration_rate,normal_force,friction_x,"
                               "friction_y,friction_z\n";
 
+// +inf is "no value" (min_gap of a scene that checks no strut pair): an empty field
 std::string csvNumber(double v)
 {
   if (std::isinf(v))
-    return v > 0 ? "inf" : "-inf";
+    return v > 0 ? "" : "-inf";
   std::ostringstream s;
   s << std::setprecision(10) << v;
   return s.str();

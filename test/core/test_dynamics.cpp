@@ -338,6 +338,57 @@ TEST(Dynamics, FailedStepReportsStatusAndKeepsTheLastGoodState)
   EXPECT_TRUE(s.q.allFinite());
 }
 
+TEST(Dynamics, StepCutsStopAtTheSmallestStepWhateverTheirAllowedNumber)
+{
+  // steps that always fail, with a million cuts allowed (they recursed once per cut and overflowed the
+  // stack): halving stops before a piece would be shorter than dt_min
+  Quadruplex quad;
+  SolverOptions o = options(Integrator::kNewmark, 1e-2);
+  o.max_iterations = 2;
+  o.newton_tolerance = 1e-30;  // below round-off: no step converges
+  o.max_step_cuts = 1000000;
+  o.dt_min = 1e-5;
+  DynamicsSolver solver(quad.model, o);
+  State s = quad.start(0.5, 3);
+  const ActuationLaw law = constantLaw(1);
+  ASSERT_TRUE(solver.initialize(s, law).ok());
+  const State before = s;
+  const Summary r = solver.step(s, 1e-2, law);
+  EXPECT_EQ(r.status, SolveStatus::kMaxIterations);
+  EXPECT_EQ(r.step_cuts, 9);  // 1e-2 / 2^9 = 1.95e-5; one more cut would give 9.8e-6 < dt_min
+  EXPECT_NE(r.message.find("solver.dt_min"), std::string::npos) << r.message;
+  EXPECT_EQ(s.t, before.t);
+  EXPECT_TRUE(s.q.isApprox(before.q));
+}
+
+TEST(Dynamics, ACutStepCoversTheWholeStep)
+{
+  // a step that converges only in pieces still ends exactly h later, with every piece counted: Newton
+  // allowed few iterations on a long step of the vibrating quadruplex
+  Quadruplex quad;
+  bool found = false;
+  for (int iterations = 2; iterations <= 6 && !found; ++iterations)
+  {
+    SolverOptions o = options(Integrator::kNewmark, 5e-2);
+    o.max_iterations = iterations;
+    o.max_step_cuts = 8;
+    DynamicsSolver solver(quad.model, o);
+    State s = quad.start(2.0, 5);
+    const ActuationLaw law = constantLaw(1);
+    ASSERT_TRUE(solver.initialize(s, law).ok());
+    const double t0 = s.t;
+    const Summary r = solver.step(s, 5e-2, law);
+    if (!r.ok() || r.step_cuts == 0)
+      continue;
+    found = true;
+    SCOPED_TRACE(iterations);
+    EXPECT_NEAR(s.t, t0 + 5e-2, 1e-15);
+    EXPECT_GE(r.iterations, r.step_cuts + 1);  // every attempt took at least one iteration
+    EXPECT_TRUE(s.q.allFinite());
+  }
+  EXPECT_TRUE(found) << "no iteration limit made the step converge only after cuts";
+}
+
 TEST(Dynamics, InitializationProjectsVelocitiesOntoTheConstraints)
 {
   Quadruplex quad;
@@ -548,6 +599,49 @@ TEST(AdaptiveSteps, LandsOnOutputTimesAndActuationBreakpoints)
   EXPECT_EQ(r.solver_steps, static_cast<int>(steps.size()));
   EXPECT_EQ(r.adaptive.accepted, static_cast<long>(steps.size()));
   EXPECT_EQ(r.final_state.u[0].value, 0.05);
+}
+
+TEST(AdaptiveSteps, NoStepIsShorterThanTheSmallestStep)
+{
+  // a ramp that starts 1e-9 s after an output time and a duration 5e-8 s past the last one: both would
+  // need steps far below dt_min; the breakpoint is left to the step to the output and the last output
+  // moves to the end
+  Model m = loadScene(std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) + "/config/scenes/quadruplex.yaml");
+  m.analysis.type = AnalysisType::kDynamic;
+  m.analysis.duration = 0.05 + 5e-8;
+  m.analysis.output_interval = 0.01;
+  m.analysis.max_actuation = 0.01;
+  m.analysis.schedule = RampSchedule{ 0.5, 0.01 + 1e-9, 0.01, 0.0 };
+  m.solver.adaptive = true;
+  m.solver.dt = 1e-3;
+  m.solver.dt_min = 1e-7;
+  std::vector<double> outputs, steps = { 0.0 };
+  const RunResult r = runAnalysis(
+      m, [&](const State& s) { outputs.push_back(s.t); }, {}, [&](const State& s) { steps.push_back(s.t); });
+  ASSERT_TRUE(r.summary.ok()) << r.summary.message;
+  for (size_t i = 1; i < steps.size(); ++i)
+    EXPECT_GE(steps[i] - steps[i - 1], m.solver.dt_min * (1.0 - 1e-9)) << "step " << i << " ends at " << steps[i];
+  ASSERT_EQ(outputs.size(), 6u);  // 0, 0.01, ..., 0.04, and the end
+  EXPECT_EQ(outputs.back(), m.analysis.duration);
+  EXPECT_EQ(r.final_state.t, m.analysis.duration);
+}
+
+TEST(FixedSteps, ALastStepShorterThanTheSmallestStepIsMergedIntoTheOneBefore)
+{
+  Model m = loadScene(std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) + "/config/scenes/quadruplex.yaml");
+  m.analysis.type = AnalysisType::kDynamic;
+  m.analysis.duration = 0.01 + 1e-9;
+  m.analysis.max_actuation = 0.01;
+  m.analysis.schedule = RampSchedule{ 0.5, 0.0, 0.01, 0.0 };
+  m.solver.dt = 1e-3;
+  std::vector<double> steps = { 0.0 };
+  const RunResult r = runAnalysis(
+      m, [](const State&) {}, {}, [&](const State& s) { steps.push_back(s.t); });
+  ASSERT_TRUE(r.summary.ok()) << r.summary.message;
+  ASSERT_EQ(steps.size(), 11u);  // ten steps, the last 1e-9 s longer
+  EXPECT_EQ(steps.back(), m.analysis.duration);
+  for (size_t i = 1; i < steps.size(); ++i)
+    EXPECT_GE(steps[i] - steps[i - 1], 1e-3 * (1.0 - 1e-9));
 }
 
 TEST(LinearSolver, DenseAndSparseFactorsSolveAlikeAndTellASingularMatrix)

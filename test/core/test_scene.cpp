@@ -691,3 +691,262 @@ TEST(SceneFiles, EveryShippedSceneLoadsAndStartsConsistent)
   }
   EXPECT_GE(n, 5);  // quadruplex, tower, prism, masts, parallel, and whatever comes
 }
+
+// ---------------------------------------------------------------------------------------------------
+// bounds on what a scene may ask for, repeated keys, and messages that stay readable
+
+const std::string kDynamic = "analysis:\n  type: dynamic\n  max_actuation: 0.3\n  duration: 0.1\n";
+
+// kMini as a dynamic run (actuation speed 0.1 m/s), with `extra` appended
+std::string dynamicMini(const std::string& extra = "")
+{
+  return edited({ { kAnalysis, "actuation: {speed: 0.1}\n" + kDynamic + extra } });
+}
+
+TEST(SceneBounds, EveryIntegerKeyIsBounded)
+{
+  const std::vector<std::tuple<std::string, std::string, std::string>> cases = {
+    { "solver.max_iterations", "1073741824", "at most 1000" },  // 4 x 2^30 overflowed an int in statics
+    { "solver.max_step_cuts", "1e9", "at most 60" },           { "solver.max_jacobian_age", "3e9", "at most 1000000" },
+    { "analysis.steps", "2147483648", "at most 10000000" },    { "solver.max_step_cuts", "-1", "at least 0" },
+  };
+  for (const auto& [key, value, needle] : cases)
+    EXPECT_TRUE(refused([&] { loadSceneFromString(kMini, "mini.yaml", { parseOverride(key + "=" + value) }); }, key,
+                        { needle, "'" + value + "'" }))
+        << key;
+  // the bounds themselves load
+  const Model m = loadSceneFromString(
+      kMini, "mini.yaml", { parseOverride("solver.max_iterations=1000"), parseOverride("solver.max_step_cuts=60") });
+  EXPECT_EQ(m.solver.max_iterations, 1000);
+  EXPECT_EQ(m.solver.max_step_cuts, 60);
+}
+
+TEST(SceneBounds, TimeStepsBeyondTheBoundAreRefusedWithTheNumbers)
+{
+  // 0.1 s / 1e-300 s would overflow the step counter (it ran no step and said converged)
+  EXPECT_TRUE(refused([] { loadSceneFromString(dynamicMini(), "mini.yaml", { parseOverride("solver.dt=1e-300") }); },
+                      "solver.dt", { "solver.dt_min = 1e-07", "1e-300" }));
+  EXPECT_TRUE(refused(
+      []
+      {
+        loadSceneFromString(dynamicMini(), "mini.yaml",
+                            { parseOverride("solver.dt=1e-9"), parseOverride("solver.dt_min=1e-12"),
+                              parseOverride("analysis.duration=1000") });
+      },
+      "solver.dt", { "1000 s", "1e-09 s", "1e+12 time steps", "1e+08" }));
+  // a static run does not step in time: the same dt loads there
+  EXPECT_NO_THROW(loadSceneFromString(kMini, "mini.yaml",
+                                      { parseOverride("solver.dt=1e-300"), parseOverride("solver.dt_min=1e-300") }));
+}
+
+TEST(SceneBounds, OutputIntervalBelowTheSmallestStepIsRefused)
+{
+  EXPECT_TRUE(refused(
+      []
+      {
+        loadSceneFromString(dynamicMini(), "mini.yaml",
+                            { parseOverride("solver.adaptive=true"),
+                              parseOverride("analysis.output_interval=1e-300") });
+      },
+      "analysis.output_interval", { "dt_min = 1e-07", "1e-300" }));
+  EXPECT_TRUE(refused([]
+                      { loadSceneFromString(dynamicMini(), "mini.yaml", { parseOverride("analysis.duration=1e-9") }); },
+                      "analysis.duration", { "dt_min", "1e-09" }));
+  EXPECT_NO_THROW(loadSceneFromString(dynamicMini(), "mini.yaml", { parseOverride("analysis.output_interval=1e-7") }));
+}
+
+TEST(SceneBounds, NothingFreeToMoveIsRefused)
+{
+  // every node fixed and no strut, for both analyses (a dynamic one crashed in the sparse LU, a static one
+  // wrote -inf heights)
+  const std::string still = R"(name: still
+materials:
+  cord: {youngs_modulus: 1.0e7}
+nodes:
+  A: {position: [0.0, 0.0, 0.0], fixed: true}
+  B: {position: [1.0, 0.0, 0.0], fixed: true}
+struts: {material: cord, radius: 0.01, members: {}}
+cables:
+  c: {material: cord, radius: 0.001, members: {C1: [A, B]}}
+)";
+  EXPECT_TRUE(refused([&] { loadSceneFromString(still + "analysis: {type: static}\n", "still.yaml"); },
+                      "struts.members", { "nothing to simulate" }));
+  EXPECT_TRUE(refused([&] { loadSceneFromString(still + "analysis: {type: dynamic, duration: 1}\n", "still.yaml"); },
+                      "struts.members", { "nothing to simulate" }));
+}
+
+TEST(SceneBounds, AStrutPinnedAtBothEndsMeasuresTheHeightOfItsNodes)
+{
+  // no free node: the height is that of all nodes (finite), not of an empty set (-inf)
+  const Model m = loadSceneFromString(
+      edited({ { "  C: {position: [0.0, 0.8, 1.0]}", "  C: {position: [0.0, 0.8, 1.0], fixed: true}" },
+               { "  D: {position: [1.0, 0.2, 1.0]}", "  D: {position: [1.0, 0.2, 1.0], fixed: true}" },
+               { "  M: {position: [0.5, 0.5, 1.5], mass: 0.2}\n", "" },
+               { "springs:\n  holders:\n    stiffness: 500.0\n    prestress: 10.0\n    members: {K1: [C, M], K2: [D, "
+                 "M]}\n",
+                 "" },
+               { "actuators:\n  lift:\n    nodes: [M]\n    direction: [0.0, 0.0, -1.0]\n    range: [0.0, 0.5]\n", "" },
+               { "  max_actuation: 0.3\n", "" } }),
+      "pinned.yaml");
+  EXPECT_EQ(m.height_nodes.size(), m.nodes.size());
+}
+
+// "line N" of the n-th (1-based) line of `yaml` that holds `needle`
+std::string lineOf(const std::string& yaml, const std::string& needle, int nth = 1)
+{
+  size_t at = std::string::npos;
+  for (int k = 0; k < nth; ++k)
+    at = yaml.find(needle, at == std::string::npos ? 0 : at + 1);
+  EXPECT_NE(at, std::string::npos) << needle;
+  return "line " + std::to_string(1 + std::count(yaml.begin(), yaml.begin() + static_cast<long>(at), '\n'));
+}
+
+TEST(SceneKeys, ARepeatedKeyIsRefusedWithBothLines)
+{
+  // a repeated node (the first one won, shifting every height) and a second members block (dropped)
+  const std::string node_twice = edited({ { "  M: {", "  A: {position: [0.0, 0.0, -1.0], fixed: true}\n  M: {" } });
+  EXPECT_TRUE(refused([&] { loadSceneFromString(node_twice, "bad.yaml"); }, "nodes.A",
+                      { "repeated key", lineOf(node_twice, "  A: {"), lineOf(node_twice, "  A: {", 2) }));
+  const std::string members_twice =
+      edited({ { "    members: {C1: [A, C], C2: [B, D]}\n",
+                 "    members: {C1: [A, C], C2: [B, D]}\n    members: {C3: [A, D]}\n" } });
+  EXPECT_TRUE(refused([&] { loadSceneFromString(members_twice, "bad.yaml"); }, "cables.cords.members",
+                      { "repeated key", lineOf(members_twice, "members: {C1"), lineOf(members_twice, "members: {C3") }));
+  // in a flow map, and at the top level
+  const std::string in_flow = edited({ { "density: 7850.0}", "density: 7850.0, density: 1.0}" } });
+  EXPECT_TRUE(refused([&] { loadSceneFromString(in_flow, "bad.yaml"); }, "materials.steel.density",
+                      { "repeated key", lineOf(in_flow, "density: 1.0}") }));
+  const std::string top = kMini + "name: again\n";
+  EXPECT_TRUE(refused([&] { loadSceneFromString(top, "bad.yaml"); }, "name",
+                      { "repeated key", "line 1 ", lineOf(top, "name: again") }));
+}
+
+TEST(SceneKeys, ASecondYamlDocumentIsRefused)
+{
+  const std::string two = kMini + "---\nname: other\n";
+  EXPECT_TRUE(refused([&] { loadSceneFromString(two, "two.yaml"); }, "",
+                      { "two.yaml", "2 YAML documents", lineOf(two, "name: other") }));
+}
+
+TEST(SceneKeys, AliasedNodesAreCheckedOnce)
+{
+  // YAML aliases share nodes: nine levels of ten references each reach a billion leaves through a few
+  // dozen nodes; the repeated-key check visits each node once (else this test would not end)
+  std::string nested = "[&a0 [1, 1, 1, 1, 1, 1, 1, 1, 1, 1]";
+  for (int level = 1; level <= 9; ++level)
+  {
+    nested += ", &a" + std::to_string(level) + " [";
+    for (int k = 0; k < 10; ++k)
+      nested += (k ? ", *a" : "*a") + std::to_string(level - 1);
+    nested += "]";
+  }
+  nested += "]";
+  EXPECT_TRUE(refused([&] { loadSceneFromString(kMini + "description: " + nested + "\n", "alias.yaml"); },
+                      "description", { "non-empty string" }));
+}
+
+TEST(SceneOverride, AKeyEndingInADotIsRefused)
+{
+  // "analysis.duration." was taken as analysis.duration
+  EXPECT_TRUE(refused([] { loadScene(kQuadruplex, { parseOverride("analysis.duration.=0.001") }); },
+                      "analysis.duration.", { "malformed" }));
+  EXPECT_TRUE(refused([] { loadScene(kQuadruplex, { parseOverride(".analysis=1") }); }, ".analysis", { "malformed" }));
+}
+
+TEST(SceneOverride, ABadValueIsBlamedOnTheCommandLine)
+{
+  try
+  {
+    loadScene(kQuadruplex, { parseOverride("struts.radius=-0.06") });
+    FAIL() << "loaded";
+  }
+  catch (const SceneError& e)
+  {
+    const std::string what = e.what();
+    EXPECT_EQ(what.rfind("--set struts.radius=-0.06 (on " + kQuadruplex + "): struts.radius: ", 0), 0u) << what;
+  }
+  // a key the file set and no override touched is still blamed on the file
+  EXPECT_TRUE(refused(
+      []
+      {
+        loadSceneFromString(edited({ { "radius: 0.02", "radius: -0.02" } }), "mini.yaml",
+                            { parseOverride("analysis.steps=5") });
+      },
+      "struts.radius", { "mini.yaml: struts.radius" }));
+}
+
+TEST(SceneMessages, NumbersArePrintedInTheirShortestExactForm)
+{
+  EXPECT_TRUE(refused([] { loadSceneFromString(kMini, "mini.yaml", { parseOverride("solver.newmark.gamma=0.4999") }); },
+                      "solver.newmark.gamma", { "got 0.4999" }));
+  EXPECT_TRUE(
+      refused([] { loadSceneFromString(kMini, "mini.yaml", { parseOverride("materials.steel.poisson_ratio=-1e-9") }); },
+              "materials.steel.poisson_ratio", { "got -1e-09" }));
+  // the six-decimal form would have printed 0.500000 and -0.000000
+  EXPECT_TRUE(refused([] { loadSceneFromString(kMini, "mini.yaml", { parseOverride("solver.newmark.beta=0.3") }); },
+                      "solver.newmark.beta", { "= 0.3025", "got 0.3" }));
+}
+
+TEST(SceneMessages, LongValuesAreCut)
+{
+  const std::string huge(1000 * 1000, 'x');
+  try
+  {
+    loadSceneFromString(kMini, "mini.yaml", { parseOverride("struts.radius=" + huge) });
+    FAIL() << "loaded";
+  }
+  catch (const SceneError& e)
+  {
+    const std::string what = e.what();
+    EXPECT_LT(what.size(), 1000u);
+    EXPECT_NE(what.find("(1000000 bytes)"), std::string::npos) << what;
+  }
+  try
+  {
+    loadSceneFromString(edited({ { "S2: [B, C]", "S2: [B, " + huge + "]" } }), "mini.yaml");
+    FAIL() << "loaded";
+  }
+  catch (const SceneError& e)
+  {
+    EXPECT_LT(std::string(e.what()).size(), 1000u);
+    EXPECT_NE(std::string(e.what()).find("unknown node 'xxx"), std::string::npos);
+  }
+}
+
+TEST(SceneMessages, TheRealCauseOfAMasslessStrutIsNamed)
+{
+  // a radius of 1e-200 m: r^2 underflows; the density is fine
+  EXPECT_TRUE(refused([] { loadSceneFromString(kMini, "mini.yaml", { parseOverride("struts.radius=1e-200") }); },
+                      "struts.radius", { "1e-200", "area of 0" }));
+  EXPECT_TRUE(refused([] { loadSceneFromString(kMini, "mini.yaml", { parseOverride("struts.radius=1e200") }); },
+                      "struts.radius", { "1e+200", "area of inf" }));
+  EXPECT_TRUE(refused([] { loadSceneFromString(kMini, "mini.yaml", { parseOverride("cables.cords.radius=1e-170") }); },
+                      "cables.cords.radius", { "1e-170" }));
+}
+
+TEST(SceneMessages, MessagesQuoteTheBadValue)
+{
+  EXPECT_TRUE(refused(
+      [] {
+        loadSceneFromString(edited({ { "S3: [C, D]", "S3: [C, D, A]" } }), "mini.yaml");
+      },
+      "struts.members.S3", { "expected two node names [from, to], got [C, D, A]" }));
+  EXPECT_TRUE(refused(
+      [] {
+        loadSceneFromString(edited({ { "[1.0, 0.2, 1.0]", "[0.0, 0.0, 0.0]" } }), "mini.yaml");
+      },
+      "struts.members.S1", { "zero length", "'A' at [0, 0, 0]", "'D' at [0, 0, 0]" }));
+}
+
+TEST(SceneLoading, TwentyThousandNodesLoad)
+{
+  // the loader indexes names and keys (its time grew with the square of the node count); the run time is
+  // measured by `tensegrity_bench load`
+  std::string extra;
+  for (int i = 0; i < 20000; ++i)
+    extra += "  G" + std::to_string(i) + ": {position: [" + std::to_string(i) + ".0, 5.0, 0.0], fixed: true}\n";
+  const Model m = loadSceneFromString(edited({ { "  M: {", extra + "  M: {" } }), "many.yaml");
+  EXPECT_EQ(m.nodes.size(), 20005u);
+  EXPECT_EQ(m.findNode("G19999"), 4 + 19999);
+  EXPECT_EQ(m.findNode("M"), 4 + 20000);
+}

@@ -105,7 +105,9 @@ private:
   /// The local error estimate of a step of h from algorithmic accelerations a0 to a1 (StepEstimate).
   double errorEstimate(const Eigen::VectorXd& a0, const Eigen::VectorXd& a1, double h) const;
   Summary attempt(State& state, double h, const ActuationLaw& law);
-  Summary advance(State& state, double h, const ActuationLaw& law, int depth);
+  /// A step of h, halved on failure (a loop over the pieces, at most max_step_cuts levels deep, never
+  /// below dt_min).
+  Summary advance(State& state, double h, const ActuationLaw& law);
   void predict(const State& start, double h, const Eigen::VectorXd& qdd_new, Eigen::VectorXd& q, Eigen::VectorXd& qd,
                Eigen::VectorXd& acc) const;
 

@@ -1,0 +1,23 @@
+/// Text for messages: numbers in their shortest exact form and user-given text cut to a bounded
+/// length, so that an error or status message names a bad value without echoing megabytes of it.
+#pragma once
+
+#include <cstddef>
+#include <string>
+
+namespace active_tensegrity::core
+{
+/// Longest piece of user-given text (a name, a value) a message repeats, in bytes.
+constexpr std::size_t kMaxEchoLength = 200;
+
+/// The shortest decimal text that reads back as exactly `v` ("0.5", "-0", "1e-300", "inf", "nan").
+std::string shortestNumber(double v);
+
+/// `text` itself when it has at most `max_length` bytes; else its first `max_length` bytes (never
+/// splitting a UTF-8 character), "..." and the full length, e.g. "abc... (1048576 bytes)".
+std::string clipped(const std::string& text, std::size_t max_length = kMaxEchoLength);
+
+/// clipped(text) in single quotes: how messages quote a name or a value.
+std::string quoted(const std::string& text);
+
+}  // namespace active_tensegrity::core
