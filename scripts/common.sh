@@ -79,7 +79,7 @@ at_build() {
   at_catkin_make "$@"
 }
 
-# devel/setup.bash is not set -u clean (toolchain gotcha 7): source it with nounset off.
+# devel/setup.bash reads unset variables and fails under `set -u`: source it with nounset off.
 at_source_devel() {
   local had_u=0
   [[ $- == *u* ]] && had_u=1

@@ -1,9 +1,9 @@
-// Lattices of quadruplex cells and the `tensegrity_bench lattice` command (issue 7: time per step
-// against the number of struts).
+// Lattices of quadruplex cells and the `tensegrity_bench lattice` command (the scaling benchmark: time per
+// step against the number of struts; docs/benchmarks.md).
 //
 // Geometry (chosen so that every cell is a quadruplex like config/scenes/quadruplex.yaml in its own
 // prestressed equilibrium, neighbouring cells are joined, and a dynamic run folds it into contact
-// and converges; what was tried and dropped is noted at the end):
+// and converges; why not otherwise is noted at the end):
 // - Cell (i, j), i < nx, j < ny, has its centre at ((i + 1/2) p, (j + 1/2) p, 0), p = pitch (1 m).
 //   Its bottom corners P1..P4 are at the centre + (h, h), (-h, h), (-h, -h), (h, -h), h = p / 2: nodes
 //   G<a>_<b> of a square grid, fixed, and SHARED by up to four cells. The (up to four) struts ending at
@@ -27,11 +27,11 @@
 //   half-cosine blends, to s = 0.4 m (of l0 = 0.66 m): the tops come down from 0.5 to about 0.31 m and
 //   struts touch from about t = 0.26-0.31 s on, so the default 0.4 s run includes contact. Contact:
 //   restitution 0.5, friction 0.1, as tower.yaml.
-// Dropped: sharing top nodes (two struts pinned at their far ends on one node; driving it down from the
-// top of the circle it can move on is a singular constraint at the start); driving the top nodes down
-// (as quadruplex.yaml's `top`): the prescribed motion locks struts of neighbouring cells against each
-// other near the shared corners (contact forces of 10-500 MN, then Newton fails); a = 0.4 m (tips 0.2 m
-// apart touched across cells first).
+// Why not otherwise: shared top nodes (two struts pinned at their far ends on one node) would make the
+// drive singular at the start, the node being driven down from the top of the circle it can move on;
+// driving the top nodes down (as quadruplex.yaml's `top`) locks struts of neighbouring cells against each
+// other near the shared corners (contact forces of 10-500 MN, then Newton fails); with a = 0.4 m the tips,
+// 0.2 m apart, touch across cells first.
 #include "lattice.h"
 
 #include <algorithm>

@@ -66,7 +66,7 @@ Vec3 angularMomentum(const Model& m, const State& s)
   return h;
 }
 
-/// The quadruplex of PHYSICS.md Sec. 7 vibrating freely about its prestressed equilibrium
+/// The quadruplex of paper Sec. 6.1 (docs/scenes.md) vibrating freely about its prestressed equilibrium
 /// (actuation held at 0), started with a velocity field.
 struct Quadruplex
 {
@@ -477,8 +477,8 @@ TEST(Dynamics, ModifiedNewtonReusesTheMatrixAndItsErrorFollowsTheTolerance)
   // Modified Newton accepts an iterate when the error estimated to be left in it (the increment times
   // theta / (1 - theta), docs/physics.md) is within the tolerance. Its distance to a tight full-Newton run
   // must shrink with the tolerance, at a small fraction of full Newton's factorizations (measured with
-  // the quadratic first guess: 1e-5 -> 8.4e-6 m, 1e-6 -> 3.9e-7, 1e-8 -> 3.1e-9; with the linear guess
-  // of before, 1e-8 gave 9.5e-8: its larger first multiplier errors were not all iterated away).
+  // the quadratic first guess: 1e-5 -> 8.4e-6 m, 1e-6 -> 3.9e-7, 1e-8 -> 3.1e-9; a linear guess leaves
+  // larger first multiplier errors, not all iterated away: 9.5e-8 at 1e-8).
   Quadruplex quad;
   SolverOptions full = options(Integrator::kNewmark, 1e-3);
   full.reuse_jacobian = false;

@@ -1,4 +1,5 @@
-// Clustered (sliding) cables: one tension over a path through several points (PHYSICS.md Sec. 2).
+// Clustered (sliding) cables: one tension over a path through several points (docs/physics.md,
+// "Force elements").
 // Tangents against central differences (taut, damped, pulled in; slack), the frictionless pulley
 // against its closed form, pull-in actuation, and energy conservation of an undamped system.
 #include <cmath>

@@ -1,4 +1,4 @@
-// Statics: the quadruplex of PHYSICS.md Sec. 7 (paper Sec. 6.1) without contact.
+// Statics: the quadruplex of paper Sec. 6.1 (config/scenes/quadruplex.yaml, docs/scenes.md) without contact.
 #include <cmath>
 
 #include <gtest/gtest.h>

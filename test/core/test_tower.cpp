@@ -1,4 +1,4 @@
-// The four-stage clustered tower (paper Sec. 6.2, PHYSICS.md Sec. 8): its layout, the quasi-static fold
+// The four-stage clustered tower (paper Sec. 6.2; layout in docs/scenes.md): its layout, the quasi-static fold
 // with and without contact against the paper's contact onset, and short dynamic folds.
 #include <cmath>
 

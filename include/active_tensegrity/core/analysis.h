@@ -33,7 +33,7 @@ std::vector<ContactPairState> activeContacts(const Model& model, const State& st
 double nodesHeight(const Model& model, const std::vector<int>& nodes, const Eigen::VectorXd& q);
 
 /// Largest bending stress in a strut from its contact forces (Pa): each strut is a beam pinned at its
-/// ends (PHYSICS.md Sec. 8), loaded by the components of its contact forces across its axis at the
+/// ends (docs/physics.md, "Derived outputs"), loaded by the components of its contact forces across its axis at the
 /// contact points' axial positions; the bending is carried by the innermost layer (the steel core of a
 /// sleeved strut, the whole section of a solid one): sigma = M r / I = 4 M / (pi r^3). 0 without contact.
 double maxStrutBendingStress(const Model& model, const Eigen::VectorXd& q,

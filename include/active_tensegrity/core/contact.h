@@ -1,4 +1,4 @@
-/// Strut-strut contact (Kan et al. 2019, Sec. 3-4 and Appendix A; PHYSICS.md Sec. 4), in stages:
+/// Strut-strut contact (Kan et al. 2019, Sec. 3-4 and Appendix A; docs/physics.md, "Strut contact"), in stages:
 /// broad phase (broad_phase.h) -> narrow phase (closest points of the two axis segments,
 /// geometry.h) -> force law (this file) -> assembly (System::contactForce).
 ///

@@ -66,7 +66,8 @@ struct Node
 /// Tension element through an ordered list of points (at least two): its length is the sum of the
 /// segment lengths and it carries one tension T = k (l - l0) + c l_dot while l > l0 (never below zero
 /// when tension_only), else 0, along every segment. Two points make a classical cable or spring; more
-/// make a clustered (sliding) cable running frictionlessly through the inner points (PHYSICS.md Sec. 2).
+/// make a clustered (sliding) cable running frictionlessly through the inner points (docs/physics.md,
+/// "Force elements").
 /// A material cable has k = EA / l0 (area > 0; pulling it in keeps EA); a spring has a given k (area 0).
 /// When actuator >= 0 its rest length is l0 - s(t) (pulled in at one end by the actuation value s).
 struct Cable
@@ -146,7 +147,7 @@ struct StrutPair
   double stiffness90 = 0.0;  // K at a right crossing, (4/3) E* (r_a r_b)^(1/4), N/m^1.5
 };
 
-/// Contact law parameters (PHYSICS.md Sec. 4, docs/physics.md).
+/// Contact law parameters (docs/physics.md, "Strut contact"; scene keys under `contact`, docs/scenes.md).
 struct ContactSettings
 {
   bool enabled = false;

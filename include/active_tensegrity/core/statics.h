@@ -1,4 +1,4 @@
-/// Static equilibrium (paper Sec. 5 and PHYSICS.md Sec. 6): qd = qdd = 0, Newton on [q; lambda] for
+/// Static equilibrium (paper Sec. 5; docs/physics.md, "Statics"): qd = qdd = 0, Newton on [q; lambda] for
 ///   -F(q) + Phi_q^T lambda = 0,  Phi(q, s) = 0,
 /// under actuation (displacement) control. The spin of every strut about its own axis has no
 /// stiffness in statics, so the solver adds one linear spin-lock row per strut,
