@@ -31,6 +31,8 @@ const char* kUsage =
     "  from the wall time of the start; no master needed. Watch it with\n"
     "  roslaunch active_tensegrity playback.launch bag:=$PWD/FILE.bag\n";
 
+const char* kDefaultBagNs = "/tensegrity_sim";
+
 const char* kContactColumns = "t,strut_a,strut_b,point_a_x,point_a_y,point_a_z,point_b_x,point_b_y,point_b_z,"
                               "normal_x,normal_y,normal_z,penetration,penetration_rate,normal_force,friction_x,"
                               "friction_y,friction_z\n";
@@ -48,7 +50,7 @@ std::string csvNumber(double v)
 
 int main(int argc, char** argv)
 {
-  std::string scene, out_path, summary_path, contacts_path, bag_path, bag_ns = "/tensegrity_sim";
+  std::string scene, out_path, summary_path, contacts_path, bag_path, bag_ns = kDefaultBagNs;
   std::vector<at::Override> overrides;
   try
   {
@@ -87,6 +89,10 @@ int main(int argc, char** argv)
     }
     if (scene.empty())
       throw std::invalid_argument("no scene given");
+    if (!bag_path.empty())
+      active_tensegrity::ros_layer::BagWriter::checkNamespace(bag_ns);
+    else if (bag_ns != kDefaultBagNs)
+      throw std::invalid_argument("--bag-ns needs --bag");
   }
   catch (const std::exception& e)
   {
@@ -115,8 +121,8 @@ int main(int argc, char** argv)
       std::cerr << "tensegrity_run: cannot write '" << path << "'\n";
     return static_cast<bool>(f);
   };
-  std::ofstream file, contacts;
-  if (!open(out_path, file) || !open(contacts_path, contacts))
+  std::ofstream file, contacts, summary_file;
+  if (!open(out_path, file) || !open(contacts_path, contacts) || !open(summary_path, summary_file))
     return 1;
   std::unique_ptr<active_tensegrity::ros_layer::BagWriter> bag;
   if (!bag_path.empty())
@@ -245,15 +251,15 @@ int main(int argc, char** argv)
   for (size_t k = 0; k < peak_cols.size(); ++k)
     summary << "  " << peak_names[k] << ": {value: " << csvNumber(peak_value[k]) << ", t: " << csvNumber(peak_time[k])
             << "}\n";
-  if (!summary_path.empty())
+  if (summary_file.is_open())
   {
-    std::ofstream s(summary_path);
-    if (!s)
+    summary_file << summary.str();
+    summary_file.close();
+    if (!summary_file)
     {
       std::cerr << "tensegrity_run: cannot write '" << summary_path << "'\n";
       return 1;
     }
-    s << summary.str();
   }
   else
     std::cerr << summary.str();

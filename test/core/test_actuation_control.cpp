@@ -195,6 +195,24 @@ TEST(ActuationController, BadCommandsAreRejectedWholeWithTheirReason)
   EXPECT_NE(c.setTargets(1.0, { "pull1" }, { 0.5 }, {}, {}, 0.0, 1.0).find("max_speeds"), std::string::npos);
 }
 
+TEST(ActuationController, AHugeNameIsCutInTheMessage)
+{
+  // a 1 MB actuator name: the node copies the message into its latched status and log
+  const at::Model model = twoActuators();
+  at::ActuationController c(model, { av(0.0), av(0.5) });
+  const std::string huge(1000000, 'n');
+  for (const std::vector<std::string>& names : { std::vector<std::string>{ huge }, { "pull1", huge, huge } })
+  {
+    const std::string err = c.setTargets(1.0, names, std::vector<double>(names.size(), 0.5), {}, {}, 0.1, 1.0);
+    EXPECT_NE(err.find("unknown actuator 'nnn"), std::string::npos) << err.substr(0, 300);
+    EXPECT_NE(err.find("(1000000 bytes)"), std::string::npos) << err.substr(0, 300);
+    EXPECT_LT(err.size(), 1000u);
+  }
+  const std::string traj = c.setTrajectory(1.0, { huge }, { 1.0 }, { { 0.5 } }, {});
+  EXPECT_LT(traj.size(), 1000u) << traj.substr(0, 300);
+  EXPECT_FALSE(traj.empty());
+}
+
 TEST(ActuationController, TrajectoriesAreFollowedAndCheckedWhole)
 {
   const at::Model model = twoActuators();

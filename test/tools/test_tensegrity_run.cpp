@@ -143,3 +143,58 @@ TEST(TensegrityRun, ContactsFileListsEveryTouchingPairPerOutputStep)
   const std::vector<std::string> main_rows = lines(csv);
   EXPECT_NE(main_rows.back().find(",4,"), std::string::npos) << main_rows.back();
 }
+
+TEST(TensegrityRun, EveryOutputPathIsCheckedBeforeTheRun)
+{
+  // the summary's folder is missing: refused at once, nothing written to the CSV path
+  const std::string csv = tmp("never.csv");
+  std::remove(csv.c_str());
+  const Result r = run(scene("tower.yaml") + " --out " + csv + " --summary /nonexistent/folder/x.yaml");
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find("cannot write '/nonexistent/folder/x.yaml'"), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("status:"), std::string::npos) << "the run went ahead: " << r.output;
+  EXPECT_TRUE(lines(csv).empty());
+}
+
+TEST(TensegrityRun, ABagNamespaceMustBeAGraphName)
+{
+  for (const std::string& ns : { "'bad name!'", "relative", "/trailing/", "'/a b'" })
+  {
+    const Result r = run(scene("prism.yaml") + " --bag " + tmp("ns.bag") + " --bag-ns " + ns);
+    EXPECT_EQ(r.code, 2) << ns << ": " << r.output;
+    EXPECT_NE(r.output.find("namespace"), std::string::npos) << r.output;
+  }
+  EXPECT_EQ(run(scene("prism.yaml") + " --bag-ns /x").code, 2);  // without --bag it would do nothing
+  const Result ok = run(scene("prism.yaml") + " --set analysis.duration=0.01 --bag " + tmp("ns.bag") +
+                        " --bag-ns /robot/sim --out " + tmp("ns.csv"));
+  EXPECT_EQ(ok.code, 0) << ok.output;
+}
+
+TEST(TensegrityRun, AnOverrideKeyEndingInADotIsRefused)
+{
+  const Result r = run(scene("prism.yaml") + " --set analysis.duration.=0.001");
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find("malformed"), std::string::npos) << r.output;
+}
+
+TEST(TensegrityRun, NoInfiniteOrNanFieldWhenNoPairIsChecked)
+{
+  // a single pinned strut swinging under gravity: no strut pair, so min_gap has no value (an empty field)
+  const std::string yaml = tmp("pendulum.yaml"), csv = tmp("pendulum.csv");
+  std::ofstream(yaml) << "name: pendulum\n"
+                         "materials: {steel: {youngs_modulus: 2.0e11, density: 7850.0}}\n"
+                         "nodes:\n  A: {position: [0.0, 0.0, 0.0], fixed: true}\n  B: {position: [1.0, 0.0, 0.0]}\n"
+                         "struts: {material: steel, radius: 0.01, members: {S: [A, B]}}\n"
+                         "gravity: {enabled: true}\n"
+                         "analysis: {type: dynamic, duration: 0.02}\n";
+  const Result r = run(yaml + " --out " + csv);
+  ASSERT_EQ(r.code, 0) << r.output;
+  const std::vector<std::string> rows = lines(csv);
+  ASSERT_GT(rows.size(), 2u);
+  for (const std::string& row : rows)
+  {
+    EXPECT_EQ(row.find("inf"), std::string::npos) << row;
+    EXPECT_EQ(row.find("nan"), std::string::npos) << row;
+  }
+  EXPECT_NE(rows[1].find(",0,,"), std::string::npos) << rows[1];  // active_contacts 0, min_gap empty
+}

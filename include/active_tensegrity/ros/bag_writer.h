@@ -18,7 +18,8 @@ class BagWriter
 {
 public:
   /// Opens (truncates) `path`; topics are <ns>/contacts etc., as the node named <ns> publishes them.
-  /// Throws rosbag::BagException when the file cannot be written.
+  /// Throws std::invalid_argument when `ns` is not a valid namespace (checkNamespace) and
+  /// rosbag::BagException when the file cannot be written.
   BagWriter(const std::string& path, const core::Model& model, const std::string& ns = "/tensegrity_sim",
             const std::string& frame_id = "world", MarkerOptions markers = MarkerOptions());
   ~BagWriter();
@@ -30,6 +31,10 @@ public:
     return written_;
   }
   void close();
+
+  /// `ns` when it is an absolute ROS graph name ("/tensegrity_sim", "/robot/sim"), "" for the root "/";
+  /// else throws std::invalid_argument quoting it and saying why.
+  static std::string checkNamespace(const std::string& ns);
 
 private:
   rosbag::Bag bag_;
