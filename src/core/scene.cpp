@@ -10,6 +10,7 @@
 #include <unordered_map>
 #include <unordered_set>
 
+#include <yaml-cpp/eventhandler.h>
 #include <yaml-cpp/yaml.h>
 
 #include "active_tensegrity/core/contact.h"
@@ -1035,10 +1036,11 @@ private:
       a.fail(a.key("output_interval"), "must be 0 (a row per step) or at least solver.dt_min = " +
                                            shortestNumber(o.dt_min) + " s, got " + shortestNumber(an.output_interval));
     if (an.output_interval > 0.0 && an.duration / an.output_interval > kMaxOutputSteps)
-      a.fail(a.key("output_interval"),
-             "analysis.duration " + shortestNumber(an.duration) + " s / output_interval " +
-                 shortestNumber(an.output_interval) + " s = " + shortestNumber(std::ceil(an.duration / an.output_interval)) +
-                 " output rows, more than the " + shortestNumber(kMaxOutputSteps) + " a run may write");
+      a.fail(a.key("output_interval"), "analysis.duration " + shortestNumber(an.duration) + " s / output_interval " +
+                                           shortestNumber(an.output_interval) +
+                                           " s = " + shortestNumber(std::ceil(an.duration / an.output_interval)) +
+                                           " output rows, more than the " + shortestNumber(kMaxOutputSteps) +
+                                           " a run may write");
   }
 
   void readOutputs()
@@ -1151,6 +1153,47 @@ void applyOverride(const YAML::Node& root, const Override& o, const Source& sour
   chain.back()[parts.back()] = value;
 }
 
+/// Counts the documents of a YAML text without building them: YAML::LoadAll does not end on some
+/// malformed texts (a lone ',' yields empty documents for ever), so the parser is driven here, at most
+/// twice, and a "document" that starts where the first one did (no progress) is not one.
+class DocumentCounter : public YAML::EventHandler
+{
+public:
+  std::vector<YAML::Mark> starts;
+  void OnDocumentStart(const YAML::Mark& mark) override
+  {
+    starts.push_back(mark);
+  }
+  void OnDocumentEnd() override {}
+  void OnNull(const YAML::Mark&, YAML::anchor_t) override {}
+  void OnAlias(const YAML::Mark&, YAML::anchor_t) override {}
+  void OnScalar(const YAML::Mark&, const std::string&, YAML::anchor_t, const std::string&) override {}
+  void OnSequenceStart(const YAML::Mark&, const std::string&, YAML::anchor_t, YAML::EmitterStyle::value) override {}
+  void OnSequenceEnd() override {}
+  void OnMapStart(const YAML::Mark&, const std::string&, YAML::anchor_t, YAML::EmitterStyle::value) override {}
+  void OnMapEnd() override {}
+};
+
+/// The line (1-based) where a second YAML document starts in `yaml`, 0 when there is none; a syntax
+/// error after the first document is refused as such.
+int secondDocumentLine(const std::string& yaml, const std::string& name)
+{
+  std::istringstream in(yaml);
+  YAML::Parser parser(in);
+  DocumentCounter counter;
+  try
+  {
+    for (int k = 0; k < 2 && parser.HandleNextDocument(counter); ++k) {}
+  }
+  catch (const YAML::Exception& e)
+  {
+    throw SceneError(name, "", std::string("YAML syntax error: ") + clipped(e.what()));
+  }
+  if (counter.starts.size() < 2 || counter.starts[1].pos <= counter.starts[0].pos)
+    return 0;
+  return counter.starts[1].line + 1;
+}
+
 Model loadFromNode(YAML::Node root, const Source& source)
 {
   if (!root.IsMap())
@@ -1185,22 +1228,21 @@ Model loadScene(const std::string& path, const std::vector<Override>& overrides)
 
 Model loadSceneFromString(const std::string& yaml, const std::string& name, const std::vector<Override>& overrides)
 {
-  std::vector<YAML::Node> documents;
+  YAML::Node root;
   try
   {
-    documents = YAML::LoadAll(yaml);
+    root = YAML::Load(yaml);
   }
   catch (const YAML::Exception& e)
   {
     throw SceneError(name, "", std::string("YAML syntax error: ") + clipped(e.what()));
   }
-  if (documents.size() > 1)
+  const int second = secondDocumentLine(yaml, name);
+  if (second > 0)
     throw SceneError(name, "",
-                     "the file holds " + std::to_string(documents.size()) +
-                         " YAML documents (a second one starts on line " +
-                         std::to_string(documents[1].Mark().line + 1) + "); a scene is one document");
-  Source source{ name, overrides };
-  return loadFromNode(documents.empty() ? YAML::Node() : documents.front(), source);
+                     "a second YAML document starts on line " + std::to_string(second) + "; a scene is one document");
+  const Source source{ name, overrides };
+  return loadFromNode(root, source);
 }
 
 }  // namespace active_tensegrity::core

@@ -825,7 +825,14 @@ TEST(SceneKeys, ASecondYamlDocumentIsRefused)
 {
   const std::string two = kMini + "---\nname: other\n";
   EXPECT_TRUE(refused([&] { loadSceneFromString(two, "two.yaml"); }, "",
-                      { "two.yaml", "2 YAML documents", lineOf(two, "name: other") }));
+                      { "two.yaml", "a second YAML document starts on", lineOf(two, "---") }));
+}
+
+TEST(SceneKeys, StrayFlowTokensEndInARefusal)
+{
+  // yaml-cpp's LoadAll yields empty documents for ever on a lone ','
+  for (const std::string& text : { std::string(","), kMini + ",\n", std::string("]") })
+    EXPECT_THROW(loadSceneFromString(text, "stray.yaml"), SceneError) << text;
 }
 
 TEST(SceneKeys, AliasedNodesAreCheckedOnce)
