@@ -28,7 +28,7 @@ int broadPhase(int repeat);
 /// `stress`: the stability stress cases, one table row each (stress.cpp).
 int stress(bool quick_only);
 /// `lattice`: time per step against the number of struts on quadruplex lattices (lattice_cmd.cpp); reports
-/// its own bad arguments (status 2).
+/// its own bad arguments (status 2; 3 when a size did not converge).
 int lattice(const std::vector<std::string>& args);
 /// `plan SCENE`: the folding planner over several seeds (plan.cpp).
 int plan(const std::string& scene, const std::vector<std::string>& args);

@@ -1,8 +1,8 @@
-//   tensegrity_bench lattice [--struts a,b,..] [--max-struts N] [--duration S] [--repeat N] [--pairs all|auto|near]
-//                            [--csv FILE] [--set key=value]... [--print-scene]
+//   tensegrity_bench lattice [--struts a,b,..] [--width W] [--max-struts N] [--duration S] [--repeat N]
+//                            [--pairs all|auto|near] [--csv FILE] [--set key=value]... [--print-scene]
 // lattices of quadruplex cells of about 10 to 500 struts (../lattice.cpp), each run dynamically with contact: one row per
 // size (sizes, Newton matrix non-zeros, us per step and its breakdown, peak contacts) and the fitted exponent of
-// the time per step against the number of struts.
+// the time per step against the number of struts. Exit status 2 on a bad argument, 3 when a size did not converge.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
