@@ -6,6 +6,7 @@
 #include <stdexcept>
 #include <string>
 #include <type_traits>
+#include <utility>
 #include <vector>
 
 namespace active_tensegrity::tools
@@ -61,5 +62,31 @@ inline std::vector<double> parsePositiveList(const std::string& option, const st
     throw BadArgument(option + ": expected a list of positive numbers, got '" + text + "'");
   return out;
 }
+
+/// "--option value" arguments, walked in order: option() takes the next one, value() the value after it
+/// (std::invalid_argument when there is none).
+class Args
+{
+public:
+  explicit Args(std::vector<std::string> args) : args_(std::move(args)) {}
+  bool more() const
+  {
+    return next_ < args_.size();
+  }
+  std::string option()
+  {
+    return args_[next_++];
+  }
+  std::string value(const std::string& option)
+  {
+    if (next_ >= args_.size())
+      throw std::invalid_argument(option + " needs a value");
+    return args_[next_++];
+  }
+
+private:
+  std::vector<std::string> args_;
+  size_t next_ = 0;
+};
 
 }  // namespace active_tensegrity::tools

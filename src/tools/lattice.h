@@ -1,5 +1,5 @@
-/// Lattices of quadruplex cells (the scaling benchmark: time per step against the number of struts) and
-/// the `tensegrity_bench lattice` command that measures them (docs/benchmarks.md). ROS-free: only the core.
+/// Lattices of quadruplex cells: the scenes that `tensegrity_bench lattice` (bench/lattice_cmd.cpp) measures
+/// the time per step on, against the number of struts. ROS-free: only the core.
 #pragma once
 
 #include <string>
@@ -56,10 +56,5 @@ LatticeCells latticeCellsFor(int struts);
 
 /// The benchmark's ladder: about 10, 20, 50, 100, 200 and 500 struts (8, 24, 48, 100, 200, 504).
 std::vector<LatticeCells> standardLatticeSizes();
-
-/// tensegrity_bench lattice [--struts a,b,..] [--width W] [--max-struts N] [--duration S] [--repeat N]
-/// [--pairs all|auto|near] [--csv FILE] [--set key=value]... [--print-scene]: returns the exit status (2 on a bad
-/// argument, 3 when a size did not converge).
-int latticeCommand(const std::vector<std::string>& args);
 
 }  // namespace active_tensegrity::tools

@@ -82,6 +82,35 @@ const char* const kWarningNames[mjNWARNING] = { "near-singular inertia",
                                                 "bad qvel",
                                                 "bad qacc",
                                                 "bad ctrl" };
+
+// whether constraint g guides constraint c's driven point: a ground constraint of the same point, not driven,
+// holding it on the line along c's direction (two rows across it)
+bool isGuideOf(const core::Constraint& g, const core::Constraint& c)
+{
+  if (g.kind != core::Constraint::Kind::kPoints || g.actuator >= 0 || g.rows() != 2 || g.b.body >= 0 ||
+      !samePoint(g.a, c.a))
+    return false;
+  const Vec3 d = c.directions[0];
+  return std::abs(g.directions[0].dot(d)) < 1e-9 && std::abs(g.directions[1].dot(d)) < 1e-9;
+}
+
+// MuJoCo's model from the MJCF text, loaded through a virtual file (std::runtime_error with MuJoCo's message)
+mjModel* loadMjcf(const std::string& xml)
+{
+  auto vfs = std::make_unique<mjVFS>();
+  mj_defaultVFS(vfs.get());
+  if (mj_makeEmptyFileVFS(vfs.get(), "scene.xml", static_cast<int>(xml.size())) != 0)
+    throw std::runtime_error("MuJoCo peer: cannot make the virtual file");
+  const int file = mj_findFileVFS(vfs.get(), "scene.xml");
+  std::copy(xml.begin(), xml.end(), static_cast<char*>(vfs->filedata[file]));
+  char error[1000] = "";
+  mju_user_warning = warningHandler;
+  mjModel* m = mj_loadXML("scene.xml", vfs.get(), error, sizeof(error));
+  mj_deleteVFS(vfs.get());
+  if (!m)
+    throw std::runtime_error(std::string("MuJoCo peer: MuJoCo refused the model: ") + error);
+  return m;
+}
 }  // namespace
 
 const char* toString(MujocoIntegrator integrator)
@@ -109,6 +138,8 @@ MujocoIntegrator parseMujocoIntegrator(const std::string& name)
   throw std::invalid_argument("unknown MuJoCo integrator '" + name + "' (euler, implicit, rk4)");
 }
 
+// The translation's state: what the constructor's builder functions (below the struct) find in our model, and
+// what the force evaluation and the queries use once MuJoCo has compiled it.
 struct MujocoPeer::Impl
 {
   // a point mass moved kinematically by a guided node actuator
@@ -125,6 +156,7 @@ struct MujocoPeer::Impl
   {
     int constraint = -1, actuator = -1;
     Vec3 p0 = Vec3::Zero(), direction = Vec3::Zero();
+    bool guided = false;                  // a guide of ours holds the end on the drive's line (no cross slides)
     int drive_qpos = -1, drive_dof = -1;  // the slide along the drive
     double drive_inertia = 0.0;           // carrier mass + armature
     int equality = -1;
@@ -147,6 +179,31 @@ struct MujocoPeer::Impl
     std::vector<int> tendons, actuators;  // MuJoCo ids
     std::vector<Segment> segments;        // segments that touch a driven mass
     double length = 0.0, tension = 0.0;   // last evaluation
+  };
+
+  // What the translation writes into the MJCF and then looks up by name in the compiled model.
+  struct Connect  // a ground pin or a ball joint
+  {
+    int a_body;
+    Vec3 a_local;
+    int b_body;  // -1: world (then a point that coincides with a's at the start)
+    std::string name;
+  };
+  struct TendonSpec
+  {
+    std::string name;
+    std::vector<std::string> sites;
+  };
+  struct SegmentSpec
+  {
+    core::PointRef a, b;
+  };
+  struct Translation
+  {
+    std::vector<Connect> connects;
+    std::vector<TendonSpec> tendons;
+    std::vector<std::vector<int>> tendons_of_cable;  // per cable: indices into tendons
+    std::vector<std::vector<SegmentSpec>> segments_of_cable;
   };
 
   const core::Model& model;
@@ -185,34 +242,44 @@ struct MujocoPeer::Impl
   {
     return driven[k].p0 + value(driven[k].actuator, t).value * driven[k].direction;
   }
+
+  bool drivenPoint(const core::PointRef& p) const
+  {
+    return p.body >= 0 && driven_of_body[p.body] >= 0;
+  }
+  bool hasContact() const
+  {
+    return model.contact.enabled && !model.checked_pairs.empty();
+  }
+  bool hasFriction() const
+  {
+    return model.contact.friction > 0.0;
+  }
+
+  std::vector<bool> mapDrivenNodes();
+  void mapConnects(const std::vector<bool>& used, Translation& tr);
+  void mapCables(Translation& tr);
+  std::string mjcf(const Translation& tr) const;
+  void writeHeader(std::ostream& x, const Translation& tr) const;
+  void writeSites(std::ostream& x, int body, const std::string& indent) const;
+  void writeBodies(std::ostream& x) const;
+  void writeCarriers(std::ostream& x) const;
+  void writeEqualities(std::ostream& x, const Translation& tr) const;
+  void writeTendons(std::ostream& x, const Translation& tr) const;
+  void writeContactPairs(std::ostream& x) const;
+  void findIds(const mjModel* m, const Translation& tr);
+  void setUpCarriers(mjModel* m);
+  void setContactParameters(mjModel* m);
 };
 
-MujocoPeer::MujocoPeer(const core::Model& model, const MujocoOptions& options)
-  : impl_(std::make_unique<Impl>(model, options))
+// Driven nodes: driven point masses (moved kinematically) or carriers of driven strut ends; returns the
+// constraints that need nothing more (the quaternion norms, the driven nodes and their guides).
+std::vector<bool> MujocoPeer::Impl::mapDrivenNodes()
 {
-  Impl& im = *impl_;
   const int n_bodies = static_cast<int>(model.bodies.size());
-  im.body_id.assign(n_bodies, -1);
-  im.driven_of_body.assign(n_bodies, -1);
-
-  // constraints: pins and joints (connect), driven nodes (driven masses or carriers), guides
-  struct Connect
-  {
-    int a_body;
-    Vec3 a_local;
-    int b_body;  // -1: world (then a point that coincides with a's at the start)
-    std::string name;
-  };
-  std::vector<Connect> connects;
+  body_id.assign(n_bodies, -1);
+  driven_of_body.assign(n_bodies, -1);
   std::vector<bool> used(model.constraints.size(), false);
-  const auto isGuideOf = [&](const core::Constraint& g, const core::Constraint& c)
-  {
-    if (g.kind != core::Constraint::Kind::kPoints || g.actuator >= 0 || g.rows() != 2 || g.b.body >= 0 ||
-        !samePoint(g.a, c.a))
-      return false;
-    const Vec3 d = c.directions[0];
-    return std::abs(g.directions[0].dot(d)) < 1e-9 && std::abs(g.directions[1].dot(d)) < 1e-9;
-  };
   for (size_t i = 0; i < model.constraints.size(); ++i)
   {
     const core::Constraint& c = model.constraints[i];
@@ -224,7 +291,7 @@ MujocoPeer::MujocoPeer(const core::Model& model, const MujocoOptions& options)
     if (c.kind == core::Constraint::Kind::kSpinLock)
       throw std::invalid_argument("MuJoCo peer: spin locks are for statics (constraint '" + c.name + "')");
     if (c.actuator < 0)
-      continue;  // pins, joints and guides below
+      continue;  // pins, joints and guides: mapConnects
     if (c.rows() != 1 || c.b.body >= 0 || c.a.body < 0)
       throw std::invalid_argument("MuJoCo peer: unsupported driven constraint '" + c.name +
                                   "' (one row of a body point against the ground expected)");
@@ -242,28 +309,35 @@ MujocoPeer::MujocoPeer(const core::Model& model, const MujocoOptions& options)
         throw std::invalid_argument("MuJoCo peer: driven point mass '" + body.name +
                                     "' must be guided (it is moved kinematically)");
       used[guide] = true;
-      Impl::DrivenMass dm;
+      DrivenMass dm;
       dm.body = c.a.body;
       dm.actuator = c.actuator;
       dm.p0 = p0 - c.a.local;
       dm.direction = d;
       dm.mass = body.mass;
-      im.driven_of_body[c.a.body] = static_cast<int>(im.driven.size());
-      im.driven.push_back(dm);
+      driven_of_body[c.a.body] = static_cast<int>(driven.size());
+      driven.push_back(dm);
     }
     else
     {
       if (guide >= 0)
         used[guide] = true;
-      Impl::Carrier cr;
+      Carrier cr;
       cr.constraint = static_cast<int>(i);
       cr.actuator = c.actuator;
       cr.p0 = p0;
       cr.direction = d;
+      cr.guided = guide >= 0;
       cr.mass = options.carrier_mass_fraction * body.mass;
-      im.carriers.push_back(cr);
+      carriers.push_back(cr);
     }
   }
+  return used;
+}
+
+// The other constraints: ground pins and ball joints become connects; anything else is refused.
+void MujocoPeer::Impl::mapConnects(const std::vector<bool>& used, Translation& tr)
+{
   for (size_t i = 0; i < model.constraints.size(); ++i)
   {
     if (used[i])
@@ -275,25 +349,18 @@ MujocoPeer::MujocoPeer(const core::Model& model, const MujocoOptions& options)
     if (!identity || c.a.body < 0)
       throw std::invalid_argument("MuJoCo peer: unsupported constraint '" + c.name +
                                   "' (ground pins, ball joints and driven nodes only)");
-    if (im.driven_of_body[c.a.body] >= 0 || (c.b.body >= 0 && im.driven_of_body[c.b.body] >= 0))
+    if (driven_of_body[c.a.body] >= 0 || (c.b.body >= 0 && driven_of_body[c.b.body] >= 0))
       throw std::invalid_argument("MuJoCo peer: constraint '" + c.name + "' holds a driven point mass");
-    connects.push_back({ c.a.body, c.a.local, c.b.body, c.name });
+    tr.connects.push_back({ c.a.body, c.a.local, c.b.body, c.name });
   }
+}
 
-  // cables: runs of points between driven masses become tendons, segments touching a driven mass are ours
-  struct TendonSpec
-  {
-    std::string name;
-    std::vector<std::string> sites;
-  };
-  std::vector<TendonSpec> tendons;
-  std::vector<std::vector<int>> tendons_of_cable(model.cables.size());
-  struct SegmentSpec
-  {
-    core::PointRef a, b;
-  };
-  std::vector<std::vector<SegmentSpec>> segments_of_cable(model.cables.size());
-  const auto drivenPoint = [&](const core::PointRef& p) { return p.body >= 0 && im.driven_of_body[p.body] >= 0; };
+// Cables: runs of points between driven masses become tendons through sites, segments touching a driven mass
+// (or fixed in space) are computed here.
+void MujocoPeer::Impl::mapCables(Translation& tr)
+{
+  tr.tendons_of_cable.resize(model.cables.size());
+  tr.segments_of_cable.resize(model.cables.size());
   for (size_t ci = 0; ci < model.cables.size(); ++ci)
   {
     const core::Cable& cable = model.cables[ci];
@@ -306,66 +373,87 @@ MujocoPeer::MujocoPeer(const core::Model& model, const MujocoOptions& options)
       if (run.size() >= 2 && moving)
       {
         TendonSpec t;
-        t.name = "tendon" + std::to_string(tendons.size());
+        t.name = "tendon" + std::to_string(tr.tendons.size());
         for (const core::PointRef& p : run)
-          t.sites.push_back(im.siteFor(p));
-        tendons_of_cable[ci].push_back(static_cast<int>(tendons.size()));
-        tendons.push_back(t);
+          t.sites.push_back(siteFor(p));
+        tr.tendons_of_cable[ci].push_back(static_cast<int>(tr.tendons.size()));
+        tr.tendons.push_back(t);
       }
       else
         for (size_t k = 0; k + 1 < run.size(); ++k)
-          segments_of_cable[ci].push_back({ run[k], run[k + 1] });  // fixed in space: a constant length
+          tr.segments_of_cable[ci].push_back({ run[k], run[k + 1] });  // fixed in space: a constant length
       run.clear();
     };
     for (size_t k = 0; k < cable.points.size(); ++k)
     {
       const core::PointRef& p = cable.points[k];
       if (k > 0 && (drivenPoint(p) || drivenPoint(cable.points[k - 1])))
-        segments_of_cable[ci].push_back({ cable.points[k - 1], p });
+        tr.segments_of_cable[ci].push_back({ cable.points[k - 1], p });
       if (drivenPoint(p))
         flush();
       else
       {
-        im.siteFor(p);
+        siteFor(p);
         run.push_back(p);
       }
     }
     flush();
   }
+}
 
-  // the MJCF
-  const double dt = options.timestep;
-  const bool contact = model.contact.enabled && !model.checked_pairs.empty();
-  const bool friction = model.contact.friction > 0.0;
+// The MJCF text of the translated scene.
+std::string MujocoPeer::Impl::mjcf(const Translation& tr) const
+{
+  std::ostringstream x;
+  x << "<mujoco model=\"" << (model.name.empty() ? "scene" : model.name) << "\">\n";
+  writeHeader(x, tr);
+  x << "  <worldbody>\n";
+  writeBodies(x);
+  writeCarriers(x);
+  x << "  </worldbody>\n";
+  writeEqualities(x, tr);
+  writeTendons(x, tr);
+  writeContactPairs(x);
+  x << "</mujoco>\n";
+  return x.str();
+}
+
+// Compiler, sizes, options (timestep, integrator, gravity, solver) and defaults.
+void MujocoPeer::Impl::writeHeader(std::ostream& x, const Translation& tr) const
+{
+  const bool friction = hasFriction();
   const Vec3 gravity = model.gravity_enabled ? model.gravity : Vec3::Zero();
-  const int n_pairs = contact ? static_cast<int>(model.checked_pairs.size()) : 0;
+  const int n_pairs = hasContact() ? static_cast<int>(model.checked_pairs.size()) : 0;
   const int ncon_max = 2 * n_pairs + 4;
-  const int njmax = 3 * static_cast<int>(connects.size() + im.carriers.size()) + (friction ? 3 : 1) * ncon_max + 16;
+  const int njmax = 3 * static_cast<int>(tr.connects.size() + carriers.size()) + (friction ? 3 : 1) * ncon_max + 16;
   const char* integrator = options.integrator == MujocoIntegrator::kEuler    ? "Euler" :
                            options.integrator == MujocoIntegrator::kImplicit ? "implicit" :
                                                                                "RK4";
-  const std::string eq_sol = " solref=\"" + num(options.equality_timeconst * dt) + " 1\" solimp=\"" +
-                             num(options.equality_impedance) + " " + num(options.equality_impedance) + " 0.001 0.5 2\"";
-  std::ostringstream x;
-  x << "<mujoco model=\"" << (model.name.empty() ? "scene" : model.name) << "\">\n";
   x << "  <compiler angle=\"radian\" inertiafromgeom=\"false\"/>\n";
   x << "  <size njmax=\"" << njmax << "\" nconmax=\"" << ncon_max << "\"/>\n";
-  x << "  <option timestep=\"" << num(dt) << "\" integrator=\"" << integrator << "\" gravity=\"" << vec(gravity)
-    << "\" cone=\"elliptic\" solver=\"Newton\" iterations=\"" << options.solver_iterations << "\" tolerance=\""
-    << num(options.solver_tolerance) << "\"/>\n";
+  x << "  <option timestep=\"" << num(options.timestep) << "\" integrator=\"" << integrator << "\" gravity=\""
+    << vec(gravity) << "\" cone=\"elliptic\" solver=\"Newton\" iterations=\"" << options.solver_iterations
+    << "\" tolerance=\"" << num(options.solver_tolerance) << "\"/>\n";
   x << "  <default><geom contype=\"0\" conaffinity=\"0\"/><site size=\"0.005\"/></default>\n";
-  x << "  <worldbody>\n";
-  const auto sitesOn = [&](int body, const std::string& indent)
-  {
-    for (const auto& [p, name] : im.site_names)
-      if (p.body == body)
-        x << indent << "<site name=\"" << name << "\" pos=\"" << vec(p.local) << "\"/>\n";
-  };
-  sitesOn(-1, "    ");
-  for (int i = 0; i < n_bodies; ++i)
+}
+
+// The sites on our body `body` (-1: the world).
+void MujocoPeer::Impl::writeSites(std::ostream& x, int body, const std::string& indent) const
+{
+  for (const auto& [p, name] : site_names)
+    if (p.body == body)
+      x << indent << "<site name=\"" << name << "\" pos=\"" << vec(p.local) << "\"/>\n";
+}
+
+// The world's sites, then our bodies: struts (free joint, capsule) and point masses not driven (three slides),
+// with their sites.
+void MujocoPeer::Impl::writeBodies(std::ostream& x) const
+{
+  writeSites(x, -1, "    ");
+  for (int i = 0; i < static_cast<int>(model.bodies.size()); ++i)
   {
     const core::Body& b = model.bodies[i];
-    if (im.driven_of_body[i] >= 0)
+    if (driven_of_body[i] >= 0)
       continue;
     const Vec3 r = model.q0.segment<3>(b.offset);
     x << "    <body name=\"body" << i << "\" pos=\"" << vec(r) << "\"";
@@ -387,21 +475,23 @@ MujocoPeer::MujocoPeer(const core::Model& model, const MujocoOptions& options)
       x << "      <inertial pos=\"0 0 0\" mass=\"" << num(b.mass) << "\" diaginertia=\"" << num(j) << " " << num(j)
         << " " << num(j) << "\"/>\n";
     }
-    sitesOn(i, "      ");
+    writeSites(x, i, "      ");
     x << "    </body>\n";
   }
-  for (size_t k = 0; k < im.carriers.size(); ++k)
+}
+
+// The carriers of driven strut ends: a slide along the drive, two across it when no guide holds the end.
+void MujocoPeer::Impl::writeCarriers(std::ostream& x) const
+{
+  for (size_t k = 0; k < carriers.size(); ++k)
   {
-    const Impl::Carrier& cr = im.carriers[k];
+    const Carrier& cr = carriers[k];
     const core::Constraint& c = model.constraints[cr.constraint];
-    bool guided = false;
-    for (const core::Constraint& g : model.constraints)
-      guided = guided || isGuideOf(g, c);
     const Vec3 d = cr.direction;
     x << "    <body name=\"carrier" << k << "\" pos=\"" << vec(cr.p0) << "\">\n";
     x << "      <joint name=\"drive" << k << "\" type=\"slide\" axis=\"" << vec(d) << "\" armature=\""
       << num(kDriveArmature * model.bodies[c.a.body].mass) << "\"/>\n";
-    if (!guided)
+    if (!cr.guided)
     {
       const Vec3 any = std::abs(d.x()) < 0.9 ? Vec3::UnitX() : Vec3::UnitY();
       const Vec3 across1 = d.cross(any).normalized(), across2 = d.cross(across1);
@@ -413,152 +503,177 @@ MujocoPeer::MujocoPeer(const core::Model& model, const MujocoOptions& options)
       << num(j) << " " << num(j) << "\"/>\n";
     x << "    </body>\n";
   }
-  x << "  </worldbody>\n";
-  if (!connects.empty() || !im.carriers.empty())
-  {
-    x << "  <equality>\n";
-    for (const Connect& c : connects)
-    {
-      x << "    <connect name=\"" << c.name << "\" body1=\"body" << c.a_body << "\"";
-      if (c.b_body >= 0)
-        x << " body2=\"body" << c.b_body << "\"";
-      x << " anchor=\"" << vec(c.a_local) << "\"" << eq_sol << "/>\n";
-    }
-    for (size_t k = 0; k < im.carriers.size(); ++k)
-    {
-      const core::Constraint& c = model.constraints[im.carriers[k].constraint];
-      x << "    <connect name=\"drive" << k << "\" body1=\"body" << c.a.body << "\" body2=\"carrier" << k
-        << "\" anchor=\"" << vec(c.a.local) << "\"" << eq_sol << "/>\n";
-    }
-    x << "  </equality>\n";
-  }
-  if (!tendons.empty())
-  {
-    x << "  <tendon>\n";
-    for (const TendonSpec& t : tendons)
-    {
-      x << "    <spatial name=\"" << t.name << "\" limited=\"false\" width=\"0.003\">\n";
-      for (const std::string& s : t.sites)
-        x << "      <site site=\"" << s << "\"/>\n";
-      x << "    </spatial>\n";
-    }
-    x << "  </tendon>\n  <actuator>\n";
-    for (const TendonSpec& t : tendons)
-      x << "    <motor name=\"pull_" << t.name << "\" tendon=\"" << t.name << "\" gear=\"1\" ctrllimited=\"false\"/>\n";
-    x << "  </actuator>\n";
-  }
-  if (contact)
-  {
-    x << "  <contact>\n";
-    for (const core::StrutPair& p : model.checked_pairs)
-      x << "    <pair geom1=\"geom" << p.body_a << "\" geom2=\"geom" << p.body_b << "\" condim=\"" << (friction ? 3 : 1)
-        << "\" friction=\"" << num(model.contact.friction) << " " << num(model.contact.friction)
-        << " 0 0 0\" solref=\"-1 -1\" solimp=\"" << num(options.contact_impedance) << " "
-        << num(options.contact_impedance) << " 0.001 0.5 2\" margin=\"0\" gap=\"0\"/>\n";
-    x << "  </contact>\n";
-  }
-  x << "</mujoco>\n";
-  xml_ = x.str();
+}
 
-  // load through a virtual file
-  auto vfs = std::make_unique<mjVFS>();
-  mj_defaultVFS(vfs.get());
-  if (mj_makeEmptyFileVFS(vfs.get(), "scene.xml", static_cast<int>(xml_.size())) != 0)
-    throw std::runtime_error("MuJoCo peer: cannot make the virtual file");
-  const int file = mj_findFileVFS(vfs.get(), "scene.xml");
-  std::copy(xml_.begin(), xml_.end(), static_cast<char*>(vfs->filedata[file]));
-  char error[1000] = "";
-  mju_user_warning = warningHandler;
-  m_ = mj_loadXML("scene.xml", vfs.get(), error, sizeof(error));
-  mj_deleteVFS(vfs.get());
-  if (!m_)
-    throw std::runtime_error(std::string("MuJoCo peer: MuJoCo refused the model: ") + error);
-  d_ = mj_makeData(m_);
+// Equality connects: pins and joints, then each driven strut end to its carrier (near-hard, solref from the
+// timestep).
+void MujocoPeer::Impl::writeEqualities(std::ostream& x, const Translation& tr) const
+{
+  if (tr.connects.empty() && carriers.empty())
+    return;
+  const std::string eq_sol = " solref=\"" + num(options.equality_timeconst * options.timestep) + " 1\" solimp=\"" +
+                             num(options.equality_impedance) + " " + num(options.equality_impedance) + " 0.001 0.5 2\"";
+  x << "  <equality>\n";
+  for (const Connect& c : tr.connects)
+  {
+    x << "    <connect name=\"" << c.name << "\" body1=\"body" << c.a_body << "\"";
+    if (c.b_body >= 0)
+      x << " body2=\"body" << c.b_body << "\"";
+    x << " anchor=\"" << vec(c.a_local) << "\"" << eq_sol << "/>\n";
+  }
+  for (size_t k = 0; k < carriers.size(); ++k)
+  {
+    const core::Constraint& c = model.constraints[carriers[k].constraint];
+    x << "    <connect name=\"drive" << k << "\" body1=\"body" << c.a.body << "\" body2=\"carrier" << k
+      << "\" anchor=\"" << vec(c.a.local) << "\"" << eq_sol << "/>\n";
+  }
+  x << "  </equality>\n";
+}
 
-  // ids
-  for (int i = 0; i < n_bodies; ++i)
-    if (im.driven_of_body[i] < 0)
-      im.body_id[i] = mj_name2id(m_, mjOBJ_BODY, ("body" + std::to_string(i)).c_str());
-  for (const auto& [p, name] : im.site_names)
-    im.site_ids.push_back(mj_name2id(m_, mjOBJ_SITE, name.c_str()));
+// Spatial tendons through the sites, each with a motor whose control the force evaluation sets to -T.
+void MujocoPeer::Impl::writeTendons(std::ostream& x, const Translation& tr) const
+{
+  if (tr.tendons.empty())
+    return;
+  x << "  <tendon>\n";
+  for (const TendonSpec& t : tr.tendons)
+  {
+    x << "    <spatial name=\"" << t.name << "\" limited=\"false\" width=\"0.003\">\n";
+    for (const std::string& s : t.sites)
+      x << "      <site site=\"" << s << "\"/>\n";
+    x << "    </spatial>\n";
+  }
+  x << "  </tendon>\n  <actuator>\n";
+  for (const TendonSpec& t : tr.tendons)
+    x << "    <motor name=\"pull_" << t.name << "\" tendon=\"" << t.name << "\" gear=\"1\" ctrllimited=\"false\"/>\n";
+  x << "  </actuator>\n";
+}
+
+// Capsule pairs for the checked pairs only; their solref is set after compiling (setContactParameters).
+void MujocoPeer::Impl::writeContactPairs(std::ostream& x) const
+{
+  if (!hasContact())
+    return;
+  x << "  <contact>\n";
+  for (const core::StrutPair& p : model.checked_pairs)
+    x << "    <pair geom1=\"geom" << p.body_a << "\" geom2=\"geom" << p.body_b << "\" condim=\""
+      << (hasFriction() ? 3 : 1) << "\" friction=\"" << num(model.contact.friction) << " "
+      << num(model.contact.friction) << " 0 0 0\" solref=\"-1 -1\" solimp=\"" << num(options.contact_impedance) << " "
+      << num(options.contact_impedance) << " 0.001 0.5 2\" margin=\"0\" gap=\"0\"/>\n";
+  x << "  </contact>\n";
+}
+
+// MuJoCo's ids of our bodies, the sites, and each cable's tendons, motors and computed segments.
+void MujocoPeer::Impl::findIds(const mjModel* m, const Translation& tr)
+{
+  for (int i = 0; i < static_cast<int>(model.bodies.size()); ++i)
+    if (driven_of_body[i] < 0)
+      body_id[i] = mj_name2id(m, mjOBJ_BODY, ("body" + std::to_string(i)).c_str());
+  for (const auto& [p, name] : site_names)
+    site_ids.push_back(mj_name2id(m, mjOBJ_SITE, name.c_str()));
   const auto siteId = [&](const core::PointRef& p)
   {
-    for (size_t k = 0; k < im.site_names.size(); ++k)
-      if (samePoint(im.site_names[k].first, p))
-        return im.site_ids[k];
+    for (size_t k = 0; k < site_names.size(); ++k)
+      if (samePoint(site_names[k].first, p))
+        return site_ids[k];
     return -1;
   };
-  im.cables.resize(model.cables.size());
+  cables.resize(model.cables.size());
   for (size_t ci = 0; ci < model.cables.size(); ++ci)
   {
-    for (int t : tendons_of_cable[ci])
+    for (int t : tr.tendons_of_cable[ci])
     {
-      im.cables[ci].tendons.push_back(mj_name2id(m_, mjOBJ_TENDON, tendons[t].name.c_str()));
-      im.cables[ci].actuators.push_back(mj_name2id(m_, mjOBJ_ACTUATOR, ("pull_" + tendons[t].name).c_str()));
+      cables[ci].tendons.push_back(mj_name2id(m, mjOBJ_TENDON, tr.tendons[t].name.c_str()));
+      cables[ci].actuators.push_back(mj_name2id(m, mjOBJ_ACTUATOR, ("pull_" + tr.tendons[t].name).c_str()));
     }
-    for (const SegmentSpec& s : segments_of_cable[ci])
+    for (const SegmentSpec& s : tr.segments_of_cable[ci])
     {
-      Impl::Segment seg;
+      Segment seg;
       for (int e = 0; e < 2; ++e)
       {
         const core::PointRef& p = e == 0 ? s.a : s.b;
-        Impl::End& end = e == 0 ? seg.a : seg.b;
+        End& end = e == 0 ? seg.a : seg.b;
         if (drivenPoint(p))
-          end.driven = im.driven_of_body[p.body];
+          end.driven = driven_of_body[p.body];
         else
           end.site = siteId(p);
       }
-      im.cables[ci].segments.push_back(seg);
+      cables[ci].segments.push_back(seg);
     }
   }
-  for (size_t k = 0; k < im.carriers.size(); ++k)
+}
+
+// The carriers' drive slides (ids, inertia along the drive) and the constraint weights of the struts they carry.
+void MujocoPeer::Impl::setUpCarriers(mjModel* m)
+{
+  for (size_t k = 0; k < carriers.size(); ++k)
   {
-    const int joint = mj_name2id(m_, mjOBJ_JOINT, ("drive" + std::to_string(k)).c_str());
-    im.carriers[k].drive_qpos = m_->jnt_qposadr[joint];
-    im.carriers[k].drive_dof = m_->jnt_dofadr[joint];
-    im.carriers[k].drive_inertia = m_->dof_armature[im.carriers[k].drive_dof] + std::max(im.carriers[k].mass, 1e-9);
-    im.carriers[k].equality = mj_name2id(m_, mjOBJ_EQUALITY, ("drive" + std::to_string(k)).c_str());
+    const int joint = mj_name2id(m, mjOBJ_JOINT, ("drive" + std::to_string(k)).c_str());
+    carriers[k].drive_qpos = m->jnt_qposadr[joint];
+    carriers[k].drive_dof = m->jnt_dofadr[joint];
+    carriers[k].drive_inertia = m->dof_armature[carriers[k].drive_dof] + std::max(carriers[k].mass, 1e-9);
+    carriers[k].equality = mj_name2id(m, mjOBJ_EQUALITY, ("drive" + std::to_string(k)).c_str());
     // MuJoCo regularizes a constraint row with R = (1 - d) / d * diagApprox, diagApprox from the bodies'
     // mean inverse weights at qpos0; a light carrier's (1 / m_c, and it cannot even move along the drive)
     // would make the drive soft along it, so the carrier takes the weights of the strut it carries
-    const int carrier = mj_name2id(m_, mjOBJ_BODY, ("carrier" + std::to_string(k)).c_str());
-    const int strut = im.body_id[model.constraints[im.carriers[k].constraint].a.body];
-    m_->body_invweight0[2 * carrier] = m_->body_invweight0[2 * strut];
-    m_->body_invweight0[2 * carrier + 1] = m_->body_invweight0[2 * strut + 1];
+    const int carrier = mj_name2id(m, mjOBJ_BODY, ("carrier" + std::to_string(k)).c_str());
+    const int strut = body_id[model.constraints[carriers[k].constraint].a.body];
+    m->body_invweight0[2 * carrier] = m->body_invweight0[2 * strut];
+    m->body_invweight0[2 * carrier + 1] = m->body_invweight0[2 * strut + 1];
   }
+}
 
-  // contact: linear spring-dashpot through the direct solref, per unit of MuJoCo's approximate mass
-  im.pair_of_checked.assign(model.checked_pairs.size(), -1);
-  im.pair_stiffness.assign(model.checked_pairs.size(), 0.0);
-  im.pair_damping.assign(model.checked_pairs.size(), 0.0);
-  if (contact)
+// Contact: linear spring-dashpot through the direct solref, per unit of MuJoCo's approximate mass, and the
+// friction rows' impratio.
+void MujocoPeer::Impl::setContactParameters(mjModel* m)
+{
+  pair_of_checked.assign(model.checked_pairs.size(), -1);
+  pair_stiffness.assign(model.checked_pairs.size(), 0.0);
+  pair_damping.assign(model.checked_pairs.size(), 0.0);
+  if (!hasContact())
+    return;
+  const int n_pairs = static_cast<int>(model.checked_pairs.size());
+  const double ce = std::clamp(model.contact.restitution, 0.0, 1.0);
+  // a linear oscillator rebounds with e = exp(-zeta pi / sqrt(1 - zeta^2))
+  const double zeta = ce <= 0.0 ? 1.0 : -std::log(ce) / std::sqrt(M_PI * M_PI + std::log(ce) * std::log(ce));
+  double impratio = 1.0;
+  for (int i = 0; i < n_pairs; ++i)
   {
-    const double ce = std::clamp(model.contact.restitution, 0.0, 1.0);
-    // a linear oscillator rebounds with e = exp(-zeta pi / sqrt(1 - zeta^2))
-    const double zeta = ce <= 0.0 ? 1.0 : -std::log(ce) / std::sqrt(M_PI * M_PI + std::log(ce) * std::log(ce));
-    double impratio = 1.0;
-    for (int i = 0; i < n_pairs; ++i)
-    {
-      const core::StrutPair& p = model.checked_pairs[i];
-      const double f = options.contact_force;
-      const double k_lin = std::cbrt(p.stiffness90 * p.stiffness90 * f);  // K90^(2/3) F*^(1/3)
-      const double inv_mass =
-          m_->body_invweight0[2 * im.body_id[p.body_a]] + m_->body_invweight0[2 * im.body_id[p.body_b]];
-      const double c_lin = 2.0 * zeta * std::sqrt(k_lin / inv_mass);
-      im.pair_of_checked[i] = i;
-      im.pair_stiffness[i] = k_lin;
-      im.pair_damping[i] = c_lin;
-      m_->pair_solref[2 * i] = -k_lin * inv_mass;
-      m_->pair_solref[2 * i + 1] = -c_lin * inv_mass;
-      // friction rows damp the slip with impratio * C_lin (elliptic cone, no friction solref in 2.2.2):
-      // our regularized Coulomb reaches mu F_N at v1, so match that slope at F*
-      if (i == 0 && friction && c_lin > 0.0)
-        impratio =
-            std::max(1.0, model.contact.friction * f /
-                              (std::max(1e-6, model.contact.slip_velocity - model.contact.stick_velocity) * c_lin));
-    }
-    m_->opt.impratio = impratio;
+    const core::StrutPair& p = model.checked_pairs[i];
+    const double f = options.contact_force;
+    const double k_lin = std::cbrt(p.stiffness90 * p.stiffness90 * f);  // K90^(2/3) F*^(1/3)
+    const double inv_mass = m->body_invweight0[2 * body_id[p.body_a]] + m->body_invweight0[2 * body_id[p.body_b]];
+    const double c_lin = 2.0 * zeta * std::sqrt(k_lin / inv_mass);
+    pair_of_checked[i] = i;
+    pair_stiffness[i] = k_lin;
+    pair_damping[i] = c_lin;
+    m->pair_solref[2 * i] = -k_lin * inv_mass;
+    m->pair_solref[2 * i + 1] = -c_lin * inv_mass;
+    // friction rows damp the slip with impratio * C_lin (elliptic cone, no friction solref in 2.2.2):
+    // our regularized Coulomb reaches mu F_N at v1, so match that slope at F*
+    if (i == 0 && hasFriction() && c_lin > 0.0)
+      impratio =
+          std::max(1.0, model.contact.friction * f /
+                            (std::max(1e-6, model.contact.slip_velocity - model.contact.stick_velocity) * c_lin));
   }
+  m->opt.impratio = impratio;
+}
+
+// Our model mapped (constraints, then cables), written as MJCF, compiled by MuJoCo, then completed in the
+// compiled model (ids, carriers, contact parameters) and put in its initial state.
+MujocoPeer::MujocoPeer(const core::Model& model, const MujocoOptions& options)
+  : impl_(std::make_unique<Impl>(model, options))
+{
+  Impl& im = *impl_;
+  Impl::Translation tr;
+  im.mapConnects(im.mapDrivenNodes(), tr);
+  im.mapCables(tr);
+  xml_ = im.mjcf(tr);
+  m_ = loadMjcf(xml_);
+  d_ = mj_makeData(m_);
+  im.findIds(m_, tr);
+  im.setUpCarriers(m_);
+  im.setContactParameters(m_);
   reset();
 }
 

@@ -13,6 +13,7 @@
 #include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/dynamics.h"
 #include "active_tensegrity/core/scene.h"
+#include "active_tensegrity/core/sparse_linear_solver.h"
 #include "fd_check.h"
 #include "test_models.h"
 

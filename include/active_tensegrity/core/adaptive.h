@@ -7,6 +7,7 @@
 #include <functional>
 
 #include "active_tensegrity/core/dynamics.h"
+#include "active_tensegrity/core/summary.h"
 
 namespace active_tensegrity::core
 {

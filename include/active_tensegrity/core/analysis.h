@@ -10,6 +10,7 @@
 #include "active_tensegrity/core/adaptive.h"
 #include "active_tensegrity/core/dynamics.h"
 #include "active_tensegrity/core/state.h"
+#include "active_tensegrity/core/summary.h"
 
 namespace active_tensegrity::core
 {

@@ -6,7 +6,9 @@
 
 #include <functional>
 
+#include "active_tensegrity/core/sparse_linear_solver.h"
 #include "active_tensegrity/core/state.h"
+#include "active_tensegrity/core/summary.h"
 
 namespace active_tensegrity::core
 {

@@ -1,16 +1,14 @@
-/// The changing part of a simulation, and the Summary every solver returns.
+/// The changing part of a simulation. Includes the solvers' Summary (summary.h) and linear solver
+/// (sparse_linear_solver.h) as well, which code written against this header finds through it.
 #pragma once
 
-#include <string>
 #include <vector>
 
 #include <Eigen/Core>
-#include <Eigen/SparseCore>
-#include <Eigen/LU>
-#include <Eigen/SparseLU>
 
 #include "active_tensegrity/core/mechanics.h"
-#include "active_tensegrity/core/static_lu.h"
+#include "active_tensegrity/core/sparse_linear_solver.h"
+#include "active_tensegrity/core/summary.h"
 
 namespace active_tensegrity::core
 {
@@ -30,135 +28,5 @@ struct State
 
 /// A state at rest in the model's initial configuration.
 State initialState(const Model& model);
-
-enum class SolveStatus
-{
-  kConverged,
-  kMaxIterations,  // Newton did not converge within max_iterations (after all step cuts)
-  kSingular,       // the Newton matrix could not be factorized (a mechanism, or a degenerate state)
-  kNonFinite,      // a NaN or infinity appeared
-  kPassedThrough   // the solution has two checked struts passed through each other (contact tunnelling)
-};
-
-const char* toString(SolveStatus s);
-
-struct Summary
-{
-  SolveStatus status = SolveStatus::kConverged;
-  int iterations = 0;         // Newton iterations, all attempts included
-  int step_cuts = 0;          // times a step or load increment was halved
-  int crossings_refused = 0;  // dynamics: steps refused (and cut) because a strut would pass through another
-  double residual = 0.0;      // last increment norm (dynamics) or force residual (statics)
-  std::string message;
-  bool ok() const
-  {
-    return status == SolveStatus::kConverged;
-  }
-};
-
-/// Factorizations of the Newton matrices. Sparse LU (Eigen's SparseLU, COLAMD) with the symbolic
-/// analysis reused while the pattern stays; a new pattern is detected by its size and number of stored
-/// entries (the Newton matrices, BlockSparseMatrix, only ever grow, so every change of their pattern
-/// changes that number). Two choices beside it, each made once per pattern:
-/// - allowDense(): a small matrix whose sparse factors fill at least 40 % of a dense one (the tower:
-///   200 unknowns, 53 %) is factorized densely instead (partial pivoting): the dense triangular solves
-///   are about twice as fast there (docs/benchmarks.md).
-/// - allowStaticPivot(): a large matrix (over 400 unknowns) with a symmetric pattern is factorized
-///   without pivoting (StaticPivotLU) in an AMD order, after -delta is put on the diagonal of the rows
-///   that have none (the constraint rows), delta about 1e-6 of the constraint block's Schur complement.
-///   Shifted so, the Newton matrix is nearly quasi-definite (a dominant positive block, a negative one),
-///   whose pivots stay away from zero in any symmetric order, so the order can follow the fill alone;
-///   sparse LU's row pivoting spoils it. On a lattice of 504 struts the factors hold 7x fewer entries than
-///   the LU's (docs/benchmarks.md). The shift makes the solve approximate (a contraction of about 1e-5
-///   when refined): for modified Newton only, whose contraction test sees it (exact() is false). Each
-///   factorization is checked on one right-hand side (A 1 must come back within 0.5 of 1); a matrix
-///   failing that, or with a zero pivot, gets the sparse LU, and so do the next four factorizations.
-class SparseLinearSolver
-{
-public:
-  /// Lets the solver choose the dense LU for small, filled matrices (dynamics; statics keeps the sparse
-  /// factors its mechanism detection and damped Newton were validated with).
-  void allowDense(bool allow)
-  {
-    allow_dense_ = allow;
-  }
-  /// Lets the solver choose the static-pivot LU for large matrices (modified Newton).
-  void allowStaticPivot(bool allow)
-  {
-    allow_static_pivot_ = allow;
-  }
-  /// False when the matrix is singular: sparse, an exact zero pivot (round-off can hide a numerically
-  /// singular matrix); dense, a reciprocal condition estimate below 1e-14; static pivots, a zero pivot
-  /// in both them and the sparse LU.
-  bool factorize(const Eigen::SparseMatrix<double>& a);
-  /// Symbolic analyses done so far (one per pattern seen, two when the static pivots were refused).
-  int analyses() const
-  {
-    return analyses_;
-  }
-  bool dense() const
-  {
-    return method_ == Method::kDense;
-  }
-  bool staticPivot() const
-  {
-    return method_ == Method::kStaticPivot;
-  }
-  /// Factorizations that fell back from the static pivots to the sparse LU (refused, or in the
-  /// pause after a refusal).
-  int staticPivotRefusals() const
-  {
-    return static_pivot_refusals_;
-  }
-  /// Whether solve() solves the factorized matrix to round-off (false: the shifted static pivots).
-  bool exact() const
-  {
-    return method_ != Method::kStaticPivot;
-  }
-  void solve(const Eigen::VectorXd& b, Eigen::VectorXd& x) const
-  {
-    switch (method_)
-    {
-      case Method::kDense:
-        x = dense_lu_.solve(b);
-        break;
-      case Method::kStaticPivot:
-        static_lu_.solve(b, x);
-        break;
-      case Method::kSparse:
-        x = lu_.solve(b);
-        break;
-    }
-  }
-
-private:
-  enum class Method
-  {
-    kSparse,
-    kDense,
-    kStaticPivot
-  };
-  bool factorizeSparse(const Eigen::SparseMatrix<double>& a);
-  bool factorizeStaticPivot(const Eigen::SparseMatrix<double>& a);
-
-  Eigen::SparseLU<Eigen::SparseMatrix<double>, Eigen::COLAMDOrdering<int>> lu_;
-  bool lu_analyzed_ = false;           // lu_ holds the analysis of the current pattern
-  bool static_analyzed_ = false;       // static_lu_ likewise
-  bool static_pivot_pattern_ = false;  // the current pattern gets the static pivots when they pass
-  int static_pivot_skip_ = 0;          // factorizations left before they are tried again
-  int static_pivot_refusals_ = 0;
-  Eigen::Index analyzed_rows_ = -1, analyzed_nonzeros_ = -1;
-  int analyses_ = 0;
-  bool allow_dense_ = false;
-  bool allow_static_pivot_ = false;
-  bool decided_ = false;  // whether the dense LU was chosen or not for the current pattern
-  Method method_ = Method::kSparse;
-  Eigen::MatrixXd dense_;
-  Eigen::PartialPivLU<Eigen::MatrixXd> dense_lu_;
-  StaticPivotLU static_lu_;
-  Eigen::SparseMatrix<double> shift_, shifted_;  // -delta on the constraint rows; the matrix plus it
-  std::vector<int> no_diagonal_;                 // rows of the pattern without a diagonal entry
-  Eigen::VectorXd check_b_, check_x_;
-};
 
 }  // namespace active_tensegrity::core

@@ -15,6 +15,7 @@
 #include "active_tensegrity/core/model.h"
 #include "active_tensegrity/core/state.h"
 #include "active_tensegrity/core/statics.h"
+#include "active_tensegrity/core/summary.h"
 
 namespace active_tensegrity::planning
 {

@@ -1,0 +1,148 @@
+#include "active_tensegrity/core/sparse_linear_solver.h"
+
+#include <algorithm>
+#include <cmath>
+#include <vector>
+
+namespace active_tensegrity::core
+{
+namespace
+{
+/// Dense LU only up to this many unknowns (its cost grows as n^3) ...
+constexpr Eigen::Index kDenseMaxRows = 400;
+/// ... and when the sparse factors fill at least this share of a dense matrix.
+constexpr double kDenseFill = 0.4;
+/// The static-pivot LU above this many unknowns.
+constexpr Eigen::Index kStaticPivotMinRows = 400;
+/// delta = kShift phi^2 / d: phi the largest entry of the constraint rows, d the largest diagonal entry
+/// (the Schur complement of the constraint block is about phi^2 / d at its smallest). Two effects pull
+/// against each other, measured on the Newton matrix of the 504-strut lattice (phi^2 / d about 0.04),
+/// as the contraction rate of refinement with these factors: the shift itself (rate about 0.8 kShift)
+/// and the pivots' growth as delta shrinks (relative residual of the factors' own solve 2e-12, 2e-10,
+/// 2e-8, 2e-6 at kShift 1e-2, 1e-4, 1e-6, 1e-8). At 1e-6 both are about 1e-5: modified Newton cannot
+/// tell these factors from exact ones.
+constexpr double kShift = 1e-6;
+/// After a refused factorization, this many factorizations use the sparse LU before it is tried again.
+constexpr int kStaticPivotSkip = 4;
+/// The check of each factorization: A 1 solved must come back within this of 1, the largest
+/// contraction rate modified Newton keeps a matrix for (measured: about 3e-6 on the lattices).
+constexpr double kStaticPivotCheck = 0.5;
+
+bool hasSymmetricPattern(const Eigen::SparseMatrix<double>& a)
+{
+  const Eigen::SparseMatrix<double> t = a.transpose();
+  if (t.nonZeros() != a.nonZeros())
+    return false;
+  for (Eigen::Index k = 0; k < a.outerSize(); ++k)
+  {
+    Eigen::SparseMatrix<double>::InnerIterator x(a, k), y(t, k);
+    for (; x && y; ++x, ++y)
+      if (x.index() != y.index())
+        return false;
+    if (x || y)
+      return false;
+  }
+  return true;
+}
+}  // namespace
+
+bool SparseLinearSolver::factorizeSparse(const Eigen::SparseMatrix<double>& a)
+{
+  if (!lu_analyzed_)
+  {
+    lu_.analyzePattern(a);
+    lu_analyzed_ = true;
+    ++analyses_;
+  }
+  lu_.factorize(a);
+  return lu_.info() == Eigen::Success;
+}
+
+bool SparseLinearSolver::factorizeStaticPivot(const Eigen::SparseMatrix<double>& a)
+{
+  const Eigen::Index n = a.rows();
+  const double diag = a.diagonal().cwiseAbs().maxCoeff();
+  double phi = 0.0;
+  for (int r : no_diagonal_)  // (column r holds the row's entries: the pattern is symmetric)
+    for (Eigen::SparseMatrix<double>::InnerIterator it(a, r); it; ++it)
+      phi = std::max(phi, std::abs(it.value()));
+  if (!(diag > 0.0) || !(phi > 0.0) || !std::isfinite(diag) || !std::isfinite(phi))
+    return false;
+  const double delta = kShift * phi * phi / diag;
+  std::vector<Eigen::Triplet<double>> shift;
+  shift.reserve(no_diagonal_.size());
+  for (int r : no_diagonal_)
+    shift.emplace_back(r, r, -delta);
+  shift_.resize(n, n);
+  shift_.setFromTriplets(shift.begin(), shift.end());
+  shifted_ = a + shift_;
+  if (!static_analyzed_)
+  {
+    static_lu_.analyzePattern(shifted_);
+    static_analyzed_ = true;
+    ++analyses_;
+  }
+  if (!static_lu_.factorize(shifted_))
+    return false;
+  check_b_ = a * Eigen::VectorXd::Ones(n);
+  static_lu_.solve(check_b_, check_x_);
+  return check_x_.allFinite() && (check_x_.array() - 1.0).abs().maxCoeff() <= kStaticPivotCheck;
+}
+
+bool SparseLinearSolver::factorize(const Eigen::SparseMatrix<double>& a)
+{
+  if (a.rows() != analyzed_rows_ || a.nonZeros() != analyzed_nonzeros_)
+  {
+    analyzed_rows_ = a.rows();
+    analyzed_nonzeros_ = a.nonZeros();
+    lu_analyzed_ = false;
+    static_analyzed_ = false;
+    decided_ = false;
+    static_pivot_pattern_ = false;
+    static_pivot_skip_ = 0;
+    method_ = Method::kSparse;
+    if (allow_static_pivot_ && a.rows() > kStaticPivotMinRows && hasSymmetricPattern(a))
+    {
+      no_diagonal_.clear();
+      for (Eigen::Index k = 0; k < a.outerSize(); ++k)
+        if (a.coeff(k, k) == 0.0)
+          no_diagonal_.push_back(static_cast<int>(k));
+      static_pivot_pattern_ = !no_diagonal_.empty();
+    }
+  }
+  if (static_pivot_pattern_)
+  {
+    if (static_pivot_skip_ > 0)
+      --static_pivot_skip_;
+    else if (factorizeStaticPivot(a))
+    {
+      method_ = Method::kStaticPivot;
+      return true;
+    }
+    else
+      static_pivot_skip_ = kStaticPivotSkip;
+    // refused: the sparse LU, for this and the next kStaticPivotSkip factorizations
+    method_ = Method::kSparse;
+    ++static_pivot_refusals_;
+    return factorizeSparse(a);
+  }
+  if (method_ == Method::kSparse)
+  {
+    if (!factorizeSparse(a))
+      return false;
+    const bool choose = !decided_ && allow_dense_;  // the first factorization of this pattern decides
+    decided_ = true;
+    if (!choose)
+      return true;
+    const double n = static_cast<double>(a.rows());
+    const bool dense = a.rows() <= kDenseMaxRows && static_cast<double>(lu_.nnzL() + lu_.nnzU()) >= kDenseFill * n * n;
+    if (!dense)
+      return true;
+    method_ = Method::kDense;
+  }
+  dense_ = a;
+  dense_lu_.compute(dense_);
+  return dense_lu_.rcond() > 1e-14;
+}
+
+}  // namespace active_tensegrity::core

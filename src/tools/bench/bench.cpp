@@ -1,0 +1,65 @@
+// What the subcommands share (bench.h): the strut built in code and the heap allocation counter.
+#include "bench.h"
+
+#include <atomic>
+#include <cmath>
+#include <cstddef>
+
+// Heap allocations are counted by interposing glibc's malloc family in this executable (the core and
+// Eigen allocate through them; operator new does too): `steps` reports them per step.
+extern "C"
+{
+  void* __libc_malloc(size_t size);
+  void* __libc_calloc(size_t n, size_t size);
+  void* __libc_realloc(void* p, size_t size);
+}
+namespace
+{
+std::atomic<long> g_allocations{ 0 };
+}
+extern "C"
+{
+  void* malloc(size_t size)
+  {
+    g_allocations.fetch_add(1, std::memory_order_relaxed);
+    return __libc_malloc(size);
+  }
+  void* calloc(size_t n, size_t size)
+  {
+    g_allocations.fetch_add(1, std::memory_order_relaxed);
+    return __libc_calloc(n, size);
+  }
+  void* realloc(void* p, size_t size)
+  {
+    g_allocations.fetch_add(1, std::memory_order_relaxed);
+    return __libc_realloc(p, size);
+  }
+}
+
+namespace active_tensegrity::tools::bench
+{
+long heapAllocations()
+{
+  return g_allocations.load();
+}
+
+core::Body strut(const std::string& name, double length, double radius, double youngs_modulus, double poisson_ratio)
+{
+  core::Body b;
+  b.name = name;
+  b.kind = core::BodyKind::kStrut;
+  b.length = length;
+  core::StrutLayer layer;
+  layer.material = "bench";
+  layer.outer_radius = radius;
+  layer.density = 2000.0;
+  layer.youngs_modulus = youngs_modulus;
+  layer.poisson_ratio = poisson_ratio;
+  b.layers.push_back(layer);
+  b.mass = layer.density * M_PI * radius * radius * length;
+  const double jt = b.mass * (3.0 * radius * radius + length * length) / 12.0;
+  b.inertia = core::Vec3(jt, jt, 0.5 * b.mass * radius * radius);
+  return b;
+}
+
+}  // namespace active_tensegrity::tools::bench

@@ -1,0 +1,112 @@
+// tensegrity_bench: the usage and the dispatch to the subcommands, one file each in this folder (bench.h).
+#include <algorithm>
+#include <iostream>
+#include <string>
+#include <vector>
+
+#include "active_tensegrity/core/scene.h"
+#include "../cli.h"
+#include "bench.h"
+
+namespace at = active_tensegrity::core;
+namespace bench = active_tensegrity::tools::bench;
+namespace tools = active_tensegrity::tools;
+
+namespace
+{
+const char* kUsage =
+    "usage: tensegrity_bench steps SCENE.yaml [--set key=value]... [--repeat N] [--peaks]\n"
+    "  Runs the scene's analysis N times (default 5) and prints wall time and Newton iterations per step\n"
+    "  and where the time goes; --peaks also evaluates a full output row after every step (as\n"
+    "  tensegrity_run's summary peaks do).\n"
+    "       tensegrity_bench contact-pair [--repeat N]\n"
+    "  Times one strut pair's contact evaluation (dynamic with friction, with and without tangents;\n"
+    "  static): ns per call, median over N (default 5) loops of 100000 calls.\n"
+    "       tensegrity_bench broad-phase [--repeat N]\n"
+    "  Random scenes of 10 to 1000 struts with all pairs checked: candidates and the time of the broad\n"
+    "  phase (sweep and direct) and of the narrow phase over the candidates, median over N (default 5).\n"
+    "       tensegrity_bench plan SCENE.yaml --actuators a,b,.. (--height H | --values v,..) [--set key=value]...\n"
+    "                        [--clearance M] [--contact-limit N] [--bending-limit PA] [--speed V] [--accel A]\n"
+    "                        [--planner NAME] [--time-limit S] [--seeds K] [--speed-limit]\n"
+    "  Plans from the scene's start equilibrium with seeds 1..K (default 5): status, planning time,\n"
+    "  equilibrium solves, figures per seed, the median time; --contact-limit allows contact up to N newtons\n"
+    "  (else --clearance, default 0.005 m); --speed-limit (seed 1) finds the time scale that keeps the\n"
+    "  dynamic contact force and bending stress under the limits and prints the resulting largest speed.\n"
+    "       tensegrity_bench work-precision SCENE.yaml [--set key=value]... [--dts a,b,..] [--tols a,b,..]\n"
+    "                        [--schemes a,b,..] [--ref-dt R] [--csv FILE]\n"
+    "  Integrators (newmark_paper, trapezoidal, generalized_alpha, newmark_paper_modified_newton over the\n"
+    "  steps, default 1e-3,5e-4,2e-4,1e-4 s; adaptive_newmark_paper, adaptive_generalized_alpha over the\n"
+    "  error tolerances, default 1e-3,1e-4,1e-5,1e-6 m) against a reference at R (default 2.5e-5 s):\n"
+    "  errors and wall time per run (CSV to FILE or stdout).\n"
+    "                        [--mujoco-dts a,b,..] [--mujoco-integrators euler,implicit,rk4]\n"
+    "                        [--mujoco-contact-force F]\n"
+    "  --mujoco-dts adds the scene in MuJoCo over that ladder (rows mujoco_<integrator>; contact\n"
+    "  stiffness from F, default the reference's peak force).\n"
+    "       tensegrity_bench stress [--quick]\n"
+    "  The stability stress cases (docs/benchmarks.md): one row per case; --quick runs the short ones.\n"
+    "       tensegrity_bench lattice [--struts a,b,..] [--width W] [--max-struts N] [--duration S] [--repeat N]\n"
+    "                        [--pairs all|auto|near] [--csv FILE] [--set key=value]... [--print-scene]\n"
+    "  Quadruplex-cell lattices (default about 10, 20, 50, 100, 200, 500 struts) run dynamically into contact:\n"
+    "  us per step (median over N runs, default 3), its breakdown, sizes, and the fitted exponent vs struts;\n"
+    "  pairs: auto (default: every pair sharing no node), all (the same pairs listed), near (same or adjacent cells);\n"
+    "  --width W: strips W cells across instead of nearly square lattices; --print-scene prints the scenes (YAML).\n";
+
+}  // namespace
+
+int main(int argc, char** argv)
+{
+  const std::string command = argc >= 2 ? argv[1] : "";
+  if (command == "lattice")
+    return bench::lattice(std::vector<std::string>(argv + 2, argv + argc));
+  const bool needs_scene = command == "steps" || command == "plan" || command == "work-precision";
+  if ((command != "steps" && command != "contact-pair" && command != "broad-phase" && command != "plan" &&
+       command != "stress" && command != "work-precision") ||
+      (needs_scene && argc < 3))
+  {
+    std::cerr << kUsage;
+    return 2;
+  }
+  std::vector<at::Override> overrides;
+  int repeat = 5;
+  bool peaks = false;
+  const std::string scene = needs_scene ? argv[2] : "";
+  try
+  {
+    if (command == "plan")
+      return bench::plan(scene, std::vector<std::string>(argv + 3, argv + argc));
+    if (command == "work-precision")
+      return bench::workPrecision(scene, std::vector<std::string>(argv + 3, argv + argc));
+    if (command == "stress")
+      return bench::stress(argc >= 3 && std::string(argv[2]) == "--quick");
+    for (int i = needs_scene ? 3 : 2; i < argc; ++i)
+    {
+      const std::string arg = argv[i];
+      if (needs_scene && arg == "--set" && i + 1 < argc)
+        overrides.push_back(at::parseOverride(argv[++i]));
+      else if (needs_scene && arg == "--peaks")
+        peaks = true;
+      else if (arg == "--repeat" && i + 1 < argc)
+        repeat = std::max(1, std::stoi(argv[++i]));
+      else
+      {
+        std::cerr << "tensegrity_bench: unknown argument '" << arg << "'\n" << kUsage;
+        return 2;
+      }
+    }
+    if (command == "contact-pair")
+      return bench::contactPair(repeat);
+    if (command == "broad-phase")
+      return bench::broadPhase(repeat);
+    return bench::steps(scene, overrides, repeat, peaks);
+  }
+  catch (const tools::BadArgument& e)
+  {
+    std::cerr << "tensegrity_bench: " << e.what() << "\n";
+    return 2;
+  }
+  catch (const std::exception& e)
+  {
+    std::cerr << "tensegrity_bench: " << e.what() << "\n";
+    return 1;
+  }
+}

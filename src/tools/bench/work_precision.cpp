@@ -1,0 +1,299 @@
+//   tensegrity_bench work-precision SCENE [--set key=value]... [--dts a,b,..] [--tols a,b,..]
+//                                  [--schemes a,b,..] [--ref-dt R] [--csv FILE]
+// runs the scene's dynamic analysis with several integrators over a ladder of steps (fixed-step schemes)
+// or error tolerances (adaptive ones) and compares each run with a much finer reference
+// (generalized-alpha at R, tolerance 1e-10): largest body-position and layer-height errors, largest
+// actuation-force error (relative to the reference's largest force), error of the peak contact force,
+// of its time and of the contact impulse (time integral of the summed normal forces); with the wall time
+// of the run (callbacks excluded). One CSV row per run.
+// --mujoco-dts a,b,.. then runs the scene translated into MuJoCo (mujoco_peer.h) over that ladder with each of
+// --mujoco-integrators (default euler,implicit,rk4), rows named mujoco_<integrator>, measured the same way;
+// --mujoco-contact-force F sets its contact stiffness scale (default: the reference's peak contact force).
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <iostream>
+#include <string>
+#include <vector>
+
+#include "active_tensegrity/core/analysis.h"
+#include "active_tensegrity/core/contact.h"
+#include "active_tensegrity/core/scene.h"
+#include "../cli.h"
+#include "../mujoco_peer.h"
+#include "bench.h"
+
+namespace at = active_tensegrity::core;
+
+namespace active_tensegrity::tools::bench
+{
+namespace
+{
+struct Trace
+{
+  std::vector<double> t, force;
+  std::vector<std::vector<double>> heights;  // per output: the layer heights (or the height)
+  std::vector<Eigen::VectorXd> q;            // per output: the coordinates
+  double peak = 0.0, peak_t = 0.0;           // largest normal contact force over every step, and when
+  double impulse = 0.0;                      // time integral of the summed normal contact forces (N s)
+  at::RunResult result;
+};
+
+Trace traceRun(const at::Model& model)
+{
+  Trace tr;
+  std::vector<int> height_cols;
+  const std::vector<std::string> cols = at::csvColumns(model);
+  for (size_t i = 0; i < cols.size(); ++i)
+    if (cols[i].rfind("height_", 0) == 0)
+      height_cols.push_back(static_cast<int>(i));
+  if (height_cols.empty())
+    height_cols.push_back(3);  // height
+  double last_t = 0.0, last_sum = 0.0;
+  tr.result = at::runAnalysis(
+      model,
+      [&](const at::State& s)
+      {
+        const std::vector<double> row = at::csvRow(model, s);
+        tr.t.push_back(row[0]);
+        tr.force.push_back(row[2]);
+        std::vector<double> h;
+        for (int c : height_cols)
+          h.push_back(row[c]);
+        tr.heights.push_back(h);
+        tr.q.push_back(s.q);
+      },
+      {},
+      [&](const at::State& s)
+      {
+        double sum = 0.0;
+        for (const at::ContactPairState& c : at::activeContacts(model, s))
+        {
+          sum += c.normal_force;
+          if (c.normal_force > tr.peak)
+          {
+            tr.peak = c.normal_force;
+            tr.peak_t = s.t;
+          }
+        }
+        tr.impulse += 0.5 * (sum + last_sum) * (s.t - last_t);  // trapezoid over the steps taken
+        last_t = s.t;
+        last_sum = sum;
+      });
+  return tr;
+}
+
+/// One integrator of the work-precision benchmark; adaptive ones run over the tolerance ladder.
+struct Scheme
+{
+  const char* name;
+  at::Integrator integrator;
+  double gamma, beta, rho;
+  bool reuse, adaptive;
+};
+
+const std::vector<Scheme>& workPrecisionSchemes()
+{
+  static const std::vector<Scheme> schemes = {
+    { "newmark_paper", at::Integrator::kNewmark, 0.6, 0.3025, 0.8, false, false },
+    { "trapezoidal", at::Integrator::kNewmark, 0.5, 0.25, 0.8, false, false },
+    { "generalized_alpha", at::Integrator::kGeneralizedAlpha, 0.5, 0.25, 0.8, false, false },
+    { "newmark_paper_modified_newton", at::Integrator::kNewmark, 0.6, 0.3025, 0.8, true, false },
+    { "adaptive_newmark_paper", at::Integrator::kNewmark, 0.6, 0.3025, 0.8, true, true },
+    { "adaptive_generalized_alpha", at::Integrator::kGeneralizedAlpha, 0.5, 0.25, 0.8, true, true },
+  };
+  return schemes;
+}
+
+/// A run's errors against the reference, on the common output grid.
+struct Errors
+{
+  double position = 0.0;   // largest body-position error (m)
+  double height = 0.0;     // largest layer-height error (m)
+  double force = 0.0;      // largest actuation-force error / the reference's largest force
+  double peak = 0.0;       // relative error of the peak contact force
+  double peak_time = 0.0;  // s
+  double impulse = 0.0;    // relative error of the contact impulse
+};
+
+Errors compare(const at::Model& model, const Trace& tr, const Trace& ref)
+{
+  double ref_fmax = 1e-12;
+  for (double f : ref.force)
+    ref_fmax = std::max(ref_fmax, std::abs(f));
+  Errors e;
+  const size_t n = std::min(tr.t.size(), ref.t.size());
+  for (size_t k = 0; k < n; ++k)
+  {
+    for (const at::Body& b : model.bodies)
+      e.position = std::max(e.position, (tr.q[k].segment<3>(b.offset) - ref.q[k].segment<3>(b.offset)).norm());
+    for (size_t j = 0; j < tr.heights[k].size(); ++j)
+      e.height = std::max(e.height, std::abs(tr.heights[k][j] - ref.heights[k][j]));
+    e.force = std::max(e.force, std::abs(tr.force[k] - ref.force[k]) / ref_fmax);
+  }
+  e.peak = ref.peak > 0.0 ? std::abs(tr.peak - ref.peak) / ref.peak : 0.0;
+  e.peak_time = std::abs(tr.peak_t - ref.peak_t);
+  e.impulse = ref.impulse > 0.0 ? std::abs(tr.impulse - ref.impulse) / ref.impulse : 0.0;
+  return e;
+}
+
+/// The MuJoCo peer's rows: the scene translated into MuJoCo (mujoco_peer.h) with each integrator over the
+/// ladder `dts`, measured against the same reference as our runs (docs/benchmarks.md); `force` is the
+/// contact force scale F* (0: the reference's peak force).
+void mujocoRows(const at::Model& base, const Trace& ref, const std::vector<std::string>& integrators,
+                const std::vector<double>& dts, double force, std::ostream& out)
+{
+  for (const std::string& integrator : integrators)
+    for (double dt : dts)
+    {
+      tools::MujocoOptions mo;
+      mo.integrator = tools::parseMujocoIntegrator(integrator);
+      mo.timestep = dt;
+      mo.contact_force = force > 0.0 ? force : (ref.peak > 0.0 ? ref.peak : 1000.0);
+      const tools::MujocoTrace mj = tools::runMujoco(base, mo);
+      // as our trace (body centres into q; the peer measures no contact impulse: written as nan)
+      Trace tr;
+      tr.t = mj.t;
+      tr.force = mj.force;
+      tr.heights = mj.heights;
+      tr.peak = mj.peak;
+      tr.peak_t = mj.peak_t;
+      for (const std::vector<at::Vec3>& centres : mj.positions)
+      {
+        Eigen::VectorXd q = Eigen::VectorXd::Zero(base.nq);
+        for (size_t b = 0; b < base.bodies.size(); ++b)
+          q.segment<3>(base.bodies[b].offset) = centres[b];
+        tr.q.push_back(q);
+      }
+      const Errors e = compare(base, tr, ref);
+      const std::string name = "mujoco_" + integrator;
+      out << name << "," << dt << ",0," << mj.status << "," << mj.steps << "," << mj.solver_iterations << ","
+          << mj.wall_time << "," << e.position << "," << e.height << "," << e.force << "," << e.peak << ","
+          << e.peak_time << ",nan," << mj.peak << "," << ref.peak << "\n";
+      out.flush();
+      std::fprintf(stderr,
+                   "  %-30s dt  %-8g %-10s wall %7.2f s  position err %.3e m  force err %.3e  peak err %.3e%s\n",
+                   name.c_str(), dt, mj.status.c_str(), mj.wall_time, e.position, e.force, e.peak,
+                   mj.ok() ? "" : ("  (" + mj.message + ")").c_str());
+    }
+}
+}  // namespace
+
+int workPrecision(const std::string& scene, const std::vector<std::string>& args)
+{
+  std::vector<at::Override> overrides;
+  std::vector<double> dts = { 1e-3, 5e-4, 2e-4, 1e-4 };
+  std::vector<double> tols = { 1e-3, 1e-4, 1e-5, 1e-6 };
+  std::vector<std::string> names;
+  double ref_dt = 2.5e-5;
+  std::string csv_path;
+  std::vector<double> mujoco_dts;  // the MuJoCo peer's ladder (none: not run)
+  std::vector<std::string> mujoco_integrators = { "euler", "implicit", "rk4" };
+  double mujoco_force = 0.0;  // contact force scale F* (0: the reference's peak)
+  Args in(args);
+  while (in.more())
+  {
+    const std::string a = in.option();
+    const auto next = [&]() { return in.value(a); };
+    const auto numbers = [&]() { return tools::parsePositiveList(a, next()); };
+    if (a == "--set")
+      overrides.push_back(at::parseOverride(next()));
+    else if (a == "--dts")
+      dts = numbers();
+    else if (a == "--tols")
+      tols = numbers();
+    else if (a == "--schemes")
+      names = splitList(next());
+    else if (a == "--ref-dt")
+      ref_dt = tools::parsePositive<double>(a, next());
+    else if (a == "--csv")
+      csv_path = next();
+    else if (a == "--mujoco-dts")
+      mujoco_dts = numbers();
+    else if (a == "--mujoco-integrators")
+      mujoco_integrators = splitList(next());
+    else if (a == "--mujoco-contact-force")
+      mujoco_force = tools::parsePositive<double>(a, next());
+    else
+      throw std::invalid_argument("unknown argument '" + a + "'");
+  }
+  std::vector<Scheme> schemes;
+  for (const Scheme& sc : workPrecisionSchemes())
+    if (names.empty() || std::find(names.begin(), names.end(), sc.name) != names.end())
+      schemes.push_back(sc);
+  for (const std::string& n : names)
+    if (std::none_of(schemes.begin(), schemes.end(), [&](const Scheme& sc) { return n == sc.name; }))
+      throw std::invalid_argument("--schemes: unknown scheme '" + n + "'");
+  at::Model base = at::loadScene(scene, overrides);
+  if (base.analysis.type != at::AnalysisType::kDynamic)
+    throw std::invalid_argument("work-precision needs a dynamic analysis (--set analysis.type=dynamic)");
+  // a common output grid that every step divides (adaptive runs step onto it)
+  double grid = base.analysis.output_interval > 0.0 ? base.analysis.output_interval : 0.01;
+  for (double dt : dts)
+    grid = std::max(grid, dt);
+  for (double dt : mujoco_dts)
+    grid = std::max(grid, dt);
+  base.analysis.output_interval = grid;
+
+  const auto configure = [&](const Scheme& sc, double dt, double tol, double error_tol)
+  {
+    at::Model m = base;
+    m.solver.integrator = sc.integrator;
+    m.solver.newmark_gamma = sc.gamma;
+    m.solver.newmark_beta = sc.beta;
+    m.solver.rho_infinity = sc.rho;
+    m.solver.reuse_jacobian = sc.reuse;
+    m.solver.adaptive = sc.adaptive;
+    m.solver.dt = dt;
+    m.solver.newton_tolerance = tol;
+    if (sc.adaptive)
+    {
+      m.solver.error_tolerance = error_tol;
+      m.solver.newton_tolerance = std::min(tol, 0.1 * error_tol);
+    }
+    return m;
+  };
+  const Scheme reference = { "reference", at::Integrator::kGeneralizedAlpha, 0.5, 0.25, 0.8, false, false };
+  std::fprintf(stderr, "work-precision: reference (generalized-alpha, dt %g s) ...\n", ref_dt);
+  const Trace ref = traceRun(configure(reference, ref_dt, 1e-10, 0.0));
+  if (!ref.result.summary.ok())
+  {
+    std::cerr << "tensegrity_bench: the reference run failed: " << ref.result.summary.message << "\n";
+    return 3;
+  }
+
+  std::ofstream file;
+  if (!csv_path.empty())
+  {
+    file.open(csv_path);
+    if (!file)
+      throw std::invalid_argument("cannot write '" + csv_path + "'");
+  }
+  std::ostream& out = csv_path.empty() ? std::cout : file;
+  out << "scheme,dt,tolerance,status,steps,newton_iterations,wall_time,position_error,height_error,force_error,"
+         "peak_force_error,peak_time_error,impulse_error,peak_force,reference_peak_force\n";
+  const double tol = base.solver.newton_tolerance;
+  for (const Scheme& sc : schemes)
+    for (double x : sc.adaptive ? tols : dts)
+    {
+      // adaptive runs start from the scene's dt; dt in the table is then their mean step
+      const Trace tr = traceRun(configure(sc, sc.adaptive ? base.solver.dt : x, tol, x));
+      const Errors e = compare(base, tr, ref);
+      const double wall = tr.result.wall_time - tr.result.callback_time;
+      const double dt = sc.adaptive ? base.analysis.duration / std::max(1, tr.result.solver_steps) : x;
+      out << sc.name << "," << dt << "," << (sc.adaptive ? x : 0.0) << "," << at::toString(tr.result.summary.status)
+          << "," << tr.result.solver_steps << "," << tr.result.summary.iterations << "," << wall << "," << e.position
+          << "," << e.height << "," << e.force << "," << e.peak << "," << e.peak_time << "," << e.impulse << ","
+          << tr.peak << "," << ref.peak << "\n";
+      out.flush();
+      std::fprintf(stderr,
+                   "  %-30s %s %-8g %-10s wall %7.2f s  position err %.3e m  force err %.3e  peak err %.3e  "
+                   "impulse err %.3e\n",
+                   sc.name, sc.adaptive ? "tol" : "dt ", x, at::toString(tr.result.summary.status), wall, e.position,
+                   e.force, e.peak, e.impulse);
+    }
+  mujocoRows(base, ref, mujoco_integrators, mujoco_dts, mujoco_force, out);
+  return 0;
+}
+}  // namespace active_tensegrity::tools::bench
