@@ -1197,7 +1197,9 @@ int secondDocumentLine(const std::string& yaml, const std::string& name)
 Model loadFromNode(YAML::Node root, const Source& source)
 {
   if (!root.IsMap())
-    throw SceneError(source.file, "", "the scene must be a YAML map");
+    throw SceneError(source.file, "",
+                     "the scene must be a YAML map (name, materials, nodes, struts, ...), got " +
+                         (root.IsNull() || !root.IsDefined() ? "no content" : show(root)));
   std::unordered_set<int> seen;
   refuseRepeatedKeys(root, "", source.file, seen);
   for (const Override& o : source.overrides)
