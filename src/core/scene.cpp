@@ -971,6 +971,9 @@ private:
     if (o.dt_min > o.dt_max)
       s.fail(s.key("dt_min"),
              "must not exceed dt_max = " + shortestNumber(o.dt_max) + ", got " + shortestNumber(o.dt_min));
+    if (o.dt < o.dt_min)
+      s.fail(s.key("dt"),
+             "must be at least solver.dt_min = " + shortestNumber(o.dt_min) + " s, got " + shortestNumber(o.dt));
   }
 
   void readAnalysis()
@@ -1022,12 +1025,14 @@ private:
   {
     const AnalysisSettings& an = model_.analysis;
     const SolverOptions& o = model_.solver;
-    if (o.dt < o.dt_min)
-      root_.fail("solver.dt",
-                 "must be at least solver.dt_min = " + shortestNumber(o.dt_min) + " s, got " + shortestNumber(o.dt));
     if (an.duration < o.dt_min)
       a.fail(a.key("duration"),
              "must be at least solver.dt_min = " + shortestNumber(o.dt_min) + " s, got " + shortestNumber(an.duration));
+    if (o.adaptive && an.duration / o.dt_max > kMaxTimeSteps)
+      root_.fail("solver.dt_max",
+                 "analysis.duration " + shortestNumber(an.duration) + " s / solver.dt_max " + shortestNumber(o.dt_max) +
+                     " s = " + shortestNumber(std::ceil(an.duration / o.dt_max)) +
+                     " time steps at least, more than the " + shortestNumber(kMaxTimeSteps) + " a run may take");
     if (!o.adaptive && an.duration / o.dt > kMaxTimeSteps)
       root_.fail("solver.dt", "analysis.duration " + shortestNumber(an.duration) + " s / solver.dt " +
                                   shortestNumber(o.dt) + " s = " + shortestNumber(std::ceil(an.duration / o.dt)) +

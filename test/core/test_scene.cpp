@@ -734,7 +734,17 @@ TEST(SceneBounds, TimeStepsBeyondTheBoundAreRefusedWithTheNumbers)
                               parseOverride("analysis.duration=1000") });
       },
       "solver.dt", { "1000 s", "1e-09 s", "1e+12 time steps", "1e+08" }));
-  // a static run does not step in time: the same dt loads there
+  EXPECT_TRUE(refused(
+      []
+      {
+        loadSceneFromString(dynamicMini(), "mini.yaml",
+                            { parseOverride("solver.adaptive=true"), parseOverride("analysis.duration=1e300") });
+      },
+      "solver.dt_max", { "1e+300 s", "0.01 s", "1e+08" }));
+  // the smallest step bounds dt in every scene (the node steps static scenes in time too); a static run
+  // does not step in time, so its number of steps does not bound dt
+  EXPECT_TRUE(refused([] { loadSceneFromString(kMini, "mini.yaml", { parseOverride("solver.dt=1e-300") }); },
+                      "solver.dt", { "solver.dt_min = 1e-07", "1e-300" }));
   EXPECT_NO_THROW(loadSceneFromString(kMini, "mini.yaml",
                                       { parseOverride("solver.dt=1e-300"), parseOverride("solver.dt_min=1e-300") }));
 }
