@@ -1,6 +1,7 @@
 #include "active_tensegrity/planning/folding_planner.h"
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <functional>
@@ -10,6 +11,7 @@
 #include <sstream>
 
 #include <ompl/base/MotionValidator.h>
+#include <ompl/base/PlannerTerminationCondition.h>
 #include <ompl/base/ProblemDefinition.h>
 #include <ompl/base/SpaceInformation.h>
 #include <ompl/base/StateSampler.h>
@@ -611,7 +613,18 @@ PlanResult planFolding(const core::Model& model, const core::State& start, const
     rrt->setNearestNeighbors<ompl::NearestNeighborsLinear>();
   }
   planner->setProblemDefinition(pdef);  // solve() runs setup()
-  const ob::PlannerStatus status = planner->solve(r.time_limit);
+  // the time limit as OMPL's timed condition, remembering whether it fired (it stays true once it has)
+  std::atomic<bool> time_limit_reached{ false };
+  const ob::PlannerTerminationCondition timed = ob::timedPlannerTerminationCondition(r.time_limit);
+  const ob::PlannerTerminationCondition ptc(
+      [&timed, &time_limit_reached]
+      {
+        if (!time_limit_reached && timed())
+          time_limit_reached = true;
+        return time_limit_reached.load();
+      });
+  const ob::PlannerStatus status = planner->solve(ptc);
+  out.stopped_by_time_limit = time_limit_reached;
   out.status = static_cast<PlanStatus>(static_cast<int>(ob::PlannerStatus::StatusType(status)));
   if (!pdef->hasSolution())
   {

@@ -1,10 +1,11 @@
 // The folding planner: the ordered-pull scene (masts.yaml) needs an order the straight pull does not
 // have; tower plans with and without contact; every state along a returned path re-checked by an
-// independent continuation; same seed, same plan; impossible goals fail in time; bad requests refused;
-// the trajectory keeps its limits and follows the path.
+// independent continuation; same seed, same plan; impossible goals end by the time limit without an
+// exact solution; bad requests refused before any equilibrium is solved; the trajectory keeps its limits
+// and follows the path. Time limits of plans that must succeed are far above their planning time (which
+// is printed): the outcome does not depend on the machine's speed.
 #include <gtest/gtest.h>
 
-#include <chrono>
 #include <cmath>
 
 #include "active_tensegrity/core/analysis.h"
@@ -102,6 +103,7 @@ TEST(FoldingPlanner, MastsStraightPullCollidesThePlannedOrderDoesNot)
 
   const ap::PlanResult plan = ap::planFolding(model, start, req);
   ASSERT_EQ(plan.status, ap::PlanStatus::kExactSolution) << plan.message;
+  EXPECT_FALSE(plan.stopped_by_time_limit);
   ASSERT_GE(plan.waypoints.size(), 3u);  // not the straight line
   EXPECT_EQ(plan.waypoints.back(), req.target_values);
   EXPECT_GE(plan.min_gap, req.limits.min_clearance);
@@ -175,16 +177,19 @@ TEST(FoldingPlanner, BadRequestsAreRefusedBeforePlanning)
   {
     ap::PlanRequest r = mastsRequest();
     c.change(r);
-    const auto t0 = std::chrono::steady_clock::now();
     const ap::PlanResult p = ap::planFolding(model, start, r);
     EXPECT_EQ(p.status, ap::PlanStatus::kInvalidRequest) << c.expect;
     EXPECT_NE(p.message.find(c.expect), std::string::npos) << p.message;
-    EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 0.5);
+    // refused before planning: no equilibrium solved, no search, nothing planned
     EXPECT_EQ(p.equilibrium_solves, 0);
+    EXPECT_FALSE(p.stopped_by_time_limit);
+    EXPECT_TRUE(p.waypoints.empty());
+    EXPECT_TRUE(p.times.empty());
+    EXPECT_EQ(p.dynamic_runs, 0);
   }
 }
 
-TEST(FoldingPlanner, ImpossibleGoalFailsWithinTheTimeLimit)
+TEST(FoldingPlanner, ImpossibleGoalEndsByTheTimeLimit)
 {
   const at::Model model = scene("masts.yaml");
   const at::State start = startEquilibrium(model);
@@ -192,14 +197,15 @@ TEST(FoldingPlanner, ImpossibleGoalFailsWithinTheTimeLimit)
   // a clearance no configuration on the way can keep: the start itself has 0.53 m
   r.limits.min_clearance = 0.3;
   r.time_limit = 3.0;
-  const auto t0 = std::chrono::steady_clock::now();
   const ap::PlanResult p = ap::planFolding(model, start, r);
-  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   EXPECT_TRUE(p.status == ap::PlanStatus::kInvalidGoal || p.status == ap::PlanStatus::kTimeout ||
               p.status == ap::PlanStatus::kApproximateSolution)
       << ap::toString(p.status) << ": " << p.message;
   EXPECT_NE(p.status, ap::PlanStatus::kExactSolution);
-  EXPECT_LT(wall, r.time_limit + 2.0);
+  // the search went on (sampling the invalid goal) until its time limit ended it
+  EXPECT_TRUE(p.stopped_by_time_limit) << ap::toString(p.status) << ": " << p.message;
+  std::printf("[ measured ] masts with a 0.3 m clearance: %s, %.2f s (time limit %.1f s)\n", ap::toString(p.status),
+              p.planning_time, r.time_limit);
 }
 
 namespace
@@ -210,7 +216,7 @@ ap::PlanRequest towerRequest()
   r.actuators = { "pull1", "pull2", "pull3", "pull4" };
   r.max_speeds = { 0.5 };
   r.max_accelerations = { 5.0 };
-  r.time_limit = 60.0;
+  r.time_limit = 300.0;  // a bound on a search that ends in seconds (the planning time is printed)
   r.seed = 1;
   r.continuation_step = 0.02;
   return r;
@@ -220,6 +226,7 @@ void checkTowerPlan(const at::Model& model, const at::State& start, const ap::Pl
                     const ap::PlanResult& plan)
 {
   ASSERT_EQ(plan.status, ap::PlanStatus::kExactSolution) << plan.message;
+  EXPECT_FALSE(plan.stopped_by_time_limit);
   EXPECT_LE(plan.final_height, req.target_height);
   std::vector<int> idx;
   for (const std::string& n : req.actuators)
@@ -263,23 +270,24 @@ TEST(FoldingPlanner, TowerBelowHalfAMetreWithContactUpToAForce)
   EXPECT_GT(plan.peak_contact_force, 0.0);  // contact is needed to get there
 }
 
-TEST(FoldingPlanner, TowerBelowHalfAMetreWithoutContactIsImpossibleAndFailsInTime)
+TEST(FoldingPlanner, TowerBelowHalfAMetreWithoutContactIsImpossibleAndEndsByTheTimeLimit)
 {
   // the struts of a stage meet at 0.80 m on the symmetric fold (0.857 m with 5 mm of clearance), and no
-  // pull order found by the planner gets lower without contact: it must give up within its time limit
+  // pull order found by the planner gets lower without contact: it must give up when its time limit ends
+  // the search, with no exact solution
   const at::Model model = scene("tower.yaml");
   const at::State start = startEquilibrium(model);
   ap::PlanRequest req = towerRequest();
   req.target_height = 0.5;
   req.limits.min_clearance = 0.005;
   req.time_limit = 5.0;
-  const auto t0 = std::chrono::steady_clock::now();
   const ap::PlanResult plan = ap::planFolding(model, start, req);
-  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   EXPECT_NE(plan.status, ap::PlanStatus::kExactSolution) << plan.message;
-  EXPECT_LT(wall, req.time_limit + 3.0);
-  std::printf("[ measured ] tower to 0.5 m without contact: %s after %.1f s (%s)\n", ap::toString(plan.status), wall,
-              plan.message.c_str());
+  EXPECT_TRUE(plan.status == ap::PlanStatus::kTimeout || plan.status == ap::PlanStatus::kApproximateSolution)
+      << ap::toString(plan.status) << ": " << plan.message;
+  EXPECT_TRUE(plan.stopped_by_time_limit) << ap::toString(plan.status) << ": " << plan.message;
+  std::printf("[ measured ] tower to 0.5 m without contact: %s after %.1f s, time limit %.1f s (%s)\n",
+              ap::toString(plan.status), plan.planning_time, req.time_limit, plan.message.c_str());
 }
 
 TEST(FoldingPlanner, SpeedLimitSlowsTheTrajectoryUntilTheDynamicForceIsUnderTheLimit)

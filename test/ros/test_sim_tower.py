@@ -1,6 +1,9 @@
 #!/usr/bin/env python3
 """rostest of tensegrity_sim on the tower (sim_tower.test): folding by an actuation command produces
-contacts; a bag recorded from the node plays back with tf and contacts intact."""
+contacts; a bag recorded from the node plays back with tf and contacts intact.
+
+The recorder and the player are synchronised on connections (the node's bus info, rosbag play
+--wait-for-subscribers), not on sleeps; waits are bounds on behaviour that is missing."""
 import math
 import os
 import shutil
@@ -10,8 +13,10 @@ import tempfile
 import threading
 import time
 import unittest
+from xmlrpc.client import ServerProxy
 
 import rosbag
+import rosgraph
 import rospy
 import rostest
 from tf2_msgs.msg import TFMessage
@@ -24,6 +29,20 @@ NS = "/tensegrity_sim"
 STRUTS = ["S%d%d" % (s, k) for s in range(1, 5) for k in range(1, 5)]
 BODIES = STRUTS + ["B1", "B2", "B3", "B4"]
 TOPICS = ["/tf", NS + "/contacts", NS + "/markers", NS + "/actuators"]
+WAIT = 60.0  # s: bound on waiting for something that takes a few seconds at most
+
+
+def recorder_connected():
+    """True when the node has a live connection to a recorder (a node named /record...) on every topic in
+    TOPICS (the node's bus info, as rosnode info shows it)."""
+    try:
+        api = rosgraph.Master("/test_sim_tower").lookupNode(NS)
+        _, _, info = ServerProxy(api).getBusInfo("/test_sim_tower")
+    except Exception:  # the master or the node not answering yet
+        return False
+    # [connection id, destination, direction, transport, topic, connected, ...]
+    topics = {c[4] for c in info if c[2] == "o" and str(c[1]).startswith("/record") and c[5]}
+    return set(TOPICS) <= topics
 
 
 def contact_key(msg):
@@ -47,7 +66,7 @@ class TestSimTower(unittest.TestCase):
         rospy.Subscriber(NS + "/contacts", ContactArray, cls.on_contacts)
         rospy.Subscriber(NS + "/markers", MarkerArray, cls.on_markers)
         cls.actuation = rospy.Publisher(NS + "/actuation", ActuationCommand, queue_size=10)
-        assert wait_for(lambda: cls.actuation.get_num_connections() > 0, 30)
+        assert wait_for(lambda: cls.actuation.get_num_connections() > 0, WAIT)
 
     @classmethod
     def tearDownClass(cls):
@@ -72,7 +91,7 @@ class TestSimTower(unittest.TestCase):
         record = subprocess.Popen(["rosbag", "record", "-O", bag_path] + TOPICS, stdout=subprocess.DEVNULL,
                                   stderr=subprocess.DEVNULL, start_new_session=True)
         try:
-            time.sleep(2.0)  # the recorder subscribes
+            self.assertTrue(wait_for(recorder_connected, WAIT), "the recorder did not connect to the node")
             names = ["pull1", "pull2", "pull3", "pull4"]
             self.actuation.publish(ActuationCommand(names=names, targets=[0.8] * 4, max_speeds=[0.5]))
             # contact starts at an actuation of 0.638 m (paper and quasi-static study)
@@ -91,12 +110,12 @@ class TestSimTower(unittest.TestCase):
                 self.assertTrue(all(math.isfinite(v) for v in (c.normal_force, c.penetration, c.penetration_rate,
                                                                 c.friction_force.x, c.friction_force.y,
                                                                 c.friction_force.z)))
-            self.assertTrue(wait_for(lambda: self.markers is not None, 10), "no contact arrows on ~markers")
-            time.sleep(1.0)
+            self.assertTrue(wait_for(lambda: self.markers is not None, WAIT), "no contact arrows on ~markers")
+            time.sleep(1.0)  # more of the fold in the bag
         finally:
             os.killpg(record.pid, signal.SIGINT)
-            record.wait(timeout=30)
-        self.assertTrue(wait_for(lambda: os.path.exists(bag_path), 30), "the recorder did not close the bag")
+            record.wait(timeout=WAIT)
+        self.assertTrue(wait_for(lambda: os.path.exists(bag_path), WAIT), "the recorder did not close the bag")
 
         # the bag: every body frame on /tf, contacts with forces
         frames, recorded = set(), []
@@ -124,12 +143,21 @@ class TestSimTower(unittest.TestCase):
 
         subs = [rospy.Subscriber("/replay/contacts", ContactArray, on_replay),
                 rospy.Subscriber("/replay/tf", TFMessage, on_replay_tf)]
-        time.sleep(0.5)
-        play = subprocess.run(["rosbag", "play", "--quiet", "--rate", "4", bag_path,
-                               NS + "/contacts:=/replay/contacts", "/tf:=/replay/tf"],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=120)
+        # the player starts once both subscribers are connected, queues rather than drops what a slow
+        # subscriber has not read yet, and stays up after the bag's end until it is stopped (a player that
+        # exits takes its unsent messages with it)
+        play = subprocess.Popen(["rosbag", "play", "--quiet", "--rate", "4", "--queue", "1000000", "--keep-alive",
+                                 "--wait-for-subscribers", bag_path, NS + "/contacts:=/replay/contacts",
+                                 "/tf:=/replay/tf", "--topics", "/tf", NS + "/contacts"],
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+        try:
+            self.assertTrue(wait_for(lambda: len(replayed) >= len(recorded), 5 * WAIT),
+                            (len(replayed), len(recorded)))
+            self.assertIsNone(play.poll(), "rosbag play exited (%s)" % play.returncode)
+        finally:
+            os.killpg(play.pid, signal.SIGINT)
+            play.wait(timeout=WAIT)
         self.assertEqual(play.returncode, 0)
-        self.assertTrue(wait_for(lambda: len(replayed) >= len(recorded), 5), (len(replayed), len(recorded)))
         for s in subs:
             s.unregister()
         with lock:

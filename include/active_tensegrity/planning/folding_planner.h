@@ -73,7 +73,8 @@ struct PlanResult
   double peak_contact_force = 0.0;
   double final_height = 0.0;
   long equilibrium_solves = 0;
-  double planning_time = 0.0;  // s wall, OMPL solve and simplification
+  double planning_time = 0.0;          // s wall, OMPL solve and simplification
+  bool stopped_by_time_limit = false;  // the search ran until its time_limit (its termination condition fired)
   // dynamic verification
   bool dynamics_verified = false;
   bool dynamics_within_limits = false;
