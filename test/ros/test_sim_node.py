@@ -289,12 +289,15 @@ class TestSimNode(unittest.TestCase):
             (self.trajectory, traj(["lift"], [(1.0, [nan])]), "position of 'lift' is nan"),
             (self.trajectory, traj(["lift"], [(1.0, [0.5])]), "outside its range"),
             (self.trajectory, traj(["lift"], []), "no points"),
+            # a 1 MB name reaches the latched status (re-sent every second) and the log only cut
+            (self.actuation, ActuationCommand(names=["n" * 1000000], targets=[0.01]), "(1000000 bytes)"),
         ]
         for pub, msg, reason in bad:
             before = self.status().commands_rejected
             pub.publish(msg)
             self.assertTrue(wait_for(lambda: self.status().commands_rejected == before + 1, WAIT), reason)
             self.assertIn(reason, self.status().last_rejection)
+            self.assertLess(len(self.status().last_rejection), 1000)
         # nothing applied (after another 0.5 s of simulated time), still running and publishing finite numbers
         last = sim(self.status().header.stamp)
         self.assertTrue(wait_for(lambda: self.now() >= last + 0.5, WAIT))
