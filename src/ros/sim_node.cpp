@@ -196,7 +196,7 @@ bool SimNode::onPlan(active_tensegrity::PlanFolding::Request& req, active_tenseg
   {
     res.status = res.INVALID_REQUEST;
     res.message =
-        "max_contact_force must be > 0 N when allow_contact is set, got " + std::to_string(req.max_contact_force);
+        "max_contact_force must be > 0 N when allow_contact is set, got " + core::shortestNumber(req.max_contact_force);
     ROS_WARN_STREAM("tensegrity_sim: ~plan_folding refused: " << res.message);
     return true;
   }

@@ -7,6 +7,8 @@
 #include <ros/package.h>
 #include <xmlrpcpp/XmlRpcValue.h>
 
+#include "active_tensegrity/core/text.h"
+
 namespace active_tensegrity::ros_layer
 {
 namespace
@@ -137,10 +139,10 @@ SimParams loadSimParams(const ros::NodeHandle& nh)
   p.real_time_factor = number(nh, "real_time_factor", p.real_time_factor);
   if (p.real_time_factor < 0.0)
     throw ParamError("~real_time_factor must be >= 0 (0 = as fast as possible), got " +
-                     std::to_string(p.real_time_factor));
+                     core::shortestNumber(p.real_time_factor));
   p.publish_rate = number(nh, "publish_rate", p.publish_rate);
   if (p.publish_rate <= 0.0)
-    throw ParamError("~publish_rate must be > 0 Hz, got " + std::to_string(p.publish_rate));
+    throw ParamError("~publish_rate must be > 0 Hz, got " + core::shortestNumber(p.publish_rate));
   p.publish_clock = boolean(nh, "publish_clock", p.publish_clock);
   p.frame_id = text(nh, "frame_id", p.frame_id);
   if (p.frame_id.empty())
@@ -148,25 +150,25 @@ SimParams loadSimParams(const ros::NodeHandle& nh)
   p.default_speed = number(nh, "default_speed", p.default_speed);
   if (p.default_speed < 0.0)
     throw ParamError("~default_speed must be > 0 m/s (or 0: the scene's actuation.speed), got " +
-                     std::to_string(p.default_speed));
+                     core::shortestNumber(p.default_speed));
   p.default_acceleration = number(nh, "default_acceleration", p.default_acceleration);
   if (p.default_acceleration < 0.0)
     throw ParamError("~default_acceleration must be > 0 m/s^2 (or 0: derived), got " +
-                     std::to_string(p.default_acceleration));
+                     core::shortestNumber(p.default_acceleration));
   p.start_paused = boolean(nh, "start_paused", p.start_paused);
   p.markers.contact_force_scale = number(nh, "contact_force_scale", p.markers.contact_force_scale);
   if (p.markers.contact_force_scale <= 0.0)
-    throw ParamError("~contact_force_scale must be > 0 m/N, got " + std::to_string(p.markers.contact_force_scale));
+    throw ParamError("~contact_force_scale must be > 0 m/N, got " + core::shortestNumber(p.markers.contact_force_scale));
   p.markers.cable_tension_scale = number(nh, "cable_tension_scale", p.markers.cable_tension_scale);
   if (p.markers.cable_tension_scale < 0.0)
     throw ParamError("~cable_tension_scale must be >= 0 N (0 = the largest tension of the moment), got " +
-                     std::to_string(p.markers.cable_tension_scale));
+                     core::shortestNumber(p.markers.cable_tension_scale));
   p.markers.strut_alpha = number(nh, "strut_alpha", p.markers.strut_alpha);
   if (p.markers.strut_alpha <= 0.0 || p.markers.strut_alpha > 1.0)
-    throw ParamError("~strut_alpha must be in (0, 1], got " + std::to_string(p.markers.strut_alpha));
+    throw ParamError("~strut_alpha must be in (0, 1], got " + core::shortestNumber(p.markers.strut_alpha));
   p.markers.cable_width = number(nh, "cable_width", p.markers.cable_width);
   if (p.markers.cable_width <= 0.0)
-    throw ParamError("~cable_width must be > 0 m, got " + std::to_string(p.markers.cable_width));
+    throw ParamError("~cable_width must be > 0 m, got " + core::shortestNumber(p.markers.cable_width));
   return p;
 }
 
