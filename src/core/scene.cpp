@@ -80,7 +80,8 @@ public:
     for (const auto& kv : node_)
     {
       if (!kv.first.IsScalar())
-        fail(path_, "expected names as keys, got the key " + show(kv.first));
+        fail(path_, "expected names as keys, got the key " + show(kv.first) + " on line " +
+                        std::to_string(kv.first.Mark().line + 1));
       const std::string& k = kv.first.Scalar();
       if (index_.emplace(k, kv.second).second)
         order_.push_back(k);

@@ -838,6 +838,17 @@ TEST(SceneKeys, ASecondYamlDocumentIsRefused)
                       { "two.yaml", "a second YAML document starts on", lineOf(two, "---") }));
 }
 
+TEST(SceneKeys, AKeyThatIsNotANameIsRefusedWithItsLine)
+{
+  const std::string yaml = edited({ { "materials:\n", "materials:\n  [a, b]: 1\n" } });
+  EXPECT_TRUE(refused([&] { loadSceneFromString(yaml, "bad.yaml"); }, "materials",
+                      { "expected names as keys", "[a, b]", lineOf(yaml, "[a, b]") }));
+  const std::string null_key = kMini + ":\n";
+  EXPECT_TRUE(
+      refused([&] { loadSceneFromString(null_key, "bad.yaml"); }, "",
+              { "got the key null", "line " + std::to_string(std::count(kMini.begin(), kMini.end(), '\n') + 1) }));
+}
+
 TEST(SceneKeys, StrayFlowTokensEndInARefusal)
 {
   // yaml-cpp's LoadAll yields empty documents for ever on a lone ','
