@@ -13,209 +13,16 @@ namespace
 /// Rows of a kPoints constraint (a ball joint has 3); checked when a System is built.
 constexpr int kMaxPointRows = 6;
 
-Vec4 thetaOf(const Eigen::VectorXd& x, const Body& b)
-{
-  return x.segment<4>(b.offset + 3);
-}
-
 Mat3 inertiaMatrix(const Body& b)
 {
   return b.inertia.asDiagonal();
 }
 }  // namespace
 
-void pointKinematics(const Model& model, const PointRef& point, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
-                     bool rate_jacobian, PointKinematics& k)
-{
-  // every member written once (no zero-filled temporary to copy: this runs for every cable point of
-  // every residual)
-  k.body = point.body;
-  if (point.body < 0)
-  {
-    k.p = point.local;
-    k.v.setZero();
-    k.jac.setZero();
-    k.dv_dq.setZero();
-    k.nq = 0;
-    return;
-  }
-  const Body& b = model.bodies[point.body];
-  k.nq = b.nq;
-  k.jac.leftCols<3>().setIdentity();
-  k.dv_dq.leftCols<3>().setZero();
-  if (b.kind == BodyKind::kPointMass)
-  {
-    k.p = q.segment<3>(b.offset) + point.local;
-    k.v = qd.segment<3>(b.offset);
-    k.jac.rightCols<4>().setZero();
-    k.dv_dq.rightCols<4>().setZero();
-    return;
-  }
-  const Vec4 th = thetaOf(q, b);
-  const Vec4 thd = thetaOf(qd, b);
-  k.jac.rightCols<4>() = pointJacobianTheta(th, point.local);
-  // R(Theta) u is quadratic in Theta, so B_Theta(Theta, u) Theta = 2 R(Theta) u (Euler)
-  k.p = q.segment<3>(b.offset) + 0.5 * (k.jac.rightCols<4>() * th);
-  k.v = qd.segment<3>(b.offset) + k.jac.rightCols<4>() * thd;
-  if (rate_jacobian)
-    k.dv_dq.rightCols<4>() = pointJacobianTheta(thd, point.local);
-  else
-    k.dv_dq.rightCols<4>().setZero();
-}
-
-PointKinematics pointKinematics(const Model& model, const PointRef& point, const Eigen::VectorXd& q,
-                                const Eigen::VectorXd& qd, bool rate_jacobian)
-{
-  PointKinematics k;
-  pointKinematics(model, point, q, qd, rate_jacobian, k);
-  return k;
-}
-
-Vec3 pointPosition(const Model& model, const PointRef& point, const Eigen::VectorXd& q)
-{
-  if (point.body < 0)
-    return point.local;
-  const Body& b = model.bodies[point.body];
-  if (b.kind == BodyKind::kPointMass)
-    return q.segment<3>(b.offset) + point.local;
-  // R(Theta) u = (e0^2 - e.e) u + 2 (e.u) e + 2 e0 e x u, the same quadratic form as rotationMatrix
-  const Vec4 th = thetaOf(q, b);
-  const double e0 = th(0);
-  const Vec3 e = th.tail<3>();
-  const Vec3& u = point.local;
-  return q.segment<3>(b.offset) + (e0 * e0 - e.squaredNorm()) * u + 2.0 * e.dot(u) * e + 2.0 * e0 * e.cross(u);
-}
-
 Mat4 rotationalMass(const Body& body, const Vec4& theta)
 {
   const Mat34 l = lMatrix(theta);
   return 4.0 * l.transpose() * inertiaMatrix(body) * l;
-}
-
-CableState evaluateCable(const Model& model, const Cable& cable, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
-                         const ActuationValues& u, bool damping, Eigen::VectorXd* F, BlockSparseMatrix* jac,
-                         double k_weight, double c_weight)
-{
-  // l = sum_k |p_{k+1} - p_k|; dl/dp_j = w_j = n_{j-1} - n_j (n_k the unit vector of segment k)
-  const int m = static_cast<int>(cable.points.size());
-  // per-thread scratch: no allocation once a thread has seen its longest cable
-  thread_local std::vector<PointKinematics> kin;
-  if (static_cast<int>(kin.size()) < m)
-    kin.resize(m);
-  std::array<Vec3, Cable::kMaxPoints> n, dd, w, e;
-  std::array<double, Cable::kMaxPoints> seg;
-  CableState s;
-  for (int j = 0; j < m; ++j)
-    pointKinematics(model, cable.points[j], q, qd, jac != nullptr, kin[j]);
-  for (int k = 0; k + 1 < m; ++k)
-  {
-    const Vec3 d = kin[k + 1].p - kin[k].p;
-    seg[k] = d.norm();
-    dd[k] = kin[k + 1].v - kin[k].v;
-    // a zero-length segment has no direction and no length to contribute
-    n[k] = seg[k] > 0.0 ? Vec3(d / seg[k]) : Vec3::Zero();
-    s.length += seg[k];
-    s.rate += n[k].dot(dd[k]);
-  }
-  double pull_in = 0.0, pull_rate = 0.0;
-  if (cable.actuator >= 0 && cable.actuator < static_cast<int>(u.size()))
-  {
-    pull_in = u[cable.actuator].value;
-    pull_rate = u[cable.actuator].rate;
-  }
-  s.rest_length = cable.rest_length - pull_in;
-  // a material cable keeps EA when pulled in, so k = EA / l0 grows; a spring keeps k
-  s.stiffness = cable.area > 0.0 ? cable.stiffness * cable.rest_length / s.rest_length : cable.stiffness;
-  const double k_axial = s.stiffness;
-  const double c = damping ? cable.damping : 0.0;
-  const double stretch = s.length - s.rest_length;
-  const double tension = k_axial * stretch + c * (s.rate + pull_rate);  // damping on the material stretch rate
-  if (s.length <= 0.0 || (cable.tension_only && (stretch <= 0.0 || tension <= 0.0)))
-  {
-    s.slack = true;
-    return s;
-  }
-  s.tension = tension;
-  if (!F && !jac)
-    return s;
-
-  // e_j: the part of dl_dot/dq through the turning of the segments, e_j^T B_j summed over points
-  for (int j = 0; j < m; ++j)
-  {
-    w[j] = (j > 0 ? n[j - 1] : Vec3::Zero()) - (j + 1 < m ? n[j] : Vec3::Zero());
-    e[j].setZero();
-    if (j > 0 && seg[j - 1] > 0.0)
-      e[j] += (dd[j - 1] - n[j - 1] * n[j - 1].dot(dd[j - 1])) / seg[j - 1];
-    if (j + 1 < m && seg[j] > 0.0)
-      e[j] -= (dd[j] - n[j] * n[j].dot(dd[j])) / seg[j];
-  }
-  // generalized force -T B_j^T w_j on the body of point j
-  if (F)
-    for (int j = 0; j < m; ++j)
-      if (kin[j].body >= 0)
-      {
-        const Body& b = model.bodies[kin[j].body];
-        F->segment(b.offset, b.nq) -= tension * kin[j].jac.leftCols(b.nq).transpose() * w[j];
-      }
-  if (!jac)
-    return s;
-
-  // K = -dF/dq = g^T (k g + c h) + T d2l/dq2 and C = -dF/dqd = c g^T g, with g = dl/dq = sum_j w_j^T B_j,
-  // h = dl_dot/dq = sum_j (w_j^T dv_dq_j + e_j^T B_j), and
-  // d2l/dq2 = sum_k (B_{k+1} - B_k)^T (I - n_k n_k^T)/l_k (B_{k+1} - B_k) + sum_j G(u_j, w_j)
-  using Row7 = Eigen::Matrix<double, 1, 7>;
-  using Col7 = Eigen::Matrix<double, 7, 1>;
-  Eigen::Matrix<double, 7, 7> blk;
-  for (int x = 0; x < m; ++x)
-  {
-    if (kin[x].body < 0)
-      continue;
-    const int nx = kin[x].nq;
-    const Col7 gx = kin[x].jac.transpose() * w[x];
-    for (int y = 0; y < m; ++y)
-    {
-      if (kin[y].body < 0)
-        continue;
-      const int ny = kin[y].nq;
-      const Row7 dy = (k_axial * w[y] + c * e[y]).transpose() * kin[y].jac + c * w[y].transpose() * kin[y].dv_dq;
-      blk.noalias() = gx * dy;
-      jac->add(kin[x].body, kin[y].body, blk.topLeftCorner(nx, ny), k_weight);
-      if (c != 0.0 && c_weight != 0.0)
-      {
-        blk.noalias() = c * gx * (kin[y].jac.transpose() * w[y]).transpose();
-        jac->add(kin[x].body, kin[y].body, blk.topLeftCorner(nx, ny), c_weight);
-      }
-    }
-    if (model.bodies[kin[x].body].kind == BodyKind::kStrut)
-    {
-      blk.setZero();
-      blk.bottomRightCorner<4, 4>() = tension * pointHessianTheta(cable.points[x].local, w[x]);
-      jac->add(kin[x].body, kin[x].body, blk, k_weight);
-    }
-  }
-  for (int k = 0; k + 1 < m; ++k)
-  {
-    if (!(seg[k] > 0.0))
-      continue;
-    const Mat3 D = (tension / seg[k]) * (Mat3::Identity() - n[k] * n[k].transpose());
-    const int ends[2] = { k, k + 1 };
-    const double sign[2] = { -1.0, 1.0 };
-    for (int a = 0; a < 2; ++a)
-    {
-      const PointKinematics& ka = kin[ends[a]];
-      if (ka.body < 0)
-        continue;
-      for (int b = 0; b < 2; ++b)
-      {
-        const PointKinematics& kb = kin[ends[b]];
-        if (kb.body < 0)
-          continue;
-        blk.noalias() = (sign[a] * sign[b]) * ka.jac.transpose() * D * kb.jac;
-        jac->add(ka.body, kb.body, blk.topLeftCorner(ka.nq, kb.nq), k_weight);
-      }
-    }
-  }
-  return s;
 }
 
 System::System(const Model& model, std::vector<Constraint> extra_constraints) : model_(model), broad_phase_(model)
@@ -635,12 +442,7 @@ double System::potentialEnergy(const Eigen::VectorXd& q, const ActuationValues& 
         e += 0.4 * st.stiffness * std::pow(st.penetration, 2.5);
     }
   for (const Cable& c : model_.cables)
-  {
-    const CableState st = evaluateCable(model_, c, q, zero, u, false, nullptr, nullptr, 0.0, 0.0);
-    const double stretch = st.length - st.rest_length;
-    if (stretch > 0.0 || !c.tension_only)
-      e += 0.5 * st.stiffness * stretch * stretch;
-  }
+    e += cablePotentialEnergy(c, evaluateCable(model_, c, q, zero, u, false, nullptr, nullptr, 0.0, 0.0));
   return e;
 }
 
