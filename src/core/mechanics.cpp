@@ -1,18 +1,13 @@
 #include "active_tensegrity/core/mechanics.h"
 
 #include <algorithm>
-#include <array>
 #include <cmath>
-#include <stdexcept>
 #include <string>
 
 namespace active_tensegrity::core
 {
 namespace
 {
-/// Rows of a kPoints constraint (a ball joint has 3); checked when a System is built.
-constexpr int kMaxPointRows = 6;
-
 Mat3 inertiaMatrix(const Body& b)
 {
   return b.inertia.asDiagonal();
@@ -32,9 +27,7 @@ System::System(const Model& model, std::vector<Constraint> extra_constraints) : 
     constraints_.push_back(std::move(c));
   zero_q_ = Eigen::VectorXd::Zero(model.nq);
   for (const Constraint& c : constraints_)
-    if (c.kind == Constraint::Kind::kPoints && c.rows() > kMaxPointRows)
-      throw std::invalid_argument("constraint '" + c.name + "' has " + std::to_string(c.rows()) + " rows; at most " +
-                                  std::to_string(kMaxPointRows) + " are supported");
+    constraintKind(c.kind).check(c);
   constraint_rows_.reserve(constraints_.size());
   for (const Constraint& c : constraints_)
   {
@@ -61,21 +54,16 @@ System::System(const Model& model, std::vector<Constraint> extra_constraints) : 
           couple(c.points[i].body, c.points[j].body);
   // strut pairs get their blocks when they first touch (contactForce reserves them): a scene with many
   // checked pairs (`auto` on a large lattice) would otherwise start with a nearly dense matrix
+  // a constraint's rows couple to its bodies, and its bodies to each other
   for (size_t i = 0; i < constraints_.size(); ++i)
   {
-    const Constraint& c = constraints_[i];
-    const int g = constraintGroup(static_cast<int>(i));
-    if (c.kind == Constraint::Kind::kPoints)
+    const ConstraintBodies cb = constraintKind(constraints_[i].kind).bodies(constraints_[i]);
+    for (int x = 0; x < cb.count; ++x)
     {
-      if (c.a.body >= 0)
-        couple(g, c.a.body);
-      if (c.b.body >= 0)
-        couple(g, c.b.body);
-      if (c.a.body >= 0 && c.b.body >= 0)
-        couple(c.a.body, c.b.body);
+      couple(constraintGroup(static_cast<int>(i)), cb.body[x]);
+      for (int y = x + 1; y < cb.count; ++y)
+        couple(cb.body[x], cb.body[y]);
     }
-    else
-      couple(g, c.body);
   }
   pattern_.init(sizes, blocks);
 }
@@ -213,92 +201,27 @@ void System::inertialForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, 
   }
 }
 
+template <class F>
+void System::forEachConstraint(F&& f) const
+{
+  for (size_t i = 0; i < constraints_.size(); ++i)
+  {
+    const Constraint& c = constraints_[i];
+    f(c, constraintKind(c.kind), constraint_rows_[i], constraintGroup(static_cast<int>(i)));
+  }
+}
+
 void System::constraintValue(const Eigen::VectorXd& q, const ActuationValues& u, Eigen::VectorXd& phi) const
 {
   phi.setZero(n_lambda_);
-  for (size_t i = 0; i < constraints_.size(); ++i)
-  {
-    const Constraint& c = constraints_[i];
-    const int r = constraint_rows_[i];
-    switch (c.kind)
-    {
-      case Constraint::Kind::kPoints:
-      {
-        const Vec3 pa = pointPosition(model_, c.a, q);
-        const Vec3 pb = pointPosition(model_, c.b, q);
-        const double s = c.actuator >= 0 ? u[c.actuator].value : 0.0;
-        for (int k = 0; k < c.rows(); ++k)
-          phi(r + k) = c.directions[k].dot(pa - pb) - c.offsets[k] - s;
-        break;
-      }
-      case Constraint::Kind::kQuatNorm:
-        phi(r) = thetaOf(q, model_.bodies[c.body]).squaredNorm() - 1.0;
-        break;
-      case Constraint::Kind::kSpinLock:
-        phi(r) = c.coefficients.dot(thetaOf(q, model_.bodies[c.body]));
-        break;
-    }
-  }
+  forEachConstraint([&](const Constraint& c, const ConstraintKindFunctions& kind, int row, int /*group*/)
+                    { kind.value(model_, c, q, u, phi.segment(row, c.rows())); });
 }
-
-namespace
-{
-// d_k^T B rows of a kPoints constraint for one end
-// (at most kMaxPointRows rows and 7 columns: on the stack, no allocation in the step loop)
-using PointRows = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::ColMajor, kMaxPointRows, 7>;
-
-PointRows pointRows(const Constraint& c, const PointKinematics& k)
-{
-  PointRows rows(c.rows(), k.nq);
-  for (int r = 0; r < c.rows(); ++r)
-    rows.row(r) = c.directions[r].transpose() * k.jac.leftCols(k.nq);
-  return rows;
-}
-
-// sum_k lambda_k d_k: the world force a kPoints constraint applies to end a (and minus it to end b)
-Vec3 combinedDirection(const Constraint& c, const Eigen::VectorXd& lambda, int first_row)
-{
-  Vec3 w = Vec3::Zero();
-  for (int k = 0; k < c.rows(); ++k)
-    w += lambda(first_row + k) * c.directions[k];
-  return w;
-}
-
-// calls f(end, sign) for each end of a kPoints constraint that lies on a body: +1 for a, -1 for b
-template <class F>
-void forEachBodyEnd(const Constraint& c, F&& f)
-{
-  if (c.a.body >= 0)
-    f(c.a, 1.0);
-  if (c.b.body >= 0)
-    f(c.b, -1.0);
-}
-}  // namespace
 
 void System::addConstraintJacobian(const Eigen::VectorXd& q, BlockSparseMatrix& jac) const
 {
-  const Eigen::VectorXd& zero = zero_q_;
-  for (size_t i = 0; i < constraints_.size(); ++i)
-  {
-    const Constraint& c = constraints_[i];
-    const int g = constraintGroup(static_cast<int>(i));
-    if (c.kind == Constraint::Kind::kPoints)
-    {
-      forEachBodyEnd(c,
-                     [&](const PointRef& end, double sign)
-                     {
-                       const PointRows rows = sign * pointRows(c, pointKinematics(model_, end, q, zero, false));
-                       jac.add(g, end.body, rows);
-                       jac.addTransposed(g, end.body, rows);
-                     });
-      continue;
-    }
-    Eigen::Matrix<double, 1, 7> row = Eigen::Matrix<double, 1, 7>::Zero();
-    const Body& b = model_.bodies[c.body];
-    row.tail<4>() = c.kind == Constraint::Kind::kQuatNorm ? Vec4(2.0 * thetaOf(q, b)) : c.coefficients;
-    jac.add(g, c.body, row);
-    jac.addTransposed(g, c.body, row);
-  }
+  forEachConstraint([&](const Constraint& c, const ConstraintKindFunctions& kind, int /*row*/, int group)
+                    { kind.addJacobian(model_, c, group, q, jac); });
 }
 
 Eigen::MatrixXd System::constraintJacobianDense(const Eigen::VectorXd& q) const
@@ -311,102 +234,30 @@ Eigen::MatrixXd System::constraintJacobianDense(const Eigen::VectorXd& q) const
 void System::constraintForce(const Eigen::VectorXd& q, const Eigen::VectorXd& lambda, Eigen::VectorXd& out) const
 {
   out.setZero(model_.nq);
-  const Eigen::VectorXd& zero = zero_q_;
-  for (size_t i = 0; i < constraints_.size(); ++i)
-  {
-    const Constraint& c = constraints_[i];
-    const int r = constraint_rows_[i];
-    if (c.kind == Constraint::Kind::kPoints)
-    {
-      const Vec3 w = combinedDirection(c, lambda, r);
-      forEachBodyEnd(c,
-                     [&](const PointRef& end, double sign)
-                     {
-                       const PointKinematics k = pointKinematics(model_, end, q, zero, false);
-                       out.segment(model_.bodies[k.body].offset, k.nq) += sign * k.jac.leftCols(k.nq).transpose() * w;
-                     });
-      continue;
-    }
-    const Body& b = model_.bodies[c.body];
-    const Vec4 row = c.kind == Constraint::Kind::kQuatNorm ? Vec4(2.0 * thetaOf(q, b)) : c.coefficients;
-    out.segment<4>(b.offset + 3) += lambda(r) * row;
-  }
+  forEachConstraint([&](const Constraint& c, const ConstraintKindFunctions& kind, int row, int /*group*/)
+                    { kind.addForce(model_, c, q, lambda.segment(row, c.rows()), out); });
 }
 
-void System::addLambdaHessian(const Eigen::VectorXd& /*q*/, const Eigen::VectorXd& lambda, BlockSparseMatrix& jac,
+void System::addLambdaHessian(const Eigen::VectorXd& q, const Eigen::VectorXd& lambda, BlockSparseMatrix& jac,
                               double weight) const
 {
-  // every constraint is at most quadratic in Theta, so this does not depend on q
-  Eigen::Matrix<double, 7, 7> h;
-  for (size_t i = 0; i < constraints_.size(); ++i)
-  {
-    const Constraint& c = constraints_[i];
-    const int r = constraint_rows_[i];
-    if (c.kind == Constraint::Kind::kSpinLock)
-      continue;
-    if (c.kind == Constraint::Kind::kQuatNorm)
-    {
-      h.setZero();
-      h.bottomRightCorner<4, 4>() = 2.0 * lambda(r) * Mat4::Identity();
-      jac.add(c.body, c.body, h, weight);
-      continue;
-    }
-    const Vec3 w = combinedDirection(c, lambda, r);
-    forEachBodyEnd(c,
-                   [&](const PointRef& end, double sign)
-                   {
-                     if (model_.bodies[end.body].kind != BodyKind::kStrut)
-                       return;
-                     h.setZero();
-                     h.bottomRightCorner<4, 4>() = sign * pointHessianTheta(end.local, w);
-                     jac.add(end.body, end.body, h, weight);
-                   });
-  }
+  forEachConstraint([&](const Constraint& c, const ConstraintKindFunctions& kind, int row, int /*group*/)
+                    { kind.addLambdaHessian(model_, c, q, lambda.segment(row, c.rows()), jac, weight); });
 }
 
 void System::velocityRhs(const ActuationValues& u, Eigen::VectorXd& rhs) const
 {
   rhs.setZero(n_lambda_);
-  for (size_t i = 0; i < constraints_.size(); ++i)
-  {
-    const Constraint& c = constraints_[i];
-    if (c.kind == Constraint::Kind::kPoints && c.actuator >= 0)
-      rhs.segment(constraint_rows_[i], c.rows()).setConstant(u[c.actuator].rate);
-  }
+  forEachConstraint([&](const Constraint& c, const ConstraintKindFunctions& kind, int row, int /*group*/)
+                    { kind.velocityRhs(c, u, rhs.segment(row, c.rows())); });
 }
 
 void System::accelerationRhs(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const ActuationValues& u,
                              Eigen::VectorXd& rhs) const
 {
   rhs.setZero(n_lambda_);
-  for (size_t i = 0; i < constraints_.size(); ++i)
-  {
-    const Constraint& c = constraints_[i];
-    const int r = constraint_rows_[i];
-    switch (c.kind)
-    {
-      case Constraint::Kind::kPoints:
-      {
-        // d^2 p / dt^2 = B qdd + B_Theta(thd) thd
-        Vec3 quad = Vec3::Zero();
-        forEachBodyEnd(c,
-                       [&](const PointRef& end, double sign)
-                       {
-                         const PointKinematics k = pointKinematics(model_, end, q, qd);
-                         quad += sign * k.dv_dq.leftCols(k.nq) * qd.segment(model_.bodies[k.body].offset, k.nq);
-                       });
-        const double sdd = c.actuator >= 0 ? u[c.actuator].accel : 0.0;
-        for (int k = 0; k < c.rows(); ++k)
-          rhs(r + k) = -c.directions[k].dot(quad) + sdd;
-        break;
-      }
-      case Constraint::Kind::kQuatNorm:
-        rhs(r) = -2.0 * thetaOf(qd, model_.bodies[c.body]).squaredNorm();
-        break;
-      case Constraint::Kind::kSpinLock:
-        break;
-    }
-  }
+  forEachConstraint([&](const Constraint& c, const ConstraintKindFunctions& kind, int row, int /*group*/)
+                    { kind.accelerationRhs(model_, c, q, qd, u, rhs.segment(row, c.rows())); });
 }
 
 double System::kineticEnergy(const Eigen::VectorXd& q, const Eigen::VectorXd& qd) const

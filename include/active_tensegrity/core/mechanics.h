@@ -15,6 +15,7 @@
 #include "active_tensegrity/core/block_sparse.h"
 #include "active_tensegrity/core/broad_phase.h"
 #include "active_tensegrity/core/cable.h"
+#include "active_tensegrity/core/constraints.h"
 #include "active_tensegrity/core/contact.h"
 #include "active_tensegrity/core/kinematics.h"
 #include "active_tensegrity/core/model.h"
@@ -121,6 +122,9 @@ private:
   {
     return static_cast<int>(model_.bodies.size()) + c;
   }
+  /// Calls f(constraint, its kind's functions, first row, group) for every constraint.
+  template <class F>
+  void forEachConstraint(F&& f) const;
 
   const Model& model_;
   std::vector<Constraint> constraints_;
