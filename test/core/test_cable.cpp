@@ -61,6 +61,15 @@ Eigen::VectorXd force(const Model& m, const Cable& c, const Eigen::VectorXd& q, 
   return F;
 }
 
+/// No generalized force F, no energy, no power.
+void expectNothing(const Cable& c, const CableState& s, const Eigen::VectorXd& F)
+{
+  EXPECT_EQ(F.norm(), 0.0) << c.name;
+  EXPECT_EQ(cablePotentialEnergy(c, s), 0.0) << c.name;
+  EXPECT_EQ(cableConservativePower(c, s), 0.0) << c.name;
+  EXPECT_EQ(cableNonConservativePower(c, s), 0.0) << c.name;
+}
+
 const ActuationValues kHeld = { ActuationValue{ 0.05, 0.0, 0.0 } };
 }  // namespace
 
@@ -143,10 +152,7 @@ TEST(CableEnergy, NoForceNoEnergyNoPowerAtRestLength)
   const CableState s = evaluate(m, c, m.q0, zero, {}, true, &F);
   EXPECT_NEAR(s.length, 1.0, 1e-15);
   EXPECT_EQ(s.tension, 0.0);
-  EXPECT_EQ(F.norm(), 0.0);
-  EXPECT_EQ(cablePotentialEnergy(c, s), 0.0);
-  EXPECT_EQ(cableConservativePower(c, s), 0.0);
-  EXPECT_EQ(cableNonConservativePower(c, s), 0.0);
+  expectNothing(c, s, F);
   // moving, without damping: still no force there, and V is stationary (V = 1/2 k (l - l0)^2)
   Eigen::VectorXd qd = zero;
   qd.segment<3>(14) = Vec3(0.3, 0.2, 0.4);
@@ -167,10 +173,7 @@ TEST(CableEnergy, SlackCableHasNoForceNoEnergyNoPower)
   Eigen::VectorXd F = Eigen::VectorXd::Zero(m.nq);
   const CableState s = evaluate(m, c, m.q0, qd, {}, true, &F);
   EXPECT_TRUE(s.slack);
-  EXPECT_EQ(F.norm(), 0.0);
-  EXPECT_EQ(cablePotentialEnergy(c, s), 0.0);
-  EXPECT_EQ(cableConservativePower(c, s), 0.0);
-  EXPECT_EQ(cableNonConservativePower(c, s), 0.0);
+  expectNothing(c, s, F);
   // a spring that also pushes stores energy when compressed and its power is still -dV/dt
   m.cables[0].tension_only = false;
   const CableState spring = evaluate(m, m.cables[0], m.q0, qd, {}, false);
