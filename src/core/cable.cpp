@@ -21,6 +21,33 @@ double elasticTension(const Cable& cable, const CableState& s)
 }
 }  // namespace
 
+CableState cableLaw(const Cable& cable, double length, double rate, const ActuationValues& u, bool damping)
+{
+  CableState s;
+  s.length = length;
+  s.rate = rate;
+  double pull_in = 0.0, pull_rate = 0.0;
+  if (cable.actuator >= 0 && cable.actuator < static_cast<int>(u.size()))
+  {
+    pull_in = u[cable.actuator].value;
+    pull_rate = u[cable.actuator].rate;
+  }
+  s.rest_length = cable.rest_length - pull_in;
+  // a material cable keeps EA when pulled in, so k = EA / l0 grows; a spring keeps k
+  s.stiffness = cable.area > 0.0 ? cable.stiffness * cable.rest_length / s.rest_length : cable.stiffness;
+  const double c = damping ? cable.damping : 0.0;
+  const double stretch = s.length - s.rest_length;
+  const double tension = s.stiffness * stretch + c * (s.rate + pull_rate);  // damping on the material stretch rate
+  if (s.length <= 0.0 || (cable.tension_only && (stretch <= 0.0 || tension <= 0.0)))
+  {
+    s.slack = true;
+    return s;
+  }
+  s.tension = tension;
+  s.damping_tension = c * (s.rate + pull_rate);
+  return s;
+}
+
 CableState evaluateCable(const Model& model, const Cable& cable, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
                          const ActuationValues& u, bool damping, Eigen::VectorXd* F, BlockSparseMatrix* jac,
                          double k_weight, double c_weight)
@@ -33,7 +60,7 @@ CableState evaluateCable(const Model& model, const Cable& cable, const Eigen::Ve
     kin.resize(m);
   std::array<Vec3, Cable::kMaxPoints> n, dd, w, e;
   std::array<double, Cable::kMaxPoints> seg;
-  CableState s;
+  double length = 0.0, rate = 0.0;
   for (int j = 0; j < m; ++j)
     pointKinematics(model, cable.points[j], q, qd, jac != nullptr, kin[j]);
   for (int k = 0; k + 1 < m; ++k)
@@ -43,31 +70,15 @@ CableState evaluateCable(const Model& model, const Cable& cable, const Eigen::Ve
     dd[k] = kin[k + 1].v - kin[k].v;
     // a zero-length segment has no direction and no length to contribute
     n[k] = seg[k] > 0.0 ? Vec3(d / seg[k]) : Vec3::Zero();
-    s.length += seg[k];
-    s.rate += n[k].dot(dd[k]);
+    length += seg[k];
+    rate += n[k].dot(dd[k]);
   }
-  double pull_in = 0.0, pull_rate = 0.0;
-  if (cable.actuator >= 0 && cable.actuator < static_cast<int>(u.size()))
-  {
-    pull_in = u[cable.actuator].value;
-    pull_rate = u[cable.actuator].rate;
-  }
-  s.rest_length = cable.rest_length - pull_in;
-  // a material cable keeps EA when pulled in, so k = EA / l0 grows; a spring keeps k
-  s.stiffness = cable.area > 0.0 ? cable.stiffness * cable.rest_length / s.rest_length : cable.stiffness;
+  const CableState s = cableLaw(cable, length, rate, u, damping);
+  if (s.slack || (!F && !jac))
+    return s;
   const double k_axial = s.stiffness;
   const double c = damping ? cable.damping : 0.0;
-  const double stretch = s.length - s.rest_length;
-  const double tension = k_axial * stretch + c * (s.rate + pull_rate);  // damping on the material stretch rate
-  if (s.length <= 0.0 || (cable.tension_only && (stretch <= 0.0 || tension <= 0.0)))
-  {
-    s.slack = true;
-    return s;
-  }
-  s.tension = tension;
-  s.damping_tension = c * (s.rate + pull_rate);
-  if (!F && !jac)
-    return s;
+  const double tension = s.tension;
 
   // e_j: the part of dl_dot/dq through the turning of the segments, e_j^T B_j summed over points
   for (int j = 0; j < m; ++j)

@@ -2,7 +2,7 @@
 // -dV/dt (central differences along a motion) and -F . qd of the undamped force; the two powers add up
 // to F . qd; the non-conservative power never is positive while the actuator holds still; at rest
 // length and when slack there is no force, no energy and no power. (The force's tangents against
-// finite differences: test_mechanics, test_sliding_cable.)
+// finite differences: test_mechanics, test_sliding_cable.) The law along the cable against closed forms.
 #include <random>
 
 #include <gtest/gtest.h>
@@ -199,5 +199,49 @@ TEST(CableEnergy, EnergyGradientIsMinusTheUndampedForce)
       const double grad = (energy(m, c, qp, kHeld) - energy(m, c, qm, kHeld)) / (2.0 * h);
       EXPECT_NEAR(grad, -F(j), 1e-6 * std::max(1.0, F.lpNorm<Eigen::Infinity>())) << c.name << " q" << j;
     }
+  }
+}
+
+TEST(CableLaw, TensionAlongTheCableMatchesClosedForms)
+{
+  Cable spring = makeCable("s", PointRef{}, PointRef{}, 100.0, 1.0, 5.0);
+  CableState s = cableLaw(spring, 1.2, 0.5, {}, true);
+  EXPECT_FALSE(s.slack);
+  EXPECT_NEAR(s.tension, 100.0 * 0.2 + 5.0 * 0.5, 1e-12);
+  EXPECT_NEAR(s.damping_tension, 5.0 * 0.5, 1e-15);
+  EXPECT_NEAR(cableLaw(spring, 1.2, 0.5, {}, false).tension, 20.0, 1e-12);
+  // pulled in by 0.1 at 0.2 m/s: a spring keeps k, a material cable keeps EA (k = EA / l0)
+  spring.actuator = 0;
+  const ActuationValues u = { ActuationValue{ 0.1, 0.2, 0.0 } };
+  s = cableLaw(spring, 1.2, 0.5, u, true);
+  EXPECT_NEAR(s.rest_length, 0.9, 1e-15);
+  EXPECT_NEAR(s.tension, 100.0 * 0.3 + 5.0 * 0.7, 1e-12);
+  Cable material = spring;
+  material.area = 1e-5;
+  s = cableLaw(material, 1.2, 0.5, u, true);
+  EXPECT_NEAR(s.stiffness, 100.0 / 0.9, 1e-12);
+  EXPECT_NEAR(s.tension, 100.0 / 0.9 * 0.3 + 5.0 * 0.7, 1e-12);
+  // shortening fast enough that damping would push: slack; a two-sided spring pushes
+  s = cableLaw(spring, 1.2, -10.0, u, true);
+  EXPECT_TRUE(s.slack);
+  EXPECT_EQ(s.tension, 0.0);
+  spring.tension_only = false;
+  EXPECT_NEAR(cableLaw(spring, 0.8, 0.0, u, true).tension, 100.0 * (0.8 - 0.9) + 5.0 * 0.2, 1e-12);
+}
+
+TEST(CableLaw, IsWhatEvaluateCableAppliesToItsLengthAndRate)
+{
+  const Model m = cableModel();
+  std::mt19937 rng(23);
+  const Eigen::VectorXd q = perturbed(m.q0, 0.05, rng);
+  const Eigen::VectorXd qd = randomVector(m.nq, 5.0, rng);
+  for (const Cable& c : m.cables)
+  {
+    const CableState s = evaluate(m, c, q, qd, kHeld, true);
+    const CableState law = cableLaw(c, s.length, s.rate, kHeld, true);
+    EXPECT_EQ(law.tension, s.tension) << c.name;
+    EXPECT_EQ(law.slack, s.slack) << c.name;
+    EXPECT_EQ(law.rest_length, s.rest_length) << c.name;
+    EXPECT_EQ(law.stiffness, s.stiffness) << c.name;
   }
 }

@@ -39,6 +39,11 @@ struct CableState
   bool slack = false;
 };
 
+/// The law along the cable: rest length l0(t), stiffness k(t), tension T (and its damping part) and slack
+/// of a cable of length l (m) and rate l_dot (m/s) under actuation u (empty: no pull-in); no damping
+/// unless `damping`. What evaluateCable applies once it has l and l_dot from the points.
+CableState cableLaw(const Cable& cable, double length, double rate, const ActuationValues& u, bool damping);
+
 /// Evaluates one cable (two points or sliding through several) at (q, qd) under actuation u (empty:
 /// no pull-in); adds its generalized force into F (if not null) and k_weight * K + c_weight * C into
 /// jac (if not null). K and C are exact (material, geometric and damping parts).
