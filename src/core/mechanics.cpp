@@ -1,221 +1,23 @@
 #include "active_tensegrity/core/mechanics.h"
 
 #include <algorithm>
-#include <array>
 #include <cmath>
-#include <stdexcept>
 #include <string>
 
 namespace active_tensegrity::core
 {
 namespace
 {
-/// Rows of a kPoints constraint (a ball joint has 3); checked when a System is built.
-constexpr int kMaxPointRows = 6;
-
-Vec4 thetaOf(const Eigen::VectorXd& x, const Body& b)
-{
-  return x.segment<4>(b.offset + 3);
-}
-
 Mat3 inertiaMatrix(const Body& b)
 {
   return b.inertia.asDiagonal();
 }
 }  // namespace
 
-void pointKinematics(const Model& model, const PointRef& point, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
-                     bool rate_jacobian, PointKinematics& k)
-{
-  // every member written once (no zero-filled temporary to copy: this runs for every cable point of
-  // every residual)
-  k.body = point.body;
-  if (point.body < 0)
-  {
-    k.p = point.local;
-    k.v.setZero();
-    k.jac.setZero();
-    k.dv_dq.setZero();
-    k.nq = 0;
-    return;
-  }
-  const Body& b = model.bodies[point.body];
-  k.nq = b.nq;
-  k.jac.leftCols<3>().setIdentity();
-  k.dv_dq.leftCols<3>().setZero();
-  if (b.kind == BodyKind::kPointMass)
-  {
-    k.p = q.segment<3>(b.offset) + point.local;
-    k.v = qd.segment<3>(b.offset);
-    k.jac.rightCols<4>().setZero();
-    k.dv_dq.rightCols<4>().setZero();
-    return;
-  }
-  const Vec4 th = thetaOf(q, b);
-  const Vec4 thd = thetaOf(qd, b);
-  k.jac.rightCols<4>() = pointJacobianTheta(th, point.local);
-  // R(Theta) u is quadratic in Theta, so B_Theta(Theta, u) Theta = 2 R(Theta) u (Euler)
-  k.p = q.segment<3>(b.offset) + 0.5 * (k.jac.rightCols<4>() * th);
-  k.v = qd.segment<3>(b.offset) + k.jac.rightCols<4>() * thd;
-  if (rate_jacobian)
-    k.dv_dq.rightCols<4>() = pointJacobianTheta(thd, point.local);
-  else
-    k.dv_dq.rightCols<4>().setZero();
-}
-
-PointKinematics pointKinematics(const Model& model, const PointRef& point, const Eigen::VectorXd& q,
-                                const Eigen::VectorXd& qd, bool rate_jacobian)
-{
-  PointKinematics k;
-  pointKinematics(model, point, q, qd, rate_jacobian, k);
-  return k;
-}
-
-Vec3 pointPosition(const Model& model, const PointRef& point, const Eigen::VectorXd& q)
-{
-  if (point.body < 0)
-    return point.local;
-  const Body& b = model.bodies[point.body];
-  if (b.kind == BodyKind::kPointMass)
-    return q.segment<3>(b.offset) + point.local;
-  // R(Theta) u = (e0^2 - e.e) u + 2 (e.u) e + 2 e0 e x u, the same quadratic form as rotationMatrix
-  const Vec4 th = thetaOf(q, b);
-  const double e0 = th(0);
-  const Vec3 e = th.tail<3>();
-  const Vec3& u = point.local;
-  return q.segment<3>(b.offset) + (e0 * e0 - e.squaredNorm()) * u + 2.0 * e.dot(u) * e + 2.0 * e0 * e.cross(u);
-}
-
 Mat4 rotationalMass(const Body& body, const Vec4& theta)
 {
   const Mat34 l = lMatrix(theta);
   return 4.0 * l.transpose() * inertiaMatrix(body) * l;
-}
-
-CableState evaluateCable(const Model& model, const Cable& cable, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
-                         const ActuationValues& u, bool damping, Eigen::VectorXd* F, BlockSparseMatrix* jac,
-                         double k_weight, double c_weight)
-{
-  // l = sum_k |p_{k+1} - p_k|; dl/dp_j = w_j = n_{j-1} - n_j (n_k the unit vector of segment k)
-  const int m = static_cast<int>(cable.points.size());
-  // per-thread scratch: no allocation once a thread has seen its longest cable
-  thread_local std::vector<PointKinematics> kin;
-  if (static_cast<int>(kin.size()) < m)
-    kin.resize(m);
-  std::array<Vec3, Cable::kMaxPoints> n, dd, w, e;
-  std::array<double, Cable::kMaxPoints> seg;
-  CableState s;
-  for (int j = 0; j < m; ++j)
-    pointKinematics(model, cable.points[j], q, qd, jac != nullptr, kin[j]);
-  for (int k = 0; k + 1 < m; ++k)
-  {
-    const Vec3 d = kin[k + 1].p - kin[k].p;
-    seg[k] = d.norm();
-    dd[k] = kin[k + 1].v - kin[k].v;
-    // a zero-length segment has no direction and no length to contribute
-    n[k] = seg[k] > 0.0 ? Vec3(d / seg[k]) : Vec3::Zero();
-    s.length += seg[k];
-    s.rate += n[k].dot(dd[k]);
-  }
-  double pull_in = 0.0, pull_rate = 0.0;
-  if (cable.actuator >= 0 && cable.actuator < static_cast<int>(u.size()))
-  {
-    pull_in = u[cable.actuator].value;
-    pull_rate = u[cable.actuator].rate;
-  }
-  s.rest_length = cable.rest_length - pull_in;
-  // a material cable keeps EA when pulled in, so k = EA / l0 grows; a spring keeps k
-  s.stiffness = cable.area > 0.0 ? cable.stiffness * cable.rest_length / s.rest_length : cable.stiffness;
-  const double k_axial = s.stiffness;
-  const double c = damping ? cable.damping : 0.0;
-  const double stretch = s.length - s.rest_length;
-  const double tension = k_axial * stretch + c * (s.rate + pull_rate);  // damping on the material stretch rate
-  if (s.length <= 0.0 || (cable.tension_only && (stretch <= 0.0 || tension <= 0.0)))
-  {
-    s.slack = true;
-    return s;
-  }
-  s.tension = tension;
-  if (!F && !jac)
-    return s;
-
-  // e_j: the part of dl_dot/dq through the turning of the segments, e_j^T B_j summed over points
-  for (int j = 0; j < m; ++j)
-  {
-    w[j] = (j > 0 ? n[j - 1] : Vec3::Zero()) - (j + 1 < m ? n[j] : Vec3::Zero());
-    e[j].setZero();
-    if (j > 0 && seg[j - 1] > 0.0)
-      e[j] += (dd[j - 1] - n[j - 1] * n[j - 1].dot(dd[j - 1])) / seg[j - 1];
-    if (j + 1 < m && seg[j] > 0.0)
-      e[j] -= (dd[j] - n[j] * n[j].dot(dd[j])) / seg[j];
-  }
-  // generalized force -T B_j^T w_j on the body of point j
-  if (F)
-    for (int j = 0; j < m; ++j)
-      if (kin[j].body >= 0)
-      {
-        const Body& b = model.bodies[kin[j].body];
-        F->segment(b.offset, b.nq) -= tension * kin[j].jac.leftCols(b.nq).transpose() * w[j];
-      }
-  if (!jac)
-    return s;
-
-  // K = -dF/dq = g^T (k g + c h) + T d2l/dq2 and C = -dF/dqd = c g^T g, with g = dl/dq = sum_j w_j^T B_j,
-  // h = dl_dot/dq = sum_j (w_j^T dv_dq_j + e_j^T B_j), and
-  // d2l/dq2 = sum_k (B_{k+1} - B_k)^T (I - n_k n_k^T)/l_k (B_{k+1} - B_k) + sum_j G(u_j, w_j)
-  using Row7 = Eigen::Matrix<double, 1, 7>;
-  using Col7 = Eigen::Matrix<double, 7, 1>;
-  Eigen::Matrix<double, 7, 7> blk;
-  for (int x = 0; x < m; ++x)
-  {
-    if (kin[x].body < 0)
-      continue;
-    const int nx = kin[x].nq;
-    const Col7 gx = kin[x].jac.transpose() * w[x];
-    for (int y = 0; y < m; ++y)
-    {
-      if (kin[y].body < 0)
-        continue;
-      const int ny = kin[y].nq;
-      const Row7 dy = (k_axial * w[y] + c * e[y]).transpose() * kin[y].jac + c * w[y].transpose() * kin[y].dv_dq;
-      blk.noalias() = gx * dy;
-      jac->add(kin[x].body, kin[y].body, blk.topLeftCorner(nx, ny), k_weight);
-      if (c != 0.0 && c_weight != 0.0)
-      {
-        blk.noalias() = c * gx * (kin[y].jac.transpose() * w[y]).transpose();
-        jac->add(kin[x].body, kin[y].body, blk.topLeftCorner(nx, ny), c_weight);
-      }
-    }
-    if (model.bodies[kin[x].body].kind == BodyKind::kStrut)
-    {
-      blk.setZero();
-      blk.bottomRightCorner<4, 4>() = tension * pointHessianTheta(cable.points[x].local, w[x]);
-      jac->add(kin[x].body, kin[x].body, blk, k_weight);
-    }
-  }
-  for (int k = 0; k + 1 < m; ++k)
-  {
-    if (!(seg[k] > 0.0))
-      continue;
-    const Mat3 D = (tension / seg[k]) * (Mat3::Identity() - n[k] * n[k].transpose());
-    const int ends[2] = { k, k + 1 };
-    const double sign[2] = { -1.0, 1.0 };
-    for (int a = 0; a < 2; ++a)
-    {
-      const PointKinematics& ka = kin[ends[a]];
-      if (ka.body < 0)
-        continue;
-      for (int b = 0; b < 2; ++b)
-      {
-        const PointKinematics& kb = kin[ends[b]];
-        if (kb.body < 0)
-          continue;
-        blk.noalias() = (sign[a] * sign[b]) * ka.jac.transpose() * D * kb.jac;
-        jac->add(ka.body, kb.body, blk.topLeftCorner(ka.nq, kb.nq), k_weight);
-      }
-    }
-  }
-  return s;
 }
 
 System::System(const Model& model, std::vector<Constraint> extra_constraints) : model_(model), broad_phase_(model)
@@ -225,9 +27,7 @@ System::System(const Model& model, std::vector<Constraint> extra_constraints) : 
     constraints_.push_back(std::move(c));
   zero_q_ = Eigen::VectorXd::Zero(model.nq);
   for (const Constraint& c : constraints_)
-    if (c.kind == Constraint::Kind::kPoints && c.rows() > kMaxPointRows)
-      throw std::invalid_argument("constraint '" + c.name + "' has " + std::to_string(c.rows()) + " rows; at most " +
-                                  std::to_string(kMaxPointRows) + " are supported");
+    constraintKind(c.kind).check(c);
   constraint_rows_.reserve(constraints_.size());
   for (const Constraint& c : constraints_)
   {
@@ -254,21 +54,16 @@ System::System(const Model& model, std::vector<Constraint> extra_constraints) : 
           couple(c.points[i].body, c.points[j].body);
   // strut pairs get their blocks when they first touch (contactForce reserves them): a scene with many
   // checked pairs (`auto` on a large lattice) would otherwise start with a nearly dense matrix
+  // a constraint's rows couple to its bodies, and its bodies to each other
   for (size_t i = 0; i < constraints_.size(); ++i)
   {
-    const Constraint& c = constraints_[i];
-    const int g = constraintGroup(static_cast<int>(i));
-    if (c.kind == Constraint::Kind::kPoints)
+    const ConstraintBodies cb = constraintKind(constraints_[i].kind).bodies(constraints_[i]);
+    for (int x = 0; x < cb.count; ++x)
     {
-      if (c.a.body >= 0)
-        couple(g, c.a.body);
-      if (c.b.body >= 0)
-        couple(g, c.b.body);
-      if (c.a.body >= 0 && c.b.body >= 0)
-        couple(c.a.body, c.b.body);
+      couple(constraintGroup(static_cast<int>(i)), cb.body[x]);
+      for (int y = x + 1; y < cb.count; ++y)
+        couple(cb.body[x], cb.body[y]);
     }
-    else
-      couple(g, c.body);
   }
   pattern_.init(sizes, blocks);
 }
@@ -406,92 +201,27 @@ void System::inertialForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, 
   }
 }
 
+template <class F>
+void System::forEachConstraint(F&& f) const
+{
+  for (size_t i = 0; i < constraints_.size(); ++i)
+  {
+    const Constraint& c = constraints_[i];
+    f(c, constraintKind(c.kind), constraint_rows_[i], constraintGroup(static_cast<int>(i)));
+  }
+}
+
 void System::constraintValue(const Eigen::VectorXd& q, const ActuationValues& u, Eigen::VectorXd& phi) const
 {
   phi.setZero(n_lambda_);
-  for (size_t i = 0; i < constraints_.size(); ++i)
-  {
-    const Constraint& c = constraints_[i];
-    const int r = constraint_rows_[i];
-    switch (c.kind)
-    {
-      case Constraint::Kind::kPoints:
-      {
-        const Vec3 pa = pointPosition(model_, c.a, q);
-        const Vec3 pb = pointPosition(model_, c.b, q);
-        const double s = c.actuator >= 0 ? u[c.actuator].value : 0.0;
-        for (int k = 0; k < c.rows(); ++k)
-          phi(r + k) = c.directions[k].dot(pa - pb) - c.offsets[k] - s;
-        break;
-      }
-      case Constraint::Kind::kQuatNorm:
-        phi(r) = thetaOf(q, model_.bodies[c.body]).squaredNorm() - 1.0;
-        break;
-      case Constraint::Kind::kSpinLock:
-        phi(r) = c.coefficients.dot(thetaOf(q, model_.bodies[c.body]));
-        break;
-    }
-  }
+  forEachConstraint([&](const Constraint& c, const ConstraintKindFunctions& kind, int row, int /*group*/)
+                    { kind.value(model_, c, q, u, phi.segment(row, c.rows())); });
 }
-
-namespace
-{
-// d_k^T B rows of a kPoints constraint for one end
-// (at most kMaxPointRows rows and 7 columns: on the stack, no allocation in the step loop)
-using PointRows = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::ColMajor, kMaxPointRows, 7>;
-
-PointRows pointRows(const Constraint& c, const PointKinematics& k)
-{
-  PointRows rows(c.rows(), k.nq);
-  for (int r = 0; r < c.rows(); ++r)
-    rows.row(r) = c.directions[r].transpose() * k.jac.leftCols(k.nq);
-  return rows;
-}
-
-// sum_k lambda_k d_k: the world force a kPoints constraint applies to end a (and minus it to end b)
-Vec3 combinedDirection(const Constraint& c, const Eigen::VectorXd& lambda, int first_row)
-{
-  Vec3 w = Vec3::Zero();
-  for (int k = 0; k < c.rows(); ++k)
-    w += lambda(first_row + k) * c.directions[k];
-  return w;
-}
-
-// calls f(end, sign) for each end of a kPoints constraint that lies on a body: +1 for a, -1 for b
-template <class F>
-void forEachBodyEnd(const Constraint& c, F&& f)
-{
-  if (c.a.body >= 0)
-    f(c.a, 1.0);
-  if (c.b.body >= 0)
-    f(c.b, -1.0);
-}
-}  // namespace
 
 void System::addConstraintJacobian(const Eigen::VectorXd& q, BlockSparseMatrix& jac) const
 {
-  const Eigen::VectorXd& zero = zero_q_;
-  for (size_t i = 0; i < constraints_.size(); ++i)
-  {
-    const Constraint& c = constraints_[i];
-    const int g = constraintGroup(static_cast<int>(i));
-    if (c.kind == Constraint::Kind::kPoints)
-    {
-      forEachBodyEnd(c,
-                     [&](const PointRef& end, double sign)
-                     {
-                       const PointRows rows = sign * pointRows(c, pointKinematics(model_, end, q, zero, false));
-                       jac.add(g, end.body, rows);
-                       jac.addTransposed(g, end.body, rows);
-                     });
-      continue;
-    }
-    Eigen::Matrix<double, 1, 7> row = Eigen::Matrix<double, 1, 7>::Zero();
-    const Body& b = model_.bodies[c.body];
-    row.tail<4>() = c.kind == Constraint::Kind::kQuatNorm ? Vec4(2.0 * thetaOf(q, b)) : c.coefficients;
-    jac.add(g, c.body, row);
-    jac.addTransposed(g, c.body, row);
-  }
+  forEachConstraint([&](const Constraint& c, const ConstraintKindFunctions& kind, int /*row*/, int group)
+                    { kind.addJacobian(model_, c, group, q, jac); });
 }
 
 Eigen::MatrixXd System::constraintJacobianDense(const Eigen::VectorXd& q) const
@@ -504,102 +234,30 @@ Eigen::MatrixXd System::constraintJacobianDense(const Eigen::VectorXd& q) const
 void System::constraintForce(const Eigen::VectorXd& q, const Eigen::VectorXd& lambda, Eigen::VectorXd& out) const
 {
   out.setZero(model_.nq);
-  const Eigen::VectorXd& zero = zero_q_;
-  for (size_t i = 0; i < constraints_.size(); ++i)
-  {
-    const Constraint& c = constraints_[i];
-    const int r = constraint_rows_[i];
-    if (c.kind == Constraint::Kind::kPoints)
-    {
-      const Vec3 w = combinedDirection(c, lambda, r);
-      forEachBodyEnd(c,
-                     [&](const PointRef& end, double sign)
-                     {
-                       const PointKinematics k = pointKinematics(model_, end, q, zero, false);
-                       out.segment(model_.bodies[k.body].offset, k.nq) += sign * k.jac.leftCols(k.nq).transpose() * w;
-                     });
-      continue;
-    }
-    const Body& b = model_.bodies[c.body];
-    const Vec4 row = c.kind == Constraint::Kind::kQuatNorm ? Vec4(2.0 * thetaOf(q, b)) : c.coefficients;
-    out.segment<4>(b.offset + 3) += lambda(r) * row;
-  }
+  forEachConstraint([&](const Constraint& c, const ConstraintKindFunctions& kind, int row, int /*group*/)
+                    { kind.addForce(model_, c, q, lambda.segment(row, c.rows()), out); });
 }
 
-void System::addLambdaHessian(const Eigen::VectorXd& /*q*/, const Eigen::VectorXd& lambda, BlockSparseMatrix& jac,
+void System::addLambdaHessian(const Eigen::VectorXd& q, const Eigen::VectorXd& lambda, BlockSparseMatrix& jac,
                               double weight) const
 {
-  // every constraint is at most quadratic in Theta, so this does not depend on q
-  Eigen::Matrix<double, 7, 7> h;
-  for (size_t i = 0; i < constraints_.size(); ++i)
-  {
-    const Constraint& c = constraints_[i];
-    const int r = constraint_rows_[i];
-    if (c.kind == Constraint::Kind::kSpinLock)
-      continue;
-    if (c.kind == Constraint::Kind::kQuatNorm)
-    {
-      h.setZero();
-      h.bottomRightCorner<4, 4>() = 2.0 * lambda(r) * Mat4::Identity();
-      jac.add(c.body, c.body, h, weight);
-      continue;
-    }
-    const Vec3 w = combinedDirection(c, lambda, r);
-    forEachBodyEnd(c,
-                   [&](const PointRef& end, double sign)
-                   {
-                     if (model_.bodies[end.body].kind != BodyKind::kStrut)
-                       return;
-                     h.setZero();
-                     h.bottomRightCorner<4, 4>() = sign * pointHessianTheta(end.local, w);
-                     jac.add(end.body, end.body, h, weight);
-                   });
-  }
+  forEachConstraint([&](const Constraint& c, const ConstraintKindFunctions& kind, int row, int /*group*/)
+                    { kind.addLambdaHessian(model_, c, q, lambda.segment(row, c.rows()), jac, weight); });
 }
 
 void System::velocityRhs(const ActuationValues& u, Eigen::VectorXd& rhs) const
 {
   rhs.setZero(n_lambda_);
-  for (size_t i = 0; i < constraints_.size(); ++i)
-  {
-    const Constraint& c = constraints_[i];
-    if (c.kind == Constraint::Kind::kPoints && c.actuator >= 0)
-      rhs.segment(constraint_rows_[i], c.rows()).setConstant(u[c.actuator].rate);
-  }
+  forEachConstraint([&](const Constraint& c, const ConstraintKindFunctions& kind, int row, int /*group*/)
+                    { kind.velocityRhs(c, u, rhs.segment(row, c.rows())); });
 }
 
 void System::accelerationRhs(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const ActuationValues& u,
                              Eigen::VectorXd& rhs) const
 {
   rhs.setZero(n_lambda_);
-  for (size_t i = 0; i < constraints_.size(); ++i)
-  {
-    const Constraint& c = constraints_[i];
-    const int r = constraint_rows_[i];
-    switch (c.kind)
-    {
-      case Constraint::Kind::kPoints:
-      {
-        // d^2 p / dt^2 = B qdd + B_Theta(thd) thd
-        Vec3 quad = Vec3::Zero();
-        forEachBodyEnd(c,
-                       [&](const PointRef& end, double sign)
-                       {
-                         const PointKinematics k = pointKinematics(model_, end, q, qd);
-                         quad += sign * k.dv_dq.leftCols(k.nq) * qd.segment(model_.bodies[k.body].offset, k.nq);
-                       });
-        const double sdd = c.actuator >= 0 ? u[c.actuator].accel : 0.0;
-        for (int k = 0; k < c.rows(); ++k)
-          rhs(r + k) = -c.directions[k].dot(quad) + sdd;
-        break;
-      }
-      case Constraint::Kind::kQuatNorm:
-        rhs(r) = -2.0 * thetaOf(qd, model_.bodies[c.body]).squaredNorm();
-        break;
-      case Constraint::Kind::kSpinLock:
-        break;
-    }
-  }
+  forEachConstraint([&](const Constraint& c, const ConstraintKindFunctions& kind, int row, int /*group*/)
+                    { kind.accelerationRhs(model_, c, q, qd, u, rhs.segment(row, c.rows())); });
 }
 
 double System::kineticEnergy(const Eigen::VectorXd& q, const Eigen::VectorXd& qd) const
@@ -635,12 +293,7 @@ double System::potentialEnergy(const Eigen::VectorXd& q, const ActuationValues& 
         e += 0.4 * st.stiffness * std::pow(st.penetration, 2.5);
     }
   for (const Cable& c : model_.cables)
-  {
-    const CableState st = evaluateCable(model_, c, q, zero, u, false, nullptr, nullptr, 0.0, 0.0);
-    const double stretch = st.length - st.rest_length;
-    if (stretch > 0.0 || !c.tension_only)
-      e += 0.5 * st.stiffness * stretch * stretch;
-  }
+    e += cablePotentialEnergy(c, evaluateCable(model_, c, q, zero, u, false, nullptr, nullptr, 0.0, 0.0));
   return e;
 }
 

@@ -14,55 +14,14 @@
 
 #include "active_tensegrity/core/block_sparse.h"
 #include "active_tensegrity/core/broad_phase.h"
+#include "active_tensegrity/core/cable.h"
+#include "active_tensegrity/core/constraints.h"
 #include "active_tensegrity/core/contact.h"
+#include "active_tensegrity/core/kinematics.h"
 #include "active_tensegrity/core/model.h"
 
 namespace active_tensegrity::core
 {
-using Mat37 = Eigen::Matrix<double, 3, 7>;
-
-/// Position, velocity and their derivatives of a material point. Only the first nq columns of the
-/// matrices are meaningful (7 for a strut, 3 for a point mass, 0 for the ground).
-struct PointKinematics
-{
-  Vec3 p = Vec3::Zero();        // world position, m
-  Vec3 v = Vec3::Zero();        // world velocity, m/s
-  Mat37 jac = Mat37::Zero();    // B_P = dp/dq = dv/dqd
-  Mat37 dv_dq = Mat37::Zero();  // dv/dq = [0, B_Theta(Theta_dot, u)]
-  int body = -1;
-  int nq = 0;
-};
-
-/// rate_jacobian = false leaves dv_dq zero (not needed without velocity-dependent tangents).
-PointKinematics pointKinematics(const Model& model, const PointRef& point, const Eigen::VectorXd& q,
-                                const Eigen::VectorXd& qd, bool rate_jacobian = true);
-/// The same into `out` (every member written), for loops that keep their kinematics in a buffer.
-void pointKinematics(const Model& model, const PointRef& point, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
-                     bool rate_jacobian, PointKinematics& out);
-/// The world position of a material point alone (as pointKinematics(...).p, without the Jacobians).
-Vec3 pointPosition(const Model& model, const PointRef& point, const Eigen::VectorXd& q);
-
-/// Actuation values of every actuator at one instant.
-using ActuationValues = std::vector<ActuationValue>;
-
-/// The state of a cable after evaluation.
-struct CableState
-{
-  double length = 0.0;       // m (sum over segments)
-  double rate = 0.0;         // m/s
-  double rest_length = 0.0;  // m, after pull-in
-  double stiffness = 0.0;    // k after pull-in, N/m (EA / l0 for a material cable)
-  double tension = 0.0;      // N (>= 0 for tension-only elements)
-  bool slack = false;
-};
-
-/// Evaluates one cable (two points or sliding through several) at (q, qd) under actuation u (empty:
-/// no pull-in); adds its generalized force into F (if not null) and k_weight * K + c_weight * C into
-/// jac (if not null). K and C are exact (material, geometric and damping parts).
-CableState evaluateCable(const Model& model, const Cable& cable, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
-                         const ActuationValues& u, bool damping, Eigen::VectorXd* F, BlockSparseMatrix* jac,
-                         double k_weight, double c_weight);
-
 /// The equations of one model plus optional extra constraints (e.g. statics' spin locks), with a
 /// sparse Jacobian whose pattern is fixed at construction: rows and columns are [q; lambda], one
 /// group per body then one per constraint. Not thread-safe (contact scratch): one System per thread.
@@ -163,6 +122,9 @@ private:
   {
     return static_cast<int>(model_.bodies.size()) + c;
   }
+  /// Calls f(constraint, its kind's functions, first row, group) for every constraint.
+  template <class F>
+  void forEachConstraint(F&& f) const;
 
   const Model& model_;
   std::vector<Constraint> constraints_;

@@ -1,0 +1,178 @@
+#include "active_tensegrity/core/cable.h"
+
+#include <array>
+#include <vector>
+
+namespace active_tensegrity::core
+{
+namespace
+{
+/// Whether the element stores energy at this stretch l - l0: taut, or a spring that also pushes.
+bool storesEnergy(const Cable& cable, double stretch)
+{
+  return stretch > 0.0 || !cable.tension_only;
+}
+
+/// k (l - l0) where the element stores energy, else 0 (N): the elastic part of the tension.
+double elasticTension(const Cable& cable, const CableState& s)
+{
+  const double stretch = s.length - s.rest_length;
+  return storesEnergy(cable, stretch) ? s.stiffness * stretch : 0.0;
+}
+}  // namespace
+
+CableState cableLaw(const Cable& cable, double length, double rate, const ActuationValues& u, bool damping)
+{
+  CableState s;
+  s.length = length;
+  s.rate = rate;
+  double pull_in = 0.0, pull_rate = 0.0;
+  if (cable.actuator >= 0 && cable.actuator < static_cast<int>(u.size()))
+  {
+    pull_in = u[cable.actuator].value;
+    pull_rate = u[cable.actuator].rate;
+  }
+  s.rest_length = cable.rest_length - pull_in;
+  // a material cable keeps EA when pulled in, so k = EA / l0 grows; a spring keeps k
+  s.stiffness = cable.area > 0.0 ? cable.stiffness * cable.rest_length / s.rest_length : cable.stiffness;
+  const double c = damping ? cable.damping : 0.0;
+  const double stretch = s.length - s.rest_length;
+  const double tension = s.stiffness * stretch + c * (s.rate + pull_rate);  // damping on the material stretch rate
+  if (s.length <= 0.0 || (cable.tension_only && (stretch <= 0.0 || tension <= 0.0)))
+  {
+    s.slack = true;
+    return s;
+  }
+  s.tension = tension;
+  s.damping_tension = c * (s.rate + pull_rate);
+  return s;
+}
+
+CableState evaluateCable(const Model& model, const Cable& cable, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                         const ActuationValues& u, bool damping, Eigen::VectorXd* F, BlockSparseMatrix* jac,
+                         double k_weight, double c_weight)
+{
+  // l = sum_k |p_{k+1} - p_k|; dl/dp_j = w_j = n_{j-1} - n_j (n_k the unit vector of segment k)
+  const int m = static_cast<int>(cable.points.size());
+  // per-thread scratch: no allocation once a thread has seen its longest cable
+  thread_local std::vector<PointKinematics> kin;
+  if (static_cast<int>(kin.size()) < m)
+    kin.resize(m);
+  std::array<Vec3, Cable::kMaxPoints> n, dd, w, e;
+  std::array<double, Cable::kMaxPoints> seg;
+  double length = 0.0, rate = 0.0;
+  for (int j = 0; j < m; ++j)
+    pointKinematics(model, cable.points[j], q, qd, jac != nullptr, kin[j]);
+  for (int k = 0; k + 1 < m; ++k)
+  {
+    const Vec3 d = kin[k + 1].p - kin[k].p;
+    seg[k] = d.norm();
+    dd[k] = kin[k + 1].v - kin[k].v;
+    // a zero-length segment has no direction and no length to contribute
+    n[k] = seg[k] > 0.0 ? Vec3(d / seg[k]) : Vec3::Zero();
+    length += seg[k];
+    rate += n[k].dot(dd[k]);
+  }
+  const CableState s = cableLaw(cable, length, rate, u, damping);
+  if (s.slack || (!F && !jac))
+    return s;
+  const double k_axial = s.stiffness;
+  const double c = damping ? cable.damping : 0.0;
+  const double tension = s.tension;
+
+  // e_j: the part of dl_dot/dq through the turning of the segments, e_j^T B_j summed over points
+  for (int j = 0; j < m; ++j)
+  {
+    w[j] = (j > 0 ? n[j - 1] : Vec3::Zero()) - (j + 1 < m ? n[j] : Vec3::Zero());
+    e[j].setZero();
+    if (j > 0 && seg[j - 1] > 0.0)
+      e[j] += (dd[j - 1] - n[j - 1] * n[j - 1].dot(dd[j - 1])) / seg[j - 1];
+    if (j + 1 < m && seg[j] > 0.0)
+      e[j] -= (dd[j] - n[j] * n[j].dot(dd[j])) / seg[j];
+  }
+  // generalized force -T B_j^T w_j on the body of point j
+  if (F)
+    for (int j = 0; j < m; ++j)
+      if (kin[j].body >= 0)
+      {
+        const Body& b = model.bodies[kin[j].body];
+        F->segment(b.offset, b.nq) -= tension * kin[j].jac.leftCols(b.nq).transpose() * w[j];
+      }
+  if (!jac)
+    return s;
+
+  // K = -dF/dq = g^T (k g + c h) + T d2l/dq2 and C = -dF/dqd = c g^T g, with g = dl/dq = sum_j w_j^T B_j,
+  // h = dl_dot/dq = sum_j (w_j^T dv_dq_j + e_j^T B_j), and
+  // d2l/dq2 = sum_k (B_{k+1} - B_k)^T (I - n_k n_k^T)/l_k (B_{k+1} - B_k) + sum_j G(u_j, w_j)
+  using Row7 = Eigen::Matrix<double, 1, 7>;
+  using Col7 = Eigen::Matrix<double, 7, 1>;
+  Eigen::Matrix<double, 7, 7> blk;
+  for (int x = 0; x < m; ++x)
+  {
+    if (kin[x].body < 0)
+      continue;
+    const int nx = kin[x].nq;
+    const Col7 gx = kin[x].jac.transpose() * w[x];
+    for (int y = 0; y < m; ++y)
+    {
+      if (kin[y].body < 0)
+        continue;
+      const int ny = kin[y].nq;
+      const Row7 dy = (k_axial * w[y] + c * e[y]).transpose() * kin[y].jac + c * w[y].transpose() * kin[y].dv_dq;
+      blk.noalias() = gx * dy;
+      jac->add(kin[x].body, kin[y].body, blk.topLeftCorner(nx, ny), k_weight);
+      if (c != 0.0 && c_weight != 0.0)
+      {
+        blk.noalias() = c * gx * (kin[y].jac.transpose() * w[y]).transpose();
+        jac->add(kin[x].body, kin[y].body, blk.topLeftCorner(nx, ny), c_weight);
+      }
+    }
+    if (model.bodies[kin[x].body].kind == BodyKind::kStrut)
+    {
+      blk.setZero();
+      blk.bottomRightCorner<4, 4>() = tension * pointHessianTheta(cable.points[x].local, w[x]);
+      jac->add(kin[x].body, kin[x].body, blk, k_weight);
+    }
+  }
+  for (int k = 0; k + 1 < m; ++k)
+  {
+    if (!(seg[k] > 0.0))
+      continue;
+    const Mat3 D = (tension / seg[k]) * (Mat3::Identity() - n[k] * n[k].transpose());
+    const int ends[2] = { k, k + 1 };
+    const double sign[2] = { -1.0, 1.0 };
+    for (int a = 0; a < 2; ++a)
+    {
+      const PointKinematics& ka = kin[ends[a]];
+      if (ka.body < 0)
+        continue;
+      for (int b = 0; b < 2; ++b)
+      {
+        const PointKinematics& kb = kin[ends[b]];
+        if (kb.body < 0)
+          continue;
+        blk.noalias() = (sign[a] * sign[b]) * ka.jac.transpose() * D * kb.jac;
+        jac->add(ka.body, kb.body, blk.topLeftCorner(ka.nq, kb.nq), k_weight);
+      }
+    }
+  }
+  return s;
+}
+
+double cablePotentialEnergy(const Cable& cable, const CableState& s)
+{
+  const double stretch = s.length - s.rest_length;
+  return storesEnergy(cable, stretch) ? 0.5 * s.stiffness * stretch * stretch : 0.0;
+}
+
+double cableConservativePower(const Cable& cable, const CableState& s)
+{
+  return -elasticTension(cable, s) * s.rate;
+}
+
+double cableNonConservativePower(const Cable& cable, const CableState& s)
+{
+  return s.slack ? elasticTension(cable, s) * s.rate : -s.damping_tension * s.rate;
+}
+
+}  // namespace active_tensegrity::core

@@ -1,0 +1,67 @@
+#include "active_tensegrity/core/kinematics.h"
+
+namespace active_tensegrity::core
+{
+void pointKinematics(const Model& model, const PointRef& point, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                     bool rate_jacobian, PointKinematics& k)
+{
+  // every member written once (no zero-filled temporary to copy: this runs for every cable point of
+  // every residual)
+  k.body = point.body;
+  if (point.body < 0)
+  {
+    k.p = point.local;
+    k.v.setZero();
+    k.jac.setZero();
+    k.dv_dq.setZero();
+    k.nq = 0;
+    return;
+  }
+  const Body& b = model.bodies[point.body];
+  k.nq = b.nq;
+  k.jac.leftCols<3>().setIdentity();
+  k.dv_dq.leftCols<3>().setZero();
+  if (b.kind == BodyKind::kPointMass)
+  {
+    k.p = q.segment<3>(b.offset) + point.local;
+    k.v = qd.segment<3>(b.offset);
+    k.jac.rightCols<4>().setZero();
+    k.dv_dq.rightCols<4>().setZero();
+    return;
+  }
+  const Vec4 th = thetaOf(q, b);
+  const Vec4 thd = thetaOf(qd, b);
+  k.jac.rightCols<4>() = pointJacobianTheta(th, point.local);
+  // R(Theta) u is quadratic in Theta, so B_Theta(Theta, u) Theta = 2 R(Theta) u (Euler)
+  k.p = q.segment<3>(b.offset) + 0.5 * (k.jac.rightCols<4>() * th);
+  k.v = qd.segment<3>(b.offset) + k.jac.rightCols<4>() * thd;
+  if (rate_jacobian)
+    k.dv_dq.rightCols<4>() = pointJacobianTheta(thd, point.local);
+  else
+    k.dv_dq.rightCols<4>().setZero();
+}
+
+PointKinematics pointKinematics(const Model& model, const PointRef& point, const Eigen::VectorXd& q,
+                                const Eigen::VectorXd& qd, bool rate_jacobian)
+{
+  PointKinematics k;
+  pointKinematics(model, point, q, qd, rate_jacobian, k);
+  return k;
+}
+
+Vec3 pointPosition(const Model& model, const PointRef& point, const Eigen::VectorXd& q)
+{
+  if (point.body < 0)
+    return point.local;
+  const Body& b = model.bodies[point.body];
+  if (b.kind == BodyKind::kPointMass)
+    return q.segment<3>(b.offset) + point.local;
+  // R(Theta) u = (e0^2 - e.e) u + 2 (e.u) e + 2 e0 e x u, the same quadratic form as rotationMatrix
+  const Vec4 th = thetaOf(q, b);
+  const double e0 = th(0);
+  const Vec3 e = th.tail<3>();
+  const Vec3& u = point.local;
+  return q.segment<3>(b.offset) + (e0 * e0 - e.squaredNorm()) * u + 2.0 * e.dot(u) * e + 2.0 * e0 * e.cross(u);
+}
+
+}  // namespace active_tensegrity::core
