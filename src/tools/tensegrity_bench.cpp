@@ -30,6 +30,7 @@
 // --mujoco-dts a,b,.. then runs the scene translated into MuJoCo (mujoco_peer.h) over that ladder with each of
 // --mujoco-integrators (default euler,implicit,rk4), rows named mujoco_<integrator>, measured the same way;
 // --mujoco-contact-force F sets its contact stiffness scale (default: the reference's peak contact force).
+// (Only when built with MuJoCo, ACTIVE_TENSEGRITY_HAVE_MUJOCO; without it these options exit with status 2.)
 //   tensegrity_bench stress [--quick]
 // runs the stability stress cases (tower and quadruplex: fast folding, large steps, bare steel, thin
 // struts, slack cables, impulsive actuation; two nearly parallel struts pressed together) and prints one table row per
@@ -60,7 +61,9 @@
 #include "active_tensegrity/planning/folding_planner.h"
 #include "cli.h"
 #include "lattice.h"
+#ifdef ACTIVE_TENSEGRITY_HAVE_MUJOCO
 #include "mujoco_peer.h"
+#endif
 
 namespace at = active_tensegrity::core;
 namespace tools = active_tensegrity::tools;
@@ -126,7 +129,7 @@ const char* kUsage =
     "                        [--mujoco-dts a,b,..] [--mujoco-integrators euler,implicit,rk4]\n"
     "                        [--mujoco-contact-force F]\n"
     "  --mujoco-dts adds the scene in MuJoCo over that ladder (rows mujoco_<integrator>; contact\n"
-    "  stiffness from F, default the reference's peak force).\n"
+    "  stiffness from F, default the reference's peak force; only when built with MuJoCo).\n"
     "       tensegrity_bench stress [--quick]\n"
     "  The stability stress cases (docs/benchmarks.md): one row per case; --quick runs the short ones.\n"
     "       tensegrity_bench lattice [--struts a,b,..] [--width W] [--max-struts N] [--duration S] [--repeat N]\n"
@@ -619,9 +622,11 @@ int workPrecision(const std::string& scene, const std::vector<std::string>& args
   std::vector<std::string> names;
   double ref_dt = 2.5e-5;
   std::string csv_path;
+#ifdef ACTIVE_TENSEGRITY_HAVE_MUJOCO
   std::vector<double> mujoco_dts;  // the MuJoCo peer's ladder (none: not run)
   std::vector<std::string> mujoco_integrators = { "euler", "implicit", "rk4" };
   double mujoco_force = 0.0;  // contact force scale F* (0: the reference's peak)
+#endif
   Args in(args);
   while (in.more())
   {
@@ -640,12 +645,18 @@ int workPrecision(const std::string& scene, const std::vector<std::string>& args
       ref_dt = tools::parsePositive<double>(a, next());
     else if (a == "--csv")
       csv_path = next();
+#ifdef ACTIVE_TENSEGRITY_HAVE_MUJOCO
     else if (a == "--mujoco-dts")
       mujoco_dts = numbers();
     else if (a == "--mujoco-integrators")
       mujoco_integrators = splitList(next());
     else if (a == "--mujoco-contact-force")
       mujoco_force = tools::parsePositive<double>(a, next());
+#else
+    else if (a == "--mujoco-dts" || a == "--mujoco-integrators" || a == "--mujoco-contact-force")
+      throw tools::BadArgument(a + ": tensegrity_bench was built without MuJoCo (libmujoco-dev was not found, or "
+                                   "-DACTIVE_TENSEGRITY_WITH_MUJOCO=OFF, when it was configured)");
+#endif
     else
       throw std::invalid_argument("unknown argument '" + a + "'");
   }
@@ -663,8 +674,10 @@ int workPrecision(const std::string& scene, const std::vector<std::string>& args
   double grid = base.analysis.output_interval > 0.0 ? base.analysis.output_interval : 0.01;
   for (double dt : dts)
     grid = std::max(grid, dt);
+#ifdef ACTIVE_TENSEGRITY_HAVE_MUJOCO
   for (double dt : mujoco_dts)
     grid = std::max(grid, dt);
+#endif
   base.analysis.output_interval = grid;
 
   const auto configure = [&](const Scheme& sc, double dt, double tol, double error_tol)
@@ -724,6 +737,7 @@ int workPrecision(const std::string& scene, const std::vector<std::string>& args
                    sc.name, sc.adaptive ? "tol" : "dt ", x, at::toString(tr.result.summary.status), wall, e.position,
                    e.force, e.peak, e.impulse);
     }
+#ifdef ACTIVE_TENSEGRITY_HAVE_MUJOCO
   // the MuJoCo peer over its own ladder, measured against the same reference (docs/benchmarks.md)
   for (const std::string& integrator : mujoco_integrators)
     for (double dt : mujoco_dts)
@@ -758,6 +772,7 @@ int workPrecision(const std::string& scene, const std::vector<std::string>& args
                    name.c_str(), dt, mj.status.c_str(), mj.wall_time, e.position, e.force, e.peak,
                    mj.ok() ? "" : ("  (" + mj.message + ")").c_str());
     }
+#endif
   return 0;
 }
 
