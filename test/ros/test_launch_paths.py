@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """rostest of the launch files' paths (launch_paths.test): roslaunch started in a temporary folder takes
 relative bag and scene paths from there (not from $ROS_HOME, where its nodes run) and fails with exit
-status 1 and a message on a bag that does not exist or a bag folder that does not exist."""
+status 1 and a message on a bag that does not exist or a bag folder that does not exist; sim.launch
+records and publishes /clock only when asked to."""
 import os
 import shutil
 import signal
@@ -109,6 +110,19 @@ class TestLaunchPaths(unittest.TestCase):
         self.assertEqual(rc, 1, out)
         self.assertIn("no directory %s/no_such_folder" % self.dir, out)
 
+
+    def test_05_without_record_no_bag_and_no_clock(self):
+        args = ["active_tensegrity", "sim.launch", "rviz:=false"]
+        rc, out = self.run_launch("roslaunch", "--nodes", *args)
+        self.assertEqual(rc, 0, out)
+        self.assertEqual(out.split(), ["/tensegrity_sim"])
+        rc, out = self.run_launch("roslaunch", "--dump-params", *args)
+        self.assertEqual(rc, 0, out)
+        self.assertIn("/use_sim_time: false", out)
+        self.assertIn("/tensegrity_sim/publish_clock: false", out)
+        rc, out = self.run_launch("roslaunch", "--nodes", *(args + ["record:=x.bag"]))
+        self.assertEqual(rc, 0, out)
+        self.assertEqual(sorted(out.split()), ["/record", "/tensegrity_sim"])
 
 if __name__ == "__main__":
     rostest.rosrun("active_tensegrity", "launch_paths", TestLaunchPaths)
