@@ -2,6 +2,7 @@
 #pragma once
 
 #include <cmath>
+#include <filesystem>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -60,6 +61,23 @@ inline std::vector<double> parsePositiveList(const std::string& option, const st
   if (out.empty())
     throw BadArgument(option + ": expected a list of positive numbers, got '" + text + "'");
   return out;
+}
+
+/// The directory of the shipped scenes: <prefix>/share/active_tensegrity/config/scenes when the running tool
+/// is installed as <prefix>/lib/active_tensegrity/<tool> (install space), else `source_dir`, the source
+/// tree's config/scenes (devel space).
+inline std::string sceneDirectory(const std::string& source_dir)
+{
+  std::error_code error;
+  const std::filesystem::path exe = std::filesystem::read_symlink("/proc/self/exe", error);
+  if (!error)
+  {
+    const std::filesystem::path installed =
+        exe.parent_path().parent_path().parent_path() / "share" / "active_tensegrity" / "config" / "scenes";
+    if (std::filesystem::is_directory(installed, error))
+      return installed.string();
+  }
+  return source_dir;
 }
 
 }  // namespace active_tensegrity::tools

@@ -786,7 +786,8 @@ struct StressCase
 
 int stress(bool quick_only)
 {
-  const std::string dir = std::string(ACTIVE_TENSEGRITY_SCENE_DIR) + "/";
+  const std::string dir = tools::sceneDirectory(ACTIVE_TENSEGRITY_SCENE_DIR) + "/";
+  std::fprintf(stderr, "stress: scenes from %s\n", dir.c_str());
   const std::vector<std::string> tower = { "analysis.type=dynamic" };
   const std::vector<std::string> quad = { "analysis.type=dynamic", "contact.enabled=true",
                                           "analysis.max_actuation=1.2" };
