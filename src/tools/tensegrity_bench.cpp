@@ -70,16 +70,21 @@ namespace tools = active_tensegrity::tools;
 using tools::splitList;
 
 // Heap allocations are counted by interposing glibc's malloc family in this executable (the core and
-// Eigen allocate through them; operator new does too): `steps` reports them per step.
+// Eigen allocate through them; operator new does too): `steps` reports them per step. Not with
+// AddressSanitizer, which replaces malloc itself (this one would run before its initialization).
+#ifndef __SANITIZE_ADDRESS__
+#define ACTIVE_TENSEGRITY_COUNT_ALLOCATIONS
+#endif
+namespace
+{
+std::atomic<long> g_allocations{ 0 };
+}
+#ifdef ACTIVE_TENSEGRITY_COUNT_ALLOCATIONS
 extern "C"
 {
   void* __libc_malloc(size_t size);
   void* __libc_calloc(size_t n, size_t size);
   void* __libc_realloc(void* p, size_t size);
-}
-namespace
-{
-std::atomic<long> g_allocations{ 0 };
 }
 extern "C"
 {
@@ -99,6 +104,7 @@ extern "C"
     return __libc_realloc(p, size);
   }
 }
+#endif
 
 namespace
 {
@@ -906,9 +912,14 @@ int steps(const std::string& scene, const std::vector<at::Override>& overrides, 
               static_cast<double>(last.summary.iterations) / std::max(1, last.solver_steps));
   std::printf("wall time per step: median %.3f us, min %.3f us over %d runs\n", 1e6 * median, 1e6 * per_step.front(),
               repeat);
+#ifdef ACTIVE_TENSEGRITY_COUNT_ALLOCATIONS
   if (!peaks)
     std::printf("heap allocations per step (solver and loop, after the first output): %.2f\n",
                 static_cast<double>(allocations) / std::max(1, last.solver_steps));
+#else
+  static_cast<void>(allocations);
+  std::printf("heap allocations per step: not counted (built with AddressSanitizer)\n");
+#endif
   std::printf("factorizations per step: %.3f, symbolic analyses: %ld\n",
               static_cast<double>(last.timings.factorizations) / std::max(1, last.solver_steps), last.timings.analyses);
   std::printf("where the time goes (last run, us per step, share of its wall time):\n");
