@@ -2,6 +2,7 @@
 #pragma once
 
 #include <cmath>
+#include <filesystem>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -88,5 +89,22 @@ private:
   std::vector<std::string> args_;
   size_t next_ = 0;
 };
+
+/// The directory of the shipped scenes: <prefix>/share/active_tensegrity/config/scenes when the running tool
+/// is installed as <prefix>/lib/active_tensegrity/<tool> (install space), else `source_dir`, the source
+/// tree's config/scenes (devel space).
+inline std::string sceneDirectory(const std::string& source_dir)
+{
+  std::error_code error;
+  const std::filesystem::path exe = std::filesystem::read_symlink("/proc/self/exe", error);
+  if (!error)
+  {
+    const std::filesystem::path installed =
+        exe.parent_path().parent_path().parent_path() / "share" / "active_tensegrity" / "config" / "scenes";
+    if (std::filesystem::is_directory(installed, error))
+      return installed.string();
+  }
+  return source_dir;
+}
 
 }  // namespace active_tensegrity::tools

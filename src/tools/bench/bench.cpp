@@ -6,16 +6,18 @@
 #include <cstddef>
 
 // Heap allocations are counted by interposing glibc's malloc family in this executable (the core and
-// Eigen allocate through them; operator new does too): `steps` reports them per step.
+// Eigen allocate through them; operator new does too): `steps` reports them per step. Not with
+// AddressSanitizer, which replaces malloc itself (this one would run before its initialization).
+namespace
+{
+std::atomic<long> g_allocations{ 0 };
+}
+#ifndef __SANITIZE_ADDRESS__
 extern "C"
 {
   void* __libc_malloc(size_t size);
   void* __libc_calloc(size_t n, size_t size);
   void* __libc_realloc(void* p, size_t size);
-}
-namespace
-{
-std::atomic<long> g_allocations{ 0 };
 }
 extern "C"
 {
@@ -35,12 +37,17 @@ extern "C"
     return __libc_realloc(p, size);
   }
 }
+#endif
 
 namespace active_tensegrity::tools::bench
 {
 long heapAllocations()
 {
+#ifdef __SANITIZE_ADDRESS__
+  return -1;
+#else
   return g_allocations.load();
+#endif
 }
 
 core::Body strut(const std::string& name, double length, double radius, double youngs_modulus, double poisson_ratio)

@@ -74,7 +74,8 @@ int callsFor(const F& f, double target)
 /// A strut built in code: one layer of density 2000 kg/m^3, solid-cylinder mass and inertia (bench.cpp).
 core::Body strut(const std::string& name, double length, double radius, double youngs_modulus, double poisson_ratio);
 
-/// Heap allocations (malloc, calloc, realloc) made by this process so far (bench.cpp).
+/// Heap allocations (malloc, calloc, realloc) made by this process so far (bench.cpp); -1 in a build with
+/// AddressSanitizer, which replaces malloc itself (nothing is counted there).
 long heapAllocations();
 
 }  // namespace active_tensegrity::tools::bench

@@ -41,7 +41,7 @@ const char* kUsage =
     "                        [--mujoco-dts a,b,..] [--mujoco-integrators euler,implicit,rk4]\n"
     "                        [--mujoco-contact-force F]\n"
     "  --mujoco-dts adds the scene in MuJoCo over that ladder (rows mujoco_<integrator>; contact\n"
-    "  stiffness from F, default the reference's peak force).\n"
+    "  stiffness from F, default the reference's peak force; only when built with MuJoCo).\n"
     "       tensegrity_bench stress [--quick]\n"
     "  The stability stress cases (docs/benchmarks.md): one row per case; --quick runs the short ones.\n"
     "       tensegrity_bench lattice [--struts a,b,..] [--width W] [--max-struts N] [--duration S] [--repeat N]\n"

@@ -61,7 +61,9 @@ int steps(const std::string& scene, const std::vector<at::Override>& overrides, 
               static_cast<double>(last.summary.iterations) / std::max(1, last.solver_steps));
   std::printf("wall time per step: median %.3f us, min %.3f us over %d runs\n", 1e6 * median, 1e6 * per_step.front(),
               repeat);
-  if (!peaks)
+  if (heapAllocations() < 0)
+    std::printf("heap allocations per step: not counted (built with AddressSanitizer)\n");
+  else if (!peaks)
     std::printf("heap allocations per step (solver and loop, after the first output): %.2f\n",
                 static_cast<double>(allocations) / std::max(1, last.solver_steps));
   std::printf("factorizations per step: %.3f, symbolic analyses: %ld\n",

@@ -10,6 +10,7 @@
 #include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/contact.h"
 #include "active_tensegrity/core/scene.h"
+#include "../cli.h"
 #include "bench.h"
 
 namespace at = active_tensegrity::core;
@@ -29,7 +30,8 @@ struct StressCase
 
 int stress(bool quick_only)
 {
-  const std::string dir = std::string(ACTIVE_TENSEGRITY_SCENE_DIR) + "/";
+  const std::string dir = tools::sceneDirectory(ACTIVE_TENSEGRITY_SCENE_DIR) + "/";
+  std::fprintf(stderr, "stress: scenes from %s\n", dir.c_str());
   const std::vector<std::string> tower = { "analysis.type=dynamic" };
   const std::vector<std::string> quad = { "analysis.type=dynamic", "contact.enabled=true",
                                           "analysis.max_actuation=1.2" };

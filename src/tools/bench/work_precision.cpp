@@ -9,6 +9,7 @@
 // --mujoco-dts a,b,.. then runs the scene translated into MuJoCo (mujoco_peer.h) over that ladder with each of
 // --mujoco-integrators (default euler,implicit,rk4), rows named mujoco_<integrator>, measured the same way;
 // --mujoco-contact-force F sets its contact stiffness scale (default: the reference's peak contact force).
+// (Only when built with MuJoCo, ACTIVE_TENSEGRITY_HAVE_MUJOCO; without it these options exit with status 2.)
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -21,7 +22,9 @@
 #include "active_tensegrity/core/contact.h"
 #include "active_tensegrity/core/scene.h"
 #include "../cli.h"
+#ifdef ACTIVE_TENSEGRITY_HAVE_MUJOCO
 #include "../mujoco_peer.h"
+#endif
 #include "bench.h"
 
 namespace at = active_tensegrity::core;
@@ -138,6 +141,7 @@ Errors compare(const at::Model& model, const Trace& tr, const Trace& ref)
   return e;
 }
 
+#ifdef ACTIVE_TENSEGRITY_HAVE_MUJOCO
 /// The MuJoCo peer's rows: the scene translated into MuJoCo (mujoco_peer.h) with each integrator over the
 /// ladder `dts`, measured against the same reference as our runs (docs/benchmarks.md); `force` is the
 /// contact force scale F* (0: the reference's peak force).
@@ -178,6 +182,7 @@ void mujocoRows(const at::Model& base, const Trace& ref, const std::vector<std::
                    mj.ok() ? "" : ("  (" + mj.message + ")").c_str());
     }
 }
+#endif
 }  // namespace
 
 int workPrecision(const std::string& scene, const std::vector<std::string>& args)
@@ -209,6 +214,11 @@ int workPrecision(const std::string& scene, const std::vector<std::string>& args
       ref_dt = tools::parsePositive<double>(a, next());
     else if (a == "--csv")
       csv_path = next();
+#ifndef ACTIVE_TENSEGRITY_HAVE_MUJOCO
+    else if (a == "--mujoco-dts" || a == "--mujoco-integrators" || a == "--mujoco-contact-force")
+      throw tools::BadArgument(a + ": tensegrity_bench was built without MuJoCo (libmujoco-dev was not found, or "
+                                   "-DACTIVE_TENSEGRITY_WITH_MUJOCO=OFF, when it was configured)");
+#endif
     else if (a == "--mujoco-dts")
       mujoco_dts = numbers();
     else if (a == "--mujoco-integrators")
@@ -293,7 +303,11 @@ int workPrecision(const std::string& scene, const std::vector<std::string>& args
                    sc.name, sc.adaptive ? "tol" : "dt ", x, at::toString(tr.result.summary.status), wall, e.position,
                    e.force, e.peak, e.impulse);
     }
+#ifdef ACTIVE_TENSEGRITY_HAVE_MUJOCO
   mujocoRows(base, ref, mujoco_integrators, mujoco_dts, mujoco_force, out);
+#else
+  static_cast<void>(mujoco_force);  // the options are refused above
+#endif
   return 0;
 }
 }  // namespace active_tensegrity::tools::bench
