@@ -14,6 +14,11 @@ AT_CATKIN_BUILD="$AT_WS/build"
 AT_PYTHON=/usr/bin/python3
 # the same cmake arguments on every catkin_make call, else catkin_make re-runs cmake each time
 AT_CMAKE_ARGS=(-DCMAKE_BUILD_TYPE=Release "-DPYTHON_EXECUTABLE=$AT_PYTHON")
+# scripts/test exports AT_WERROR=1: warnings are errors on the package's targets, in the scripts it runs too.
+# (CMake keeps the option in build/ws's cache: later builds without it keep it on.)
+if [[ "${AT_WERROR:-0}" == 1 ]]; then
+  AT_CMAKE_ARGS+=(-DACTIVE_TENSEGRITY_WERROR=ON)
+fi
 AT_JOBS="${AT_JOBS:-2}"
 
 # Debian's ROS lives in /usr: its python3 has catkin_pkg and rospy, a pyenv/venv python3 does not
