@@ -158,7 +158,7 @@ TEST(TensegrityRun, EveryOutputPathIsCheckedBeforeTheRun)
 
 TEST(TensegrityRun, ABagNamespaceMustBeAGraphName)
 {
-  for (const std::string& ns : { "'bad name!'", "relative", "/trailing/", "'/a b'" })
+  for (const std::string ns : { "'bad name!'", "relative", "/trailing/", "'/a b'" })
   {
     const Result r = run(scene("prism.yaml") + " --bag " + tmp("ns.bag") + " --bag-ns " + ns);
     EXPECT_EQ(r.code, 2) << ns << ": " << r.output;
