@@ -9,8 +9,6 @@
 
 namespace active_tensegrity::core
 {
-namespace
-{
 std::vector<Constraint> spinLocks(const Model& model)
 {
   std::vector<Constraint> locks;
@@ -29,6 +27,8 @@ std::vector<Constraint> spinLocks(const Model& model)
   return locks;
 }
 
+namespace
+{
 void accept(State& s, const Eigen::VectorXd& q, const Eigen::VectorXd& lambda, const ActuationValues& u)
 {
   s.q = q;

@@ -16,6 +16,8 @@ const char* toString(SolveStatus s)
       return "non_finite";
     case SolveStatus::kPassedThrough:
       return "passed_through";
+    case SolveStatus::kBranchJump:
+      return "branch_jump";
   }
   return "unknown";
 }

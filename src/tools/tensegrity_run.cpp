@@ -46,6 +46,28 @@ std::string csvNumber(double v)
   s << std::setprecision(10) << v;
   return s.str();
 }
+
+// A YAML double-quoted scalar: backslashes, quotes and control characters escaped
+std::string yamlString(const std::string& text)
+{
+  std::string out = "\"";
+  for (const char c : text)
+  {
+    if (c == '"' || c == '\\')
+      out += std::string("\\") + c;
+    else if (c == '\n')
+      out += "\\n";
+    else if (static_cast<unsigned char>(c) < 0x20)
+    {
+      char buf[8];
+      std::snprintf(buf, sizeof buf, "\\x%02x", static_cast<unsigned char>(c));
+      out += buf;
+    }
+    else
+      out += c;
+  }
+  return out + "\"";
+}
 }  // namespace
 
 int main(int argc, char** argv)
@@ -220,7 +242,7 @@ int main(int argc, char** argv)
           << "name: " << model.name << "\n"
           << "analysis: " << (model.analysis.type == at::AnalysisType::kStatic ? "static" : "dynamic") << "\n"
           << "status: " << at::toString(result.summary.status) << "\n"
-          << "message: \"" << result.summary.message << "\"\n"
+          << "message: " << yamlString(result.summary.message) << "\n"
           << "output_steps: " << result.steps << "\n"
           << "solver_steps: " << result.solver_steps << "\n"
           << "newton_iterations: " << result.summary.iterations << "\n"
@@ -240,6 +262,9 @@ int main(int argc, char** argv)
             << "  smallest: " << csvNumber(a.h_min) << "\n"
             << "  largest: " << csvNumber(a.h_max) << "\n";
   }
+  summary << "warnings:" << (result.summary.warnings.empty() ? " []" : "") << "\n";
+  for (const std::string& w : result.summary.warnings)
+    summary << "  - " << yamlString(w) << "\n";
   summary << "time_breakdown:  # wall seconds (share); callbacks = output rows, per-step peaks, writing\n";
   for (const auto& [part, seconds] : at::timeBreakdown(result))
     summary << "  " << part << ": {seconds: " << csvNumber(seconds)
@@ -263,6 +288,8 @@ int main(int argc, char** argv)
   }
   else
     std::cerr << summary.str();
+  for (const std::string& w : result.summary.warnings)
+    std::cerr << "tensegrity_run: warning: " << w << "\n";
   if (!result.summary.ok())
   {
     std::cerr << "tensegrity_run: the analysis stopped: " << result.summary.message << "\n";

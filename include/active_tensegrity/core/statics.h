@@ -13,6 +13,11 @@
 
 namespace active_tensegrity::core
 {
+/// One spin-lock row per strut, (conj(Theta0) (x) Theta)_z = 0 with Theta0 the model's initial
+/// orientation: the constraints statics (and every analysis about an equilibrium) adds so that a strut's
+/// spin about its own axis, which no element resists, is not a degree of freedom.
+std::vector<Constraint> spinLocks(const Model& model);
+
 class StaticSolver
 {
 public:
