@@ -334,6 +334,7 @@ RunResult runAnalysis(const Model& model, const std::function<void(const State&)
     path.iterations += first.iterations;
     result.summary = path;
     result.solver_steps = an.steps + path.step_cuts;
+    result.timings = solver.timings();
   }
   else
   {

@@ -8,26 +8,6 @@
 
 namespace active_tensegrity::core
 {
-namespace
-{
-/// Adds the wall time of its scope to `sum` (s).
-class ScopeTimer
-{
-public:
-  explicit ScopeTimer(double& sum) : sum_(sum), start_(std::chrono::steady_clock::now()) {}
-  ~ScopeTimer()
-  {
-    sum_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
-  }
-  ScopeTimer(const ScopeTimer&) = delete;
-  ScopeTimer& operator=(const ScopeTimer&) = delete;
-
-private:
-  double& sum_;
-  std::chrono::steady_clock::time_point start_;
-};
-}  // namespace
-
 DynamicsSolver::DynamicsSolver(const Model& model, const SolverOptions& options)
   : system_(model), options_(options), jac_(system_.makeMatrix())
 {

@@ -145,4 +145,29 @@ bool SparseLinearSolver::factorize(const Eigen::SparseMatrix<double>& a)
   return dense_lu_.rcond() > 1e-14;
 }
 
+int SparseLinearSolver::determinantSign() const
+{
+  switch (method_)
+  {
+    case Method::kDense:
+    {
+      int sign = dense_lu_.permutationP().determinant();
+      const Eigen::MatrixXd& lu = dense_lu_.matrixLU();
+      for (Eigen::Index k = 0; k < lu.rows(); ++k)
+      {
+        if (lu(k, k) == 0.0)
+          return 0;
+        if (lu(k, k) < 0.0)
+          sign = -sign;
+      }
+      return sign;
+    }
+    case Method::kStaticPivot:
+      return static_lu_.determinantSign();
+    case Method::kSparse:
+      break;
+  }
+  return static_cast<int>(lu_.signDeterminant());
+}
+
 }  // namespace active_tensegrity::core

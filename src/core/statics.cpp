@@ -51,17 +51,30 @@ ActuationValues blend(const ActuationValues& a, const ActuationValues& b, double
 StaticSolver::StaticSolver(const Model& model, const SolverOptions& options)
   : system_(model, spinLocks(model)), options_(options), jac_(system_.makeMatrix())
 {
+  path_linear_.allowDense(true);
+  zero_q_.setZero(system_.nq());
+  force_rows_.setZero(system_.nLambda());
+  for (size_t c = 0; c < system_.constraints().size(); ++c)
+    if (system_.constraints()[c].kind == Constraint::Kind::kPoints)
+      force_rows_.segment(system_.constraintRow(static_cast<int>(c)), system_.constraints()[c].rows()).setOnes();
 }
 
 void StaticSolver::assemble(const Eigen::VectorXd& q, const Eigen::VectorXd& lambda, const ActuationValues& u,
                             bool with_jacobian)
 {
-  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(system_.nq());
+  const Eigen::VectorXd& zero = zero_q_;
   BlockSparseMatrix* jac = with_jacobian ? &jac_ : nullptr;
   if (jac)
     jac_.setZero();
-  system_.appliedForce(q, zero, u, F_, jac, 1.0, 0.0);
-  system_.contactForce(q, zero, {}, ContactMode::kStatic, F_, jac, 1.0, 0.0);
+  {
+    const ScopeTimer timer(timings_.forces);
+    system_.appliedForce(q, zero, u, F_, jac, 1.0, 0.0);
+  }
+  {
+    const ScopeTimer timer(timings_.contact);
+    system_.contactForce(q, zero, {}, ContactMode::kStatic, F_, jac, 1.0, 0.0);
+  }
+  const ScopeTimer timer(timings_.constraints);
   system_.constraintForce(q, lambda, cforce_);
   system_.constraintValue(q, u, phi_);
   if (jac)
@@ -227,14 +240,209 @@ Summary StaticSolver::dampedNewton(State& s, const ActuationValues& u)
   return sum;
 }
 
+void StaticSolver::parameterDerivative(const Eigen::VectorXd& q, const ActuationValues& u,
+                                       const std::vector<double>& du, Eigen::VectorXd& out)
+{
+  // r = [Phi_q^T lambda - F(q, u); Phi(q, u)]: lambda and contact do not depend on u. Phi is affine in u (a
+  // driven row is d.(p_a - p_b) - offset - s), so its difference is exact; F (a cable pulled in) is smooth
+  // in u, and central differences with a pull of 1e-6 m leave about 1e-12 of it.
+  double scale = 0.0;
+  for (double d : du)
+    scale = std::max(scale, std::abs(d));
+  out.setZero(system_.size());
+  if (scale == 0.0)
+    return;
+  const double dw = 1e-6 / scale;
+  ActuationValues plus = u, minus = u;
+  for (size_t i = 0; i < u.size(); ++i)
+  {
+    plus[i].value += dw * du[i];
+    minus[i].value -= dw * du[i];
+  }
+  const ScopeTimer timer(timings_.forces);
+  system_.appliedForce(q, zero_q_, plus, fplus_, nullptr, 0.0, 0.0);
+  system_.appliedForce(q, zero_q_, minus, fminus_, nullptr, 0.0, 0.0);
+  out.head(system_.nq()) = -(fplus_ - fminus_) / (2.0 * dw);
+  system_.constraintValue(q, plus, fplus_);
+  system_.constraintValue(q, minus, fminus_);
+  out.tail(system_.nLambda()) = (fplus_ - fminus_) / (2.0 * dw);
+}
+
+bool StaticSolver::factorizePath(const Eigen::VectorXd& q, const Eigen::VectorXd& lambda, const ActuationValues& u,
+                                 double w)
+{
+  assemble(q, lambda, u, true);
+  bool ok = false;
+  {
+    const ScopeTimer timer(timings_.factorization);
+    ok = r_.allFinite() && path_linear_.factorize(jac_.matrix());
+  }
+  ++timings_.factorizations;
+  timings_.analyses = path_linear_.analyses() + linear_.analyses();
+  path_factor_valid_ = ok;
+  path_factor_age_ = 0;
+  path_theta_ = 0.0;
+  path_factor_q_ = q;
+  path_factor_w_ = w;
+  path_factor_sign_ = ok ? path_linear_.determinantSign() : 0;
+  return ok;
+}
+
+void StaticSolver::confirmSign(double w)
+{
+  if (!path_factor_valid_ || path_factor_sign_ == 0)
+    return;
+  if (sign_ != 0 && path_factor_sign_ != sign_)
+  {
+    CriticalPoint c;
+    c.kind = "bifurcation";
+    c.parameter = w;
+    c.previous_parameter = sign_parameter_;
+    c.sign_before = sign_;
+    c.sign_after = path_factor_sign_;
+    critical_points_.push_back(c);
+  }
+  sign_ = path_factor_sign_;
+  sign_parameter_ = std::max(path_factor_w_, sign_parameter_);
+}
+
+bool StaticSolver::pathTangent(const Eigen::VectorXd& q, const ActuationValues& u, const std::vector<double>& du,
+                               Eigen::VectorXd& tangent)
+{
+  if (!path_factor_valid_)
+    return false;
+  parameterDerivative(q, u, du, tangent);
+  {
+    const ScopeTimer timer(timings_.solve);
+    path_linear_.solve(-tangent, dx_);
+  }
+  tangent = dx_;
+  return tangent.allFinite();
+}
+
+Summary StaticSolver::correct(Eigen::VectorXd& q, Eigen::VectorXd& lambda, const ActuationValues& u, double w)
+{
+  // Modified Newton with the path factorization, rebuilt when it contracts slowly (rate > 0.5), after
+  // max_jacobian_age increments, or at every iteration without reuse_jacobian. An iterate is accepted as in
+  // dynamics: with a matrix built in this iteration when the increment is within the tolerance; with an
+  // older one when the error estimated to be left, theta / (1 - theta) times the scaled increment, is.
+  Summary sum;
+  const int nq = system_.nq();
+  const int nl = system_.nLambda();
+  const bool reuse = options_.reuse_jacobian;
+  bool rebuild = !reuse || !path_factor_valid_ || path_factor_age_ >= options_.max_jacobian_age;
+  double previous = -1.0;
+  for (int it = 0; it < options_.max_iterations; ++it)
+  {
+    const bool build = rebuild;
+    ++sum.iterations;
+    ++timings_.newton_iterations;
+    if (build)
+    {
+      if (!factorizePath(q, lambda, u, w))
+      {
+        sum.status = r_.allFinite() ? SolveStatus::kSingular : SolveStatus::kNonFinite;
+        sum.message = r_.allFinite() ? "singular static Jacobian" : "non-finite static residual";
+        return sum;
+      }
+      previous = -1.0;
+      rebuild = !reuse;
+    }
+    else
+      assemble(q, lambda, u, false);
+    if (!r_.allFinite())
+    {
+      sum.status = SolveStatus::kNonFinite;
+      sum.message = "non-finite static residual";
+      return sum;
+    }
+    if (r_.lpNorm<Eigen::Infinity>() == 0.0)
+      return sum;
+    {
+      const ScopeTimer timer(timings_.solve);
+      r_ = -r_;
+      path_linear_.solve(r_, dx_);
+    }
+    if (!dx_.allFinite())
+    {
+      sum.status = SolveStatus::kNonFinite;
+      sum.message = "non-finite static Newton increment";
+      path_factor_valid_ = false;
+      return sum;
+    }
+    q += dx_.head(nq);
+    lambda += dx_.tail(nl);
+    sum.residual = dx_.head(nq).lpNorm<Eigen::Infinity>();
+    const double tol = options_.newton_tolerance;
+    const double q_part = sum.residual / tol;
+    // the multipliers of joints, pins and driven nodes (forces), relative to their size; those of the
+    // quaternion norms and spin locks are not judged (they move no point and feed no output)
+    const double lambda_part = nl == 0 ? 0.0 :
+                                         (dx_.tail(nl).array() * force_rows_.array()).abs().maxCoeff() /
+                                             (tol * (1.0 + (lambda.array() * force_rows_.array()).abs().maxCoeff()));
+    const double scaled = std::max(q_part, lambda_part);
+    bool measured = false;                         // a contraction rate measured in this correction
+    if (reuse && previous > 0.0 && scaled > 1e-6)  // (not round-off)
+    {
+      path_theta_ = std::max(path_theta_, scaled / previous);
+      measured = true;
+      if (path_theta_ > 0.5)
+        rebuild = true;
+    }
+    const bool second = previous >= 0.0;
+    previous = scaled;
+    // A matrix built in this iteration: Newton's own step, the increment is the error measure. An older one:
+    // the error left is estimated from its contraction rate theta (floored at 0.05), the largest measured with
+    // this matrix, as theta / (1 - theta) times the increment. The rate must have been measured in this
+    // correction (or the increment have fallen to round-off): a mode that has softened since the matrix was
+    // made contracts slowly from a tiny first increment, and accepting that increment leaves an error that
+    // adds up over the increments of a path (seen on the tower, 5e-6 m after 600 increments at tolerance 1e-6)
+    const double theta = std::max(path_theta_, 0.05);
+    const bool converged =
+        build ? q_part <= 1.0 :
+                (measured && theta / (1.0 - std::min(theta, 0.5)) * scaled <= 1.0) || (second && scaled <= 1e-6);
+    if (converged)
+      return sum;
+    if (scaled > 1e12)
+      break;  // diverging
+  }
+  sum.status = SolveStatus::kMaxIterations;
+  std::ostringstream msg;
+  msg << "static Newton did not converge in " << options_.max_iterations << " iterations (last increment "
+      << sum.residual << ")";
+  sum.message = msg.str();
+  return sum;
+}
+
 Summary StaticSolver::followPath(State& s, const ActuationValues& u_end, int steps,
                                  const std::function<void(const State&, const Summary&)>& on_step)
 {
+  const ScopeTimer total_timer(timings_.total);
   Summary total;
+  critical_points_.clear();
+  sign_ = 0;
   const ActuationValues u_start = s.u;
+  std::vector<double> du(u_start.size());
+  for (size_t i = 0; i < du.size(); ++i)
+    du[i] = u_end[i].value - u_start[i].value;
+  if (s.lambda.size() != system_.nLambda())
+    s.lambda.conservativeResizeLike(Eigen::VectorXd::Zero(system_.nLambda()));
   s.t = 0.0;  // t carries the path parameter
+  const int nq = system_.nq();
+  // a factorization kept from an earlier call is used only at the state it ended in
+  if (path_factor_valid_ && (path_factor_q_.size() != nq ||
+                             (s.q - path_factor_q_).lpNorm<Eigen::Infinity>() > 100.0 * options_.newton_tolerance))
+    path_factor_valid_ = false;
+  if (!path_factor_valid_)
+    factorizePath(s.q, s.lambda, s.u, 0.0);
+  path_factor_w_ = 0.0;
+  sign_parameter_ = 0.0;
+  confirmSign(0.0);
+  Eigen::VectorXd tangent, tangent_next;
+  bool have_tangent = pathTangent(s.q, s.u, du, tangent);
   State previous = s;
   bool have_previous = false;
+  const double floor = 100.0 * options_.newton_tolerance;
   double w = 0.0;  // path parameter reached
   for (int k = 1; k <= steps; ++k)
   {
@@ -247,31 +455,72 @@ Summary StaticSolver::followPath(State& s, const ActuationValues& u_end, int ste
       const double dw = std::min(w_target - w, std::ldexp(1.0 / steps, -cuts));
       const double w_next = w_target - (w + dw) <= 1e-9 / steps ? w_target : w + dw;
       const ActuationValues u = blend(u_start, u_end, w_next);
-      // secant predictor from the last two equilibria, then a plain warm start
+      // predictor: the tangent, else the secant through the last two equilibria, else the last one
       State trial = s;
-      Summary attempt;
-      attempt.status = SolveStatus::kMaxIterations;
-      if (have_previous && previous.t < s.t)
+      if (have_tangent)
+      {
+        trial.q += (w_next - w) * tangent.head(nq);
+        trial.lambda += (w_next - w) * tangent.tail(system_.nLambda());
+      }
+      else if (have_previous && previous.t < s.t)
       {
         const double ratio = (w_next - s.t) / (s.t - previous.t);
         trial.q = s.q + ratio * (s.q - previous.q);
         trial.lambda = s.lambda + ratio * (s.lambda - previous.lambda);
-        attempt = solve(trial, u);
-        total.iterations += attempt.iterations;
       }
+      const Eigen::VectorXd predicted = trial.q;
+      trial.u = u;
+      Summary attempt = correct(trial.q, trial.lambda, u, w_next);
+      total.iterations += attempt.iterations;
       if (!attempt.ok())
       {
+        // the full solver (plain, then damped Newton) from the prediction, then from the last equilibrium
         trial = s;
+        trial.q = predicted;
         attempt = solve(trial, u);
         total.iterations += attempt.iterations;
+        if (!attempt.ok())
+        {
+          trial = s;
+          attempt = solve(trial, u);
+          total.iterations += attempt.iterations;
+        }
+        path_factor_valid_ = false;
       }
       if (attempt.ok() && system_.model().contact.enabled)
       {
+        const ScopeTimer timer(timings_.contact);
         const int crossed = system_.firstPassedThrough(s.q, trial.q);
         if (crossed >= 0)
         {
           attempt.status = SolveStatus::kPassedThrough;
           attempt.message = system_.passedThroughMessage(crossed);
+        }
+      }
+      bool have_next = false;
+      if (attempt.ok())
+      {
+        if (!path_factor_valid_)
+          factorizePath(trial.q, trial.lambda, u, w_next);
+        have_next = pathTangent(trial.q, u, du, tangent_next);
+        // branch-jump guard: on a smooth path the corrector moves the prediction by O(dw^2); across a kink
+        // (a cable going slack or taut, a contact starting) by at most dw times the change of the tangent;
+        // a jump to another branch by a distance that does not shrink with dw
+        if (have_tangent)
+        {
+          const double distance = (trial.q - predicted).lpNorm<Eigen::Infinity>();
+          const double allowed = (w_next - w) * (tangent.head(nq).lpNorm<Eigen::Infinity>() +
+                                                 (have_next ? tangent_next.head(nq).lpNorm<Eigen::Infinity>() : 0.0)) +
+                                 floor;
+          if (!(distance <= allowed))
+          {
+            attempt.status = SolveStatus::kBranchJump;
+            std::ostringstream msg;
+            msg << "the equilibrium found lies " << distance << " from the predicted one, more than the " << allowed
+                << " the increment allows: a jump to another branch of equilibria";
+            attempt.message = msg.str();
+            path_factor_valid_ = false;
+          }
         }
       }
       if (attempt.ok())
@@ -283,7 +532,17 @@ Summary StaticSolver::followPath(State& s, const ActuationValues& u_end, int ste
         w = w_next;
         cuts = std::max(0, cuts - 1);
         total.residual = attempt.residual;
+        ++path_factor_age_;
+        confirmSign(w);
+        if (have_next)
+          tangent.swap(tangent_next);
+        have_tangent = have_next;
         continue;
+      }
+      if (!path_factor_valid_)
+      {
+        factorizePath(s.q, s.lambda, s.u, w);
+        have_tangent = pathTangent(s.q, s.u, du, tangent);
       }
       if (++cuts > options_.max_step_cuts)
       {
@@ -292,12 +551,21 @@ Summary StaticSolver::followPath(State& s, const ActuationValues& u_end, int ste
         msg << attempt.message << "; load step " << k << " of " << steps << " failed at path parameter " << w_next
             << " after " << options_.max_step_cuts << " increment cuts";
         total.message = msg.str();
-        return total;
+        break;
       }
       ++total.step_cuts;
     }
+    if (!total.ok())
+      break;
     if (on_step)
       on_step(s, total);
+  }
+  for (const CriticalPoint& c : critical_points_)
+  {
+    std::ostringstream msg;
+    msg << "a critical point (" << c.kind << ") was passed between path parameters " << c.previous_parameter << " and "
+        << c.parameter << ": the tangent stiffness changed the sign of its determinant";
+    total.warnings.push_back(msg.str());
   }
   return total;
 }

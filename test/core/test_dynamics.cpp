@@ -678,6 +678,21 @@ TEST(LinearSolver, DenseAndSparseFactorsSolveAlikeAndTellASingularMatrix)
   EXPECT_LT((a * xd - b).lpNorm<Eigen::Infinity>(), 1e-12);
   EXPECT_LT((xs - xd).lpNorm<Eigen::Infinity>(), 1e-12);
 
+  // the sign of the determinant, from either factors, is the dense determinant's; flipping one row's sign
+  // flips it
+  const double det = Eigen::MatrixXd(a).determinant();
+  ASSERT_NE(det, 0.0);
+  EXPECT_EQ(sparse.determinantSign(), det > 0.0 ? 1 : -1);
+  EXPECT_EQ(dense.determinantSign(), det > 0.0 ? 1 : -1);
+  Eigen::SparseMatrix<double> flipped = a;
+  for (int j = 0; j < n; ++j)
+    if (a.coeff(5, j) != 0.0)
+      flipped.coeffRef(5, j) = -a.coeff(5, j);
+  ASSERT_TRUE(sparse.factorize(flipped));
+  ASSERT_TRUE(dense.factorize(flipped));
+  EXPECT_EQ(sparse.determinantSign(), det > 0.0 ? -1 : 1);
+  EXPECT_EQ(dense.determinantSign(), det > 0.0 ? -1 : 1);
+
   // two equal rows: singular. The dense factors tell it by their condition; the sparse factors only
   // by an exact zero pivot, which round-off hides here (so the dense one is used in dynamics only,
   // where a singular matrix cuts the step either way)
@@ -756,6 +771,13 @@ TEST(LinearSolver, StaticPivotsOfALargeSaddleMatrixNearlySolveItAndAnUnstableOne
   EXPECT_TRUE(fast.staticPivot());
   EXPECT_FALSE(fast.exact());
   EXPECT_TRUE(lu.exact());
+  // the shift is far too small to change the sign of the determinant
+  const double dense_det = Eigen::MatrixXd(a).partialPivLu().determinant();
+  if (std::isfinite(dense_det) && dense_det != 0.0)
+  {
+    EXPECT_EQ(fast.determinantSign(), dense_det > 0.0 ? 1 : -1);
+  }
+  EXPECT_EQ(fast.determinantSign(), lu.determinantSign());
   Eigen::VectorXd exact, x = Eigen::VectorXd::Zero(a.rows()), dx;
   lu.solve(b, exact);
   ASSERT_LT((a * exact - b).lpNorm<Eigen::Infinity>(), 1e-10);

@@ -15,23 +15,6 @@ namespace active_tensegrity::core
 /// s(t) for every actuator.
 using ActuationLaw = std::function<ActuationValues(double t)>;
 
-/// Wall time (s) a DynamicsSolver spent in each part of its steps, summed since construction (or
-/// resetTimings()). Measured with steady_clock around each part: about ten clock reads per Newton
-/// iteration, well under 0.1 % of a step on the shipped scenes.
-struct StepTimings
-{
-  double forces = 0.0;         // inertial and applied (cable, spring, actuator) forces with their tangents
-  double contact = 0.0;        // broad phase, impact speeds, contact forces and tangents, pass-through check
-  double constraints = 0.0;    // constraint values, forces, Jacobian and lambda-Hessian
-  double factorization = 0.0;  // numeric factorization of the Newton matrix (sparse, dense or static-pivot LU)
-  double solve = 0.0;          // triangular solves
-  double total = 0.0;          // whole step() calls (the rest is vector work and bookkeeping)
-  long newton_iterations = 0;
-  long factorizations = 0;
-  long analyses = 0;  // symbolic analyses of the Newton matrix (its pattern grows when a new pair touches)
-  long static_pivot_factorizations = 0;  // of them, the approximate static-pivot LU (SparseLinearSolver)
-};
-
 /// What an accepted step tells a step-size controller (AdaptiveStepper).
 struct StepEstimate
 {

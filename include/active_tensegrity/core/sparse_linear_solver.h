@@ -71,6 +71,10 @@ public:
   {
     return method_ != Method::kStaticPivot;
   }
+  /// Sign of the determinant of the last factorized matrix (+1, -1, or 0 when a pivot is exactly zero);
+  /// with the static pivots that of the shifted matrix. A change of sign along a path of Newton matrices
+  /// says that an odd number of eigenvalues passed through zero (statics: a critical point).
+  int determinantSign() const;
   void solve(const Eigen::VectorXd& b, Eigen::VectorXd& x) const
   {
     switch (method_)
@@ -97,7 +101,7 @@ private:
   bool factorizeSparse(const Eigen::SparseMatrix<double>& a);
   bool factorizeStaticPivot(const Eigen::SparseMatrix<double>& a);
 
-  Eigen::SparseLU<Eigen::SparseMatrix<double>, Eigen::COLAMDOrdering<int>> lu_;
+  mutable Eigen::SparseLU<Eigen::SparseMatrix<double>, Eigen::COLAMDOrdering<int>> lu_;  // (signDeterminant)
   bool lu_analyzed_ = false;           // lu_ holds the analysis of the current pattern
   bool static_analyzed_ = false;       // static_lu_ likewise
   bool static_pivot_pattern_ = false;  // the current pattern gets the static pivots when they pass

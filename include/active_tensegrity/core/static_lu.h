@@ -25,6 +25,14 @@ public:
   /// False on a zero or non-finite pivot. The pattern must be the analyzed one.
   bool factorize(const Eigen::SparseMatrix<double>& a);
   void solve(const Eigen::VectorXd& b, Eigen::VectorXd& x) const;
+  /// Sign of det(A) = prod(D) (P A P^T has the determinant of A; L and U are unit triangular).
+  int determinantSign() const
+  {
+    int sign = 1;
+    for (Eigen::Index k = 0; k < d_.size(); ++k)
+      sign = d_[k] < 0.0 ? -sign : (d_[k] == 0.0 ? 0 : sign);
+    return sign;
+  }
   /// Stored entries of L (those of U are as many).
   Eigen::Index factorNonZeros() const
   {

@@ -6,7 +6,10 @@
 #pragma once
 
 #include <functional>
+#include <string>
+#include <vector>
 
+#include "active_tensegrity/core/mechanics.h"
 #include "active_tensegrity/core/sparse_linear_solver.h"
 #include "active_tensegrity/core/state.h"
 #include "active_tensegrity/core/summary.h"
@@ -18,6 +21,21 @@ namespace active_tensegrity::core
 /// spin about its own axis, which no element resists, is not a degree of freedom.
 std::vector<Constraint> spinLocks(const Model& model);
 
+/// A critical point of an equilibrium path passed by StaticSolver::followPath: the sign of the determinant
+/// of the tangent (Newton) matrix, which equals (-1)^(constraint rows) times the sign of the determinant of
+/// the tangent stiffness on the constraint manifold, changed between two factorizations: an odd number of
+/// the reduced stiffness's eigenvalues passed through zero.
+struct CriticalPoint
+{
+  /// "bifurcation" when the path parameter kept its direction through it (a simple bifurcation point
+  /// crossed: the path followed goes on along the branch it was on, which turned unstable or stable), or
+  /// "limit_point" when the parameter turned back there (arc-length continuation only).
+  std::string kind;
+  double parameter = 0.0;           // path parameter at the equilibrium where the new sign was found
+  double previous_parameter = 0.0;  // ... and where the old sign was last seen (the point lies between)
+  int sign_before = 0, sign_after = 0;
+};
+
 class StaticSolver
 {
 public:
@@ -27,14 +45,34 @@ public:
   /// plain Newton fails, a damped (Levenberg-Marquardt) Newton from the same start.
   Summary solve(State& state, const ActuationValues& u);
 
-  /// Follows the path from state's actuation to u_end in `steps` equal increments, warm-started
-  /// (secant predictor) and halving an increment when Newton fails. Calls `on_step` after every
-  /// requested step. Stops at the first increment that fails after all cuts.
+  /// Follows the path of equilibria from state's actuation to u_end, the path parameter w running from 0 to
+  /// 1 (u = (1 - w) u_start + w u_end) in `steps` equal load steps; calls `on_step` after every one
+  /// (state.t = w). Predictor-corrector continuation (docs/physics.md, "Statics"): a tangent predictor
+  /// dx/dw = -J^-1 dr/dw from the factorized tangent, modified-Newton correction that keeps the
+  /// factorization while it contracts, increments halved (at most max_step_cuts times in a row) when the
+  /// correction fails and doubled back after successes. Branch-jump guard: a corrected equilibrium further
+  /// from the predicted one than the increment times the tangents at both ends (plus a floor of
+  /// 100 newton_tolerance) is refused and the increment cut; when cutting to the smallest increment does not
+  /// help, the path ends with status kBranchJump. Critical points passed are listed in criticalPoints()
+  /// and as warnings in the returned summary. Stops at the first increment that fails after all cuts.
   Summary followPath(State& state, const ActuationValues& u_end, int steps,
                      const std::function<void(const State&, const Summary&)>& on_step);
 
+  /// Critical points passed by the last followPath.
+  const std::vector<CriticalPoint>& criticalPoints() const
+  {
+    return critical_points_;
+  }
+
   /// Force residual of the equilibrium equations at (q, lambda), N (max norm of -F + Phi_q^T lambda).
   double forceResidual(const State& state);
+
+  /// Where the solver's time went since construction (forces, contact, constraints, factorization, solve,
+  /// total; Newton iterations and factorizations).
+  const StepTimings& timings() const
+  {
+    return timings_;
+  }
 
   const System& system() const
   {
@@ -46,12 +84,37 @@ private:
   Summary dampedNewton(State& state, const ActuationValues& u);
   /// r_ (and jac_ when asked) at (q, lambda) under u.
   void assemble(const Eigen::VectorXd& q, const Eigen::VectorXd& lambda, const ActuationValues& u, bool with_jacobian);
+  /// dr/dw at q (central differences of the applied forces, exact constraint part) along du = u_end - u_start.
+  void parameterDerivative(const Eigen::VectorXd& q, const ActuationValues& u, const std::vector<double>& du,
+                           Eigen::VectorXd& out);
+  /// Factorizes the path's Newton matrix at (q, lambda, u); records its determinant sign.
+  bool factorizePath(const Eigen::VectorXd& q, const Eigen::VectorXd& lambda, const ActuationValues& u, double w);
+  /// The path tangent dx/dw at q under u with the current path factorization (false without one).
+  bool pathTangent(const Eigen::VectorXd& q, const ActuationValues& u, const std::vector<double>& du,
+                   Eigen::VectorXd& tangent);
+  /// Modified-Newton correction of (q, lambda) to the equilibrium under u (w: for the determinant record).
+  Summary correct(Eigen::VectorXd& q, Eigen::VectorXd& lambda, const ActuationValues& u, double w);
+  /// At an accepted equilibrium (path parameter w): takes the sign of the path factorization as the
+  /// path's, noting a critical point when it changed.
+  void confirmSign(double w);
 
   System system_;
   SolverOptions options_;
   BlockSparseMatrix jac_;
-  SparseLinearSolver linear_;
-  Eigen::VectorXd F_, cforce_, phi_, r_, dx_;
+  SparseLinearSolver linear_;       // solve() and the damped Newton (sparse LU: exact zero pivots)
+  SparseLinearSolver path_linear_;  // the continuation's tangent factorization (dense when filled)
+  bool path_factor_valid_ = false;
+  int path_factor_age_ = 0;        // load increments since the path factorization was made
+  double path_theta_ = 0.0;        // largest contraction rate measured with it
+  Eigen::VectorXd path_factor_q_;  // the state it was made at
+  double path_factor_w_ = 0.0;     // ... and the path parameter it was made at
+  int path_factor_sign_ = 0;       // the sign of its determinant
+  int sign_ = 0;                   // the path's determinant sign at the last accepted equilibrium (0: none yet)
+  double sign_parameter_ = 0.0;    // the path parameter of the factorization that showed it
+  std::vector<CriticalPoint> critical_points_;
+  StepTimings timings_;
+  Eigen::VectorXd force_rows_;  // 1 on the multipliers of kPoints constraints (forces), else 0
+  Eigen::VectorXd zero_q_, F_, cforce_, phi_, r_, dx_, fplus_, fminus_;
 };
 
 /// Multipliers that best satisfy the force equations at a given q (least squares), for checks of
