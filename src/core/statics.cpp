@@ -7,6 +7,8 @@
 
 #include <Eigen/Dense>
 
+#include "active_tensegrity/core/dynamics.h"
+
 namespace active_tensegrity::core
 {
 std::vector<Constraint> spinLocks(const Model& model)
@@ -29,6 +31,26 @@ std::vector<Constraint> spinLocks(const Model& model)
 
 namespace
 {
+/// Turns every strut about its own axis so that its spin lock holds exactly (its nodes, on the axis, do
+/// not move): a state from dynamics, where friction turns struts about their axes, starts statics on
+/// its spin-lock rows.
+void unspin(const Model& model, Eigen::VectorXd& q)
+{
+  for (const Body& b : model.bodies)
+  {
+    if (b.kind != BodyKind::kStrut)
+      continue;
+    const Eigen::Quaterniond theta = toEigenQuaternion(q.segment<4>(b.offset + 3));
+    const Eigen::Quaterniond p = toEigenQuaternion(model.q0.segment<4>(b.offset + 3)).conjugate() * theta;
+    const double n = std::hypot(p.w(), p.z());
+    if (!(n > 1e-12))
+      continue;  // swung by half a turn: the lock cannot tell the spin
+    // (p (x) (c, 0, 0, s))_z = p_w s + p_z c = 0
+    const Eigen::Quaterniond turn(p.w() / n, 0.0, 0.0, -p.z() / n);
+    q.segment<4>(b.offset + 3) = fromEigenQuaternion(theta * turn);
+  }
+}
+
 void accept(State& s, const Eigen::VectorXd& q, const Eigen::VectorXd& lambda, const ActuationValues& u)
 {
   s.q = q;
@@ -91,6 +113,7 @@ Summary StaticSolver::solve(State& s, const ActuationValues& u)
 {
   if (s.lambda.size() != system_.nLambda())
     s.lambda.conservativeResizeLike(Eigen::VectorXd::Zero(system_.nLambda()));
+  unspin(system_.model(), s.q);
   Summary plain = newton(s, u);
   if (plain.ok() || plain.status == SolveStatus::kNonFinite)
     return plain;
@@ -103,6 +126,91 @@ Summary StaticSolver::solve(State& s, const ActuationValues& u)
     damped.message = plain.message + "; damped Newton found no equilibrium either";
   }
   return damped;
+}
+
+Summary StaticSolver::relax(State& s, const ActuationValues& u_in, long max_steps)
+{
+  ActuationValues u = u_in;
+  for (ActuationValue& v : u)
+    v.rate = v.accel = 0.0;
+  State trial = s;
+  Summary first = solve(trial, u);
+  if (first.ok())
+  {
+    s = trial;
+    return first;
+  }
+  // dynamic relaxation: the structure moves under its forces at fixed actuation; whenever its kinetic
+  // energy falls (a peak passed) every velocity is set to zero, so the motion only ever runs downhill
+  // (without friction, which statics does not have: it could hold the structure where no frictionless
+  // equilibrium is)
+  Model model = system_.model();
+  model.contact.friction = 0.0;
+  model.solver.adaptive = false;
+  DynamicsSolver dyn(model, model.solver);
+  const ActuationLaw law = [u](double) { return u; };
+  State d = s;
+  unspin(model, d.q);
+  d.t = 0.0;
+  d.u = u;
+  d.qd.setZero(model.nq);
+  d.lambda.conservativeResizeLike(Eigen::VectorXd::Zero(model.n_lambda));
+  Summary total = dyn.initialize(d, law);
+  total.iterations += first.iterations;
+  double kinetic_before = 0.0;
+  long resets = 0;
+  int step_cuts = 0;
+  for (long k = 1; k <= max_steps && total.ok(); ++k)
+  {
+    const Summary step = dyn.step(d, options_.dt, law);
+    total.iterations += step.iterations;
+    step_cuts += step.step_cuts;
+    if (!step.ok())
+    {
+      total.status = step.status;
+      total.message = step.message;
+      break;
+    }
+    const double kinetic = system_.kineticEnergy(d.q, d.qd);
+    if (kinetic < kinetic_before)
+    {
+      // (zero velocities satisfy the velocity constraints at fixed actuation; the accelerations are the
+      // step's business)
+      d.qd.setZero();
+      ++resets;
+      kinetic_before = 0.0;
+    }
+    else
+      kinetic_before = kinetic;
+    if (k % 500 == 0 || k == max_steps)
+    {
+      trial = d;
+      trial.qd.setZero();
+      unspin(model, trial.q);
+      const Summary attempt = newton(trial, u);
+      total.iterations += attempt.iterations;
+      if (attempt.ok())
+      {
+        s = trial;
+        total.residual = attempt.residual;
+        total.step_cuts += step_cuts;
+        std::ostringstream msg;
+        msg << "found by dynamic relaxation (" << k << " steps, " << resets
+            << " velocity resets) after Newton from the "
+            << "given state failed";
+        total.warnings.push_back(msg.str());
+        return total;
+      }
+    }
+  }
+  if (total.ok())
+    total.status = SolveStatus::kMaxIterations;
+  std::ostringstream msg;
+  msg << "no equilibrium at this actuation: Newton from the given state failed (" << first.message << "), and so did "
+      << max_steps << " steps of dynamic relaxation (" << resets << " velocity resets"
+      << (total.message.empty() ? std::string() : "; " + total.message) << ")";
+  total.message = msg.str();
+  return total;
 }
 
 Summary StaticSolver::newton(State& s, const ActuationValues& u)

@@ -213,7 +213,9 @@ bool SimNode::onPlan(active_tensegrity::PlanFolding::Request& req, active_tenseg
     u.rate = u.accel = 0.0;
   start.qd.setZero();
   core::StaticSolver solver(statics, statics.solver);
-  const core::Summary eq = solver.solve(start, start.u);
+  // relaxed from wherever the structure is (Newton, then dynamic relaxation): a folded, moving structure is
+  // a valid start
+  const core::Summary eq = solver.relax(start, start.u);
   ap::PlanResult plan;
   if (!eq.ok())
   {

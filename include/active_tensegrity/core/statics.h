@@ -42,8 +42,17 @@ public:
   StaticSolver(const Model& model, const SolverOptions& options);
 
   /// Newton from state (q, lambda) to the equilibrium under actuation values u (no step cutting); when
-  /// plain Newton fails, a damped (Levenberg-Marquardt) Newton from the same start.
+  /// plain Newton fails, a damped (Levenberg-Marquardt) Newton from the same start. Struts are first turned
+  /// about their own axes to satisfy their spin locks (their nodes do not move): a state from dynamics,
+  /// where friction spins struts, is a valid start.
   Summary solve(State& state, const ActuationValues& u);
+
+  /// The equilibrium at actuation u nearest to state's configuration (velocities ignored): solve() from
+  /// it, and when that fails, dynamic relaxation with kinetic damping (the dynamics at fixed actuation, the
+  /// velocities zeroed at every peak of the kinetic energy; contact without friction, as in statics), trying
+  /// Newton from the relaxing state every 500 steps, for at most `max_steps` steps of solver.dt. On success state holds
+  /// the equilibrium (u set, velocities zero); on failure it is left unchanged and the status and message say why.
+  Summary relax(State& state, const ActuationValues& u, long max_steps = 20000);
 
   /// Follows the path of equilibria from state's actuation to u_end, the path parameter w running from 0 to
   /// 1 (u = (1 - w) u_start + w u_end) in `steps` equal load steps; calls `on_step` after every one
