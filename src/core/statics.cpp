@@ -583,6 +583,8 @@ Summary StaticSolver::followPath(State& s, const ActuationValues& u_end, int ste
       if (!attempt.ok())
       {
         // the full solver (plain, then damped Newton) from the prediction, then from the last equilibrium
+        // (what a barely stressed mechanism, whose matrix is singular or nearly, needs; measured on the
+        // planner: cutting the increment instead is cheaper but loses paths the damped Newton finds)
         trial = s;
         trial.q = predicted;
         attempt = solve(trial, u);
