@@ -142,6 +142,20 @@ int slackCables(const Model& model, const State& state)
   return n;
 }
 
+bool hasLoadPath(const Model& model)
+{
+  return model.analysis.type == AnalysisType::kStatic &&
+         model.analysis.load_factor_start != model.analysis.load_factor_end;
+}
+
+double loadFactor(const Model& model, const State& state)
+{
+  const AnalysisSettings& an = model.analysis;
+  if (an.type != AnalysisType::kStatic)
+    return 1.0;
+  return an.load_factor_start + state.t * (an.load_factor_end - an.load_factor_start);
+}
+
 std::vector<std::string> csvColumns(const Model& model)
 {
   std::vector<std::string> cols = { "t",
@@ -155,6 +169,8 @@ std::vector<std::string> csvColumns(const Model& model)
                                     "slack_cables",
                                     "max_strut_bending_stress",
                                     "max_cable_stress" };
+  if (hasLoadPath(model))
+    cols.push_back("load_factor");
   for (const OutputLayer& layer : model.layers)
     cols.push_back("height_" + layer.name);
   if (model.actuators.size() > 1)
@@ -187,6 +203,8 @@ std::vector<double> csvRow(const Model& model, const State& state)
                               static_cast<double>(slackCables(model, state)),
                               maxStrutBendingStress(model, state.q, contacts),
                               maxCableStress(model, state) };
+  if (hasLoadPath(model))
+    row.push_back(loadFactor(model, state));
   for (const OutputLayer& layer : model.layers)
     row.push_back(nodesHeight(model, layer.nodes, state.q));
   if (model.actuators.size() > 1)
@@ -302,7 +320,9 @@ RunResult runAnalysis(const Model& model, const std::function<void(const State&)
   if (an.type == AnalysisType::kStatic)
   {
     StaticSolver solver(model, model.solver);
-    // the initial equilibrium (prestress, no actuation)
+    solver.setLoadPath(an.load_factor_start, an.load_factor_end);
+    solver.setArcLength(an.arc_length);
+    // the initial equilibrium (prestress, no actuation, the loads at their first factor)
     Summary first = solver.solve(state, state.u);
     result.summary.iterations += first.iterations;
     if (!first.ok())
@@ -333,7 +353,7 @@ RunResult runAnalysis(const Model& model, const std::function<void(const State&)
                           });
     path.iterations += first.iterations;
     result.summary = path;
-    result.solver_steps = an.steps + path.step_cuts;
+    result.solver_steps = an.arc_length ? result.steps - 1 : an.steps + path.step_cuts;
     result.timings = solver.timings();
   }
   else

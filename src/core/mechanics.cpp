@@ -83,12 +83,13 @@ void System::appliedForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, c
       continue;
     const PointKinematics k = pointKinematics(model_, load.point, q, qd);
     const Body& b = model_.bodies[k.body];
-    F.segment(b.offset, b.nq) += k.jac.leftCols(b.nq).transpose() * load.force;
+    const Vec3 force = load_factor_ * load.force;
+    F.segment(b.offset, b.nq) += k.jac.leftCols(b.nq).transpose() * force;
     if (jac && b.kind == BodyKind::kStrut)
     {
       // K = -d(B^T f)/dq: only the orientation block, -G(u, f)
       Eigen::Matrix<double, 7, 7> kb = Eigen::Matrix<double, 7, 7>::Zero();
-      kb.bottomRightCorner<4, 4>() = -pointHessianTheta(load.point.local, load.force);
+      kb.bottomRightCorner<4, 4>() = -pointHessianTheta(load.point.local, force);
       jac->add(k.body, k.body, kb, k_weight);
     }
   }
@@ -283,7 +284,7 @@ double System::potentialEnergy(const Eigen::VectorXd& q, const ActuationValues& 
     for (const Body& b : model_.bodies)
       e -= b.mass * model_.gravity.dot(q.segment<3>(b.offset));
   for (const PointLoad& load : model_.loads)
-    e -= load.force.dot(pointPosition(model_, load.point, q));
+    e -= load_factor_ * load.force.dot(pointPosition(model_, load.point, q));
   if (model_.contact.enabled)
     for (size_t i = 0; i < model_.checked_pairs.size(); ++i)
     {

@@ -1018,7 +1018,36 @@ private:
                                            shortestNumber(an.max_actuation));
     if (an.type == AnalysisType::kDynamic)
       checkDynamicWork(a);
+    readLoadPath(a);
     a.finish();
+  }
+
+  /// analysis.load_factor: [start, end] scales the point loads along a static path; analysis.arc_length
+  /// switches the static path to arc-length continuation.
+  void readLoadPath(Reader& a)
+  {
+    AnalysisSettings& an = model_.analysis;
+    const bool is_static = an.type == AnalysisType::kStatic;
+    if (a.has("load_factor"))
+    {
+      const YAML::Node n = a.raw("load_factor");
+      if (!n.IsSequence() || n.size() != 2)
+        a.fail(a.key("load_factor"), "expected a list of two numbers [start, end], got " + show(n));
+      an.load_factor_start = a.toNumber(n[0], a.key("load_factor"));
+      an.load_factor_end = a.toNumber(n[1], a.key("load_factor"));
+      if (!is_static)
+        a.fail(a.key("load_factor"), "scales the loads of a static path only; this analysis is not static");
+      if (model_.loads.empty() && an.load_factor_start != an.load_factor_end)
+        a.fail(a.key("load_factor"), "the scene has no loads to scale");
+      if (std::abs(an.load_factor_start) > 1e6 || std::abs(an.load_factor_end) > 1e6)
+        a.fail(a.key("load_factor"), "must lie within [-1e6, 1e6], got [" + shortestNumber(an.load_factor_start) +
+                                         ", " + shortestNumber(an.load_factor_end) + "]");
+    }
+    else
+      a.optional("load_factor");
+    an.arc_length = a.boolean("arc_length", false);
+    if (an.arc_length && !is_static)
+      a.fail(a.key("arc_length"), "arc-length continuation is for static paths only; this analysis is not static");
   }
 
   /// A dynamic run's steps and output rows stay countable, and no step is shorter than solver.dt_min.

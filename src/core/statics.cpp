@@ -213,6 +213,15 @@ Summary StaticSolver::relax(State& s, const ActuationValues& u_in, long max_step
   return total;
 }
 
+bool StaticSolver::factorizeFull()
+{
+  const ScopeTimer timer(timings_.factorization);
+  ++timings_.factorizations;
+  const bool ok = linear_.factorize(jac_.matrix());
+  timings_.analyses = path_linear_.analyses() + linear_.analyses();
+  return ok;
+}
+
 Summary StaticSolver::newton(State& s, const ActuationValues& u)
 {
   Summary sum;
@@ -223,6 +232,7 @@ Summary StaticSolver::newton(State& s, const ActuationValues& u)
   {
     assemble(q, lambda, u, true);
     ++sum.iterations;
+    ++timings_.newton_iterations;
     if (!r_.allFinite())
     {
       sum.status = SolveStatus::kNonFinite;
@@ -235,14 +245,17 @@ Summary StaticSolver::newton(State& s, const ActuationValues& u)
       accept(s, q, lambda, u);
       return sum;
     }
-    if (!linear_.factorize(jac_.matrix()))
+    if (!factorizeFull())
     {
       sum.status = SolveStatus::kSingular;
       sum.message = "singular static Jacobian: the scene has a mechanism (a motion no force element or "
                     "constraint resists, e.g. a node held only by slack cables) or a degenerate configuration";
       return sum;
     }
-    linear_.solve(-r_, dx_);
+    {
+      const ScopeTimer timer(timings_.solve);
+      linear_.solve(-r_, dx_);
+    }
     if (!dx_.allFinite())
     {
       sum.status = SolveStatus::kNonFinite;
@@ -301,13 +314,17 @@ Summary StaticSolver::dampedNewton(State& s, const ActuationValues& u)
       return sum;
     }
     ++sum.iterations;
+    ++timings_.newton_iterations;
     if (!r_.allFinite())
       break;
     if (mu > 0.0)
       system_.addMass(q, jac_, mu);
-    const bool factorized = linear_.factorize(jac_.matrix());
+    const bool factorized = factorizeFull();
     if (factorized)
+    {
+      const ScopeTimer timer(timings_.solve);
       linear_.solve(-r_, dx_);
+    }
     bool kept = false;
     double step = 0.0;
     if (factorized && dx_.allFinite())
@@ -348,28 +365,31 @@ Summary StaticSolver::dampedNewton(State& s, const ActuationValues& u)
   return sum;
 }
 
-void StaticSolver::parameterDerivative(const Eigen::VectorXd& q, const ActuationValues& u,
-                                       const std::vector<double>& du, Eigen::VectorXd& out)
+ActuationValues StaticSolver::pathPoint(double w)
 {
-  // r = [Phi_q^T lambda - F(q, u); Phi(q, u)]: lambda and contact do not depend on u. Phi is affine in u (a
-  // driven row is d.(p_a - p_b) - offset - s), so its difference is exact; F (a cable pulled in) is smooth
-  // in u, and central differences with a pull of 1e-6 m leave about 1e-12 of it.
+  system_.setLoadFactor(load_start_ + w * (load_end_ - load_start_));
+  return blend(path_u_start_, path_u_end_, w);
+}
+
+void StaticSolver::parameterDerivative(const Eigen::VectorXd& q, double w, Eigen::VectorXd& out)
+{
+  // r = [Phi_q^T lambda - F(q, u, f); Phi(q, u)] with u(w) and the load factor f(w): lambda and contact do
+  // not depend on w. Phi is affine in u (a driven row is d.(p_a - p_b) - offset - s) and F in f, so their
+  // differences are exact; F (a cable pulled in) is smooth in u, and central differences with a pull of
+  // 1e-6 m leave about 1e-12 of it.
   double scale = 0.0;
-  for (double d : du)
-    scale = std::max(scale, std::abs(d));
+  for (size_t i = 0; i < path_u_start_.size(); ++i)
+    scale = std::max(scale, std::abs(path_u_end_[i].value - path_u_start_[i].value));
   out.setZero(system_.size());
-  if (scale == 0.0)
+  if (scale == 0.0 && load_start_ == load_end_)
     return;
-  const double dw = 1e-6 / scale;
-  ActuationValues plus = u, minus = u;
-  for (size_t i = 0; i < u.size(); ++i)
-  {
-    plus[i].value += dw * du[i];
-    minus[i].value -= dw * du[i];
-  }
+  const double dw = scale > 0.0 ? std::min(1e-3, 1e-6 / scale) : 1e-3;
   const ScopeTimer timer(timings_.forces);
+  const ActuationValues plus = pathPoint(w + dw);
   system_.appliedForce(q, zero_q_, plus, fplus_, nullptr, 0.0, 0.0);
+  const ActuationValues minus = pathPoint(w - dw);
   system_.appliedForce(q, zero_q_, minus, fminus_, nullptr, 0.0, 0.0);
+  pathPoint(w);
   out.head(system_.nq()) = -(fplus_ - fminus_) / (2.0 * dw);
   system_.constraintValue(q, plus, fplus_);
   system_.constraintValue(q, minus, fminus_);
@@ -411,15 +431,14 @@ void StaticSolver::confirmSign(double w)
     critical_points_.push_back(c);
   }
   sign_ = path_factor_sign_;
-  sign_parameter_ = std::max(path_factor_w_, sign_parameter_);
+  sign_parameter_ = path_factor_w_;
 }
 
-bool StaticSolver::pathTangent(const Eigen::VectorXd& q, const ActuationValues& u, const std::vector<double>& du,
-                               Eigen::VectorXd& tangent)
+bool StaticSolver::pathTangent(const Eigen::VectorXd& q, double w, Eigen::VectorXd& tangent)
 {
   if (!path_factor_valid_)
     return false;
-  parameterDerivative(q, u, du, tangent);
+  parameterDerivative(q, w, tangent);
   {
     const ScopeTimer timer(timings_.solve);
     path_linear_.solve(-tangent, dx_);
@@ -529,10 +548,8 @@ Summary StaticSolver::followPath(State& s, const ActuationValues& u_end, int ste
   Summary total;
   critical_points_.clear();
   sign_ = 0;
-  const ActuationValues u_start = s.u;
-  std::vector<double> du(u_start.size());
-  for (size_t i = 0; i < du.size(); ++i)
-    du[i] = u_end[i].value - u_start[i].value;
+  path_u_start_ = s.u;
+  path_u_end_ = u_end;
   if (s.lambda.size() != system_.nLambda())
     s.lambda.conservativeResizeLike(Eigen::VectorXd::Zero(system_.nLambda()));
   s.t = 0.0;  // t carries the path parameter
@@ -541,13 +558,16 @@ Summary StaticSolver::followPath(State& s, const ActuationValues& u_end, int ste
   if (path_factor_valid_ && (path_factor_q_.size() != nq ||
                              (s.q - path_factor_q_).lpNorm<Eigen::Infinity>() > 100.0 * options_.newton_tolerance))
     path_factor_valid_ = false;
+  pathPoint(0.0);
   if (!path_factor_valid_)
     factorizePath(s.q, s.lambda, s.u, 0.0);
   path_factor_w_ = 0.0;
   sign_parameter_ = 0.0;
   confirmSign(0.0);
   Eigen::VectorXd tangent, tangent_next;
-  bool have_tangent = pathTangent(s.q, s.u, du, tangent);
+  bool have_tangent = pathTangent(s.q, 0.0, tangent);
+  if (arc_length_)
+    return followArcLength(s, steps, on_step, tangent, have_tangent);
   State previous = s;
   bool have_previous = false;
   const double floor = 100.0 * options_.newton_tolerance;
@@ -562,7 +582,7 @@ Summary StaticSolver::followPath(State& s, const ActuationValues& u_end, int ste
       // (one cut less), and the last piece of a load step lands exactly on its target
       const double dw = std::min(w_target - w, std::ldexp(1.0 / steps, -cuts));
       const double w_next = w_target - (w + dw) <= 1e-9 / steps ? w_target : w + dw;
-      const ActuationValues u = blend(u_start, u_end, w_next);
+      const ActuationValues u = pathPoint(w_next);
       // predictor: the tangent, else the secant through the last two equilibria, else the last one
       State trial = s;
       if (have_tangent)
@@ -612,7 +632,7 @@ Summary StaticSolver::followPath(State& s, const ActuationValues& u_end, int ste
       {
         if (!path_factor_valid_)
           factorizePath(trial.q, trial.lambda, u, w_next);
-        have_next = pathTangent(trial.q, u, du, tangent_next);
+        have_next = pathTangent(trial.q, w_next, tangent_next);
         // branch-jump guard: on a smooth path the corrector moves the prediction by O(dw^2); across a kink
         // (a cable going slack or taut, a contact starting) by at most dw times the change of the tangent;
         // a jump to another branch by a distance that does not shrink with dw
@@ -651,8 +671,9 @@ Summary StaticSolver::followPath(State& s, const ActuationValues& u_end, int ste
       }
       if (!path_factor_valid_)
       {
+        pathPoint(w);
         factorizePath(s.q, s.lambda, s.u, w);
-        have_tangent = pathTangent(s.q, s.u, du, tangent);
+        have_tangent = pathTangent(s.q, w, tangent);
       }
       if (++cuts > options_.max_step_cuts)
       {
@@ -675,6 +696,202 @@ Summary StaticSolver::followPath(State& s, const ActuationValues& u_end, int ste
     std::ostringstream msg;
     msg << "a critical point (" << c.kind << ") was passed between path parameters " << c.previous_parameter << " and "
         << c.parameter << ": the tangent stiffness changed the sign of its determinant";
+    total.warnings.push_back(msg.str());
+  }
+  return total;
+}
+
+Summary StaticSolver::followArcLength(State& s, int steps,
+                                      const std::function<void(const State&, const Summary&)>& on_step,
+                                      Eigen::VectorXd tangent, bool have_tangent)
+{
+  // Pseudo-arc-length continuation (Keller) in (q, w) with the metric <a, b> = a_q . b_q + psi^2 a_w b_w,
+  // psi = |dq/dw| at the start (a unit of w weighs as much as the motion it first causes). The unit tangent
+  // T ~ (dq/dw, 1) keeps its orientation from step to step (<T_new, T_old> > 0), so the path goes on
+  // through a limit point, where w turns back. Each step: predictor (q, w) + ds T; corrector: full Newton
+  // on r(x, w) = 0 bordered by the hyperplane <T, (q, w) - (q0, w0)> = ds.
+  Summary total;
+  const int nq = system_.nq();
+  const int nl = system_.nLambda();
+  if (!have_tangent)
+  {
+    total.status = SolveStatus::kSingular;
+    total.message = "arc-length continuation needs a regular start (the tangent stiffness at the start is singular)";
+    return total;
+  }
+  const double psi2 = std::max(tangent.head(nq).squaredNorm(), 1e-12);
+  const auto unit = [&](const Eigen::VectorXd& t, double orientation)
+  {
+    // (T_x, T_w) with T_x = T_w dx/dw (the multipliers ride along), <T, T> = 1
+    const double tw = orientation / std::sqrt(t.head(nq).squaredNorm() + psi2);
+    return std::make_pair(Eigen::VectorXd(tw * t), tw);
+  };
+  auto [tx, tw] = unit(tangent, 1.0);
+  const double ds_first = std::sqrt(tangent.head(nq).squaredNorm() + psi2) / steps;
+  const double ds_max = 4.0 * ds_first;
+  const double ds_min = std::ldexp(ds_first, -options_.max_step_cuts);
+  const double floor = 100.0 * options_.newton_tolerance;
+  const long max_steps = 100L * steps;
+  double ds = ds_first;
+  double w = 0.0;
+  long taken = 0;
+  Eigen::VectorXd q, lambda, da, db, rw;
+  while (w < 1.0)
+  {
+    if (++taken > max_steps)
+    {
+      total.status = SolveStatus::kMaxIterations;
+      std::ostringstream msg;
+      msg << "arc-length continuation took " << max_steps << " steps without reaching the end of the path (at path "
+          << "parameter " << w << ")";
+      total.message = msg.str();
+      break;
+    }
+    // the last step lands on w = 1 by the parameter (when the path is going forward and would pass it)
+    const bool last = tw > 0.0 && w + ds * tw >= 1.0;
+    const double ds_step = last ? (1.0 - w) / tw : ds;
+    q = s.q + ds_step * tx.head(nq);
+    lambda = s.lambda + ds_step * tx.tail(nl);
+    double w_it = last ? 1.0 : w + ds_step * tw;
+    const Eigen::VectorXd predicted = q;
+    Summary attempt;
+    attempt.status = SolveStatus::kMaxIterations;
+    for (int it = 0; it < options_.max_iterations; ++it)
+    {
+      ++attempt.iterations;
+      ++timings_.newton_iterations;
+      const ActuationValues u = pathPoint(w_it);
+      if (!factorizePath(q, lambda, u, w_it))
+      {
+        attempt.status = r_.allFinite() ? SolveStatus::kSingular : SolveStatus::kNonFinite;
+        attempt.message = r_.allFinite() ? "singular static Jacobian" : "non-finite static residual";
+        break;
+      }
+      {
+        const ScopeTimer timer(timings_.solve);
+        path_linear_.solve(-r_, da);
+      }
+      double dw = 0.0;
+      if (!last)
+      {
+        parameterDerivative(q, w_it, rw);
+        {
+          const ScopeTimer timer(timings_.solve);
+          path_linear_.solve(-rw, db);
+        }
+        const double g = ds_step - (tx.head(nq).dot(q - s.q) + psi2 * tw * (w_it - w));
+        dw = (g - tx.head(nq).dot(da.head(nq))) / (tx.head(nq).dot(db.head(nq)) + psi2 * tw);
+        da += dw * db;
+      }
+      if (!da.allFinite() || !std::isfinite(dw))
+      {
+        attempt.status = SolveStatus::kNonFinite;
+        attempt.message = "non-finite static Newton increment";
+        break;
+      }
+      q += da.head(nq);
+      lambda += da.tail(nl);
+      w_it += dw;
+      attempt.residual = da.head(nq).lpNorm<Eigen::Infinity>();
+      if (attempt.residual <= options_.newton_tolerance)
+      {
+        attempt.status = SolveStatus::kConverged;
+        break;
+      }
+    }
+    if (attempt.ok() && system_.model().contact.enabled)
+    {
+      const int crossed = system_.firstPassedThrough(s.q, q);
+      if (crossed >= 0)
+      {
+        attempt.status = SolveStatus::kPassedThrough;
+        attempt.message = system_.passedThroughMessage(crossed);
+      }
+    }
+    Eigen::VectorXd tangent_next;
+    if (attempt.ok() && !pathTangent(q, w_it, tangent_next))
+    {
+      attempt.status = SolveStatus::kSingular;
+      attempt.message = "singular static Jacobian at the new equilibrium";
+    }
+    std::pair<Eigen::VectorXd, double> next;
+    if (attempt.ok())
+    {
+      next = unit(tangent_next, 1.0);
+      if (next.first.head(nq).dot(tx.head(nq)) + psi2 * next.second * tw < 0.0)
+        next = unit(tangent_next, -1.0);
+      const double distance = (q - predicted).lpNorm<Eigen::Infinity>();
+      const double allowed =
+          ds_step * (tx.head(nq).lpNorm<Eigen::Infinity>() + next.first.head(nq).lpNorm<Eigen::Infinity>()) + floor;
+      if (!(distance <= allowed))
+      {
+        attempt.status = SolveStatus::kBranchJump;
+        std::ostringstream msg;
+        msg << "the equilibrium found lies " << distance << " from the predicted one, more than the " << allowed
+            << " the step allows: a jump to another branch of equilibria";
+        attempt.message = msg.str();
+      }
+    }
+    if (!attempt.ok())
+    {
+      total.iterations += attempt.iterations;
+      ds *= 0.5;
+      ++total.step_cuts;
+      if (ds < ds_min)
+      {
+        total.status = attempt.status;
+        std::ostringstream msg;
+        msg << attempt.message << "; arc-length step failed at path parameter " << w << " after "
+            << options_.max_step_cuts << " cuts";
+        total.message = msg.str();
+        break;
+      }
+      pathPoint(w);
+      factorizePath(s.q, s.lambda, s.u, w);
+      continue;
+    }
+    total.iterations += attempt.iterations;
+    total.residual = attempt.residual;
+    // a limit point: the path parameter turned back; the determinant of the tangent changed sign there too
+    const size_t known = critical_points_.size();
+    confirmSign(w_it);
+    if (next.second * tw < 0.0)
+    {
+      if (critical_points_.size() > known)
+        critical_points_.back().kind = "limit_point";
+      else
+      {
+        CriticalPoint c;
+        c.kind = "limit_point";
+        c.parameter = w_it;
+        c.previous_parameter = w;
+        critical_points_.push_back(c);
+      }
+    }
+    s.q = q;
+    s.lambda = lambda;
+    s.u = pathPoint(w_it);
+    s.qd.setZero(nq);
+    s.qdd.setZero(nq);
+    s.acc.setZero(nq);
+    s.t = w_it;
+    w = w_it;
+    tx = next.first;
+    tw = next.second;
+    if (attempt.iterations <= 3)
+      ds = std::min(ds_max, 1.5 * ds);
+    if (on_step)
+      on_step(s, total);
+    if (last)
+      break;
+  }
+  for (const CriticalPoint& c : critical_points_)
+  {
+    std::ostringstream msg;
+    msg << "a critical point (" << c.kind << ") was passed between path parameters " << c.previous_parameter << " and "
+        << c.parameter
+        << (c.kind == "limit_point" ? ": the path parameter turned back there" :
+                                      ": the tangent stiffness changed the sign of its determinant");
     total.warnings.push_back(msg.str());
   }
   return total;

@@ -978,3 +978,21 @@ TEST(SceneLoading, TwentyThousandNodesLoad)
   EXPECT_EQ(m.findNode("G19999"), 4 + 19999);
   EXPECT_EQ(m.findNode("M"), 4 + 20000);
 }
+
+TEST(SceneBounds, LoadPathKeysAreCheckedAgainstTheAnalysis)
+{
+  const std::string tripod = std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) + "/test/scenes/snap_tripod.yaml";
+  EXPECT_NO_THROW(loadScene(tripod, { parseOverride("analysis.arc_length=true") }));
+  EXPECT_TRUE(refused([&] { loadScene(tripod, { parseOverride("analysis.load_factor=[0, 1, 2]") }); },
+                      "analysis.load_factor", { "two numbers", "[0, 1, 2]" }));
+  EXPECT_TRUE(refused([&] { loadScene(tripod, { parseOverride("analysis.load_factor=[0, .nan]") }); },
+                      "analysis.load_factor", { "finite", ".nan" }));
+  EXPECT_TRUE(refused([&] { loadScene(tripod, { parseOverride("analysis.load_factor=[0, 1e9]") }); },
+                      "analysis.load_factor", { "[-1e6, 1e6]", "1e+09" }));
+  // a path with no loads to scale, and keys of static paths on a dynamic analysis
+  EXPECT_TRUE(refused([] { loadScene(kQuadruplex, { parseOverride("analysis.load_factor=[0, 1]") }); },
+                      "analysis.load_factor", { "no loads" }));
+  EXPECT_TRUE(
+      refused([] { loadSceneFromString(dynamicMini(), "mini.yaml", { parseOverride("analysis.arc_length=true") }); },
+              "analysis.arc_length", { "static paths only" }));
+}

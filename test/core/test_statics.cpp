@@ -344,3 +344,65 @@ TEST(Statics, RelaxationThatFindsNothingSaysSo)
   EXPECT_NE(eq.message.find("2000 steps of dynamic relaxation"), std::string::npos) << eq.message;
   EXPECT_EQ(s.q, before.q);
 }
+
+namespace
+{
+/// The snap-through tripod (test/scenes/snap_tripod.yaml): rows of (load factor, apex height).
+struct TripodRun
+{
+  RunResult result;
+  std::vector<std::pair<double, double>> rows;
+};
+
+TripodRun runTripod(bool arc_length)
+{
+  const Model model = loadScene(std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) + "/test/scenes/snap_tripod.yaml",
+                                { { "analysis.arc_length", arc_length ? "true" : "false" } });
+  TripodRun run;
+  run.result = runAnalysis(model, [&](const State& s)
+                           { run.rows.emplace_back(loadFactor(model, s), structureHeight(model, s.q)); });
+  return run;
+}
+
+/// The load (N, downwards) that holds the apex at height z: P = 3 k z (L0 / L - 1).
+double tripodLoad(double z)
+{
+  const double k = 1000.0, a = 1.0, l0 = std::sqrt(1.0 + 0.2 * 0.2);
+  return 3.0 * k * z * (l0 / std::hypot(a, z) - 1.0);
+}
+}  // namespace
+
+TEST(ArcLength, PassesTheLimitPointsOfASnapThroughOnItsClosedForm)
+{
+  // the load factor stepped: the path stops at the limit point (0.45287: P* = 4.5287 N of the 10 N load),
+  // never "converged" past it
+  const TripodRun stepped = runTripod(false);
+  EXPECT_FALSE(stepped.result.summary.ok());
+  ASSERT_FALSE(stepped.rows.empty());
+  EXPECT_LT(stepped.rows.back().first, 0.4529);
+  EXPECT_GT(stepped.rows.back().first, 0.42);
+
+  // arc length: over the first limit point (0.45287, z* = 0.11471 m), down through the flat state, the
+  // mirror limit point (-0.45287) and on to the full load with the apex below the ground
+  const TripodRun arc = runTripod(true);
+  ASSERT_TRUE(arc.result.summary.ok()) << arc.result.summary.message;
+  const double z_star = std::sqrt(std::pow(std::sqrt(1.04), 2.0 / 3.0) - 1.0);
+  const double p_star = tripodLoad(z_star);
+  EXPECT_NEAR(p_star, 4.5287211, 1e-6);
+  double highest = -1.0, lowest = 1.0;
+  for (const auto& [f, z] : arc.rows)
+  {
+    EXPECT_NEAR(10.0 * f, tripodLoad(z), 1e-6) << "load factor " << f << ", height " << z;
+    if (z > 0.0)
+      highest = std::max(highest, f);  // on the rising branch
+    lowest = std::min(lowest, f);
+  }
+  EXPECT_EQ(arc.rows.back().first, 1.0);
+  EXPECT_LT(arc.rows.back().second, -0.2);  // past the inverted, unstressed state
+  // the extreme load factors reached are the limit points, to within a step's curvature
+  EXPECT_NEAR(highest, p_star / 10.0, 2e-3);
+  EXPECT_NEAR(lowest, -p_star / 10.0, 2e-3);
+  ASSERT_EQ(arc.result.summary.warnings.size(), 2u);
+  for (const std::string& w : arc.result.summary.warnings)
+    EXPECT_NE(w.find("limit_point"), std::string::npos) << w;
+}

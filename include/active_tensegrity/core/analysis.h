@@ -49,10 +49,15 @@ double maxCableStress(const Model& model, const State& state);
 /// Number of slack cables (tension-only elements carrying no tension) in a state.
 int slackCables(const Model& model, const State& state);
 
+/// Whether a static path scales its point loads (analysis.load_factor with start != end).
+bool hasLoadPath(const Model& model);
+/// The point loads' factor in a state (static paths: from the path parameter state.t; 1 otherwise).
+double loadFactor(const Model& model, const State& state);
+
 /// Column names of the CSV: t, actuation, actuation_force, height, active_contacts, min_gap,
 /// max_normal_force, max_friction_force, slack_cables, max_strut_bending_stress, max_cable_stress,
-/// height_<layer> per output layer, then actuation_<name> and actuation_force_<name> per actuator when
-/// there are several.
+/// load_factor (static paths that scale their loads), height_<layer> per output layer, then actuation_<name> and
+/// actuation_force_<name> per actuator when there are several.
 std::vector<std::string> csvColumns(const Model& model);
 std::vector<double> csvRow(const Model& model, const State& state);
 

@@ -55,8 +55,19 @@ public:
     return constraint_rows_[c];
   }
 
-  /// F(q, qd, u): cables (pulled in by u), springs, gravity, loads. Adds k_weight K + c_weight C into
-  /// jac when not null.
+  /// The factor the point loads (Model::loads) are applied with: 1 unless a static path scales them
+  /// (analysis.load_factor).
+  void setLoadFactor(double factor)
+  {
+    load_factor_ = factor;
+  }
+  double loadFactor() const
+  {
+    return load_factor_;
+  }
+
+  /// F(q, qd, u): cables (pulled in by u), springs, gravity, loads (times the load factor). Adds k_weight K + c_weight
+  /// C into jac when not null.
   void appliedForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const ActuationValues& u, Eigen::VectorXd& F,
                     BlockSparseMatrix* jac, double k_weight, double c_weight) const;
   /// Strut contact (contact.h) at (q, qd), when the model's contact is enabled: adds the generalized
@@ -132,7 +143,8 @@ private:
   int n_lambda_ = 0;
   BlockSparseMatrix pattern_;
   BroadPhase broad_phase_;
-  Eigen::VectorXd zero_q_;               // zero velocities (for positions-only point kinematics)
+  Eigen::VectorXd zero_q_;  // zero velocities (for positions-only point kinematics)
+  double load_factor_ = 1.0;
   mutable std::vector<int> candidates_;  // scratch of contactForce
   mutable ContactContribution contribution_;
 };

@@ -203,6 +203,10 @@ struct AnalysisSettings
   double duration = 0.0;         // s (dynamic)
   double output_interval = 0.0;  // s (dynamic, 0 = every step)
   RampSchedule schedule;         // dynamic actuation law for every actuator
+  /// static: the point loads' factor runs from start to end along the path (with the actuation)
+  double load_factor_start = 1.0;
+  double load_factor_end = 1.0;
+  bool arc_length = false;  // static: arc-length continuation (passes limit points of the path parameter)
 };
 
 /// A named group of nodes whose highest z above the ground is written as the CSV column height_<name>

@@ -67,6 +67,23 @@ public:
   Summary followPath(State& state, const ActuationValues& u_end, int steps,
                      const std::function<void(const State&, const Summary&)>& on_step);
 
+  /// The point loads' factor along the path: f(w) = start + w (end - start) (default 1 to 1: loads as given);
+  /// solve() applies f(0) until a path moves it.
+  void setLoadPath(double start, double end)
+  {
+    load_start_ = start;
+    load_end_ = end;
+    system_.setLoadFactor(start);
+  }
+  /// Arc-length continuation in followPath (default off: the path parameter is stepped): passes limit
+  /// points of the path parameter, where the path turns back (a load-driven snap-through). The first step
+  /// is about 1/steps in w; the arc length then adapts; the path ends when w reaches 1 (or, with a message,
+  /// after 100 steps per requested load step).
+  void setArcLength(bool on)
+  {
+    arc_length_ = on;
+  }
+
   /// Critical points passed by the last followPath.
   const std::vector<CriticalPoint>& criticalPoints() const
   {
@@ -91,16 +108,21 @@ public:
 private:
   Summary newton(State& state, const ActuationValues& u);
   Summary dampedNewton(State& state, const ActuationValues& u);
+  /// Factorizes jac_ with the sparse LU of solve() and the damped Newton (timed).
+  bool factorizeFull();
   /// r_ (and jac_ when asked) at (q, lambda) under u.
   void assemble(const Eigen::VectorXd& q, const Eigen::VectorXd& lambda, const ActuationValues& u, bool with_jacobian);
-  /// dr/dw at q (central differences of the applied forces, exact constraint part) along du = u_end - u_start.
-  void parameterDerivative(const Eigen::VectorXd& q, const ActuationValues& u, const std::vector<double>& du,
-                           Eigen::VectorXd& out);
+  /// The actuation at path parameter w; sets the system's load factor to f(w).
+  ActuationValues pathPoint(double w);
+  /// dr/dw at q and w (central differences of the applied forces, exact constraint part).
+  void parameterDerivative(const Eigen::VectorXd& q, double w, Eigen::VectorXd& out);
   /// Factorizes the path's Newton matrix at (q, lambda, u); records its determinant sign.
   bool factorizePath(const Eigen::VectorXd& q, const Eigen::VectorXd& lambda, const ActuationValues& u, double w);
-  /// The path tangent dx/dw at q under u with the current path factorization (false without one).
-  bool pathTangent(const Eigen::VectorXd& q, const ActuationValues& u, const std::vector<double>& du,
-                   Eigen::VectorXd& tangent);
+  /// The path tangent dx/dw at q and w with the current path factorization (false without one).
+  bool pathTangent(const Eigen::VectorXd& q, double w, Eigen::VectorXd& tangent);
+  /// followPath with setArcLength(true); tangent: dx/dw at the start, when have_tangent.
+  Summary followArcLength(State& state, int steps, const std::function<void(const State&, const Summary&)>& on_step,
+                          Eigen::VectorXd tangent, bool have_tangent);
   /// Modified-Newton correction of (q, lambda) to the equilibrium under u (w: for the determinant record).
   Summary correct(Eigen::VectorXd& q, Eigen::VectorXd& lambda, const ActuationValues& u, double w);
   /// At an accepted equilibrium (path parameter w): takes the sign of the path factorization as the
@@ -110,7 +132,10 @@ private:
   System system_;
   SolverOptions options_;
   BlockSparseMatrix jac_;
-  SparseLinearSolver linear_;       // solve() and the damped Newton (sparse LU: exact zero pivots)
+  SparseLinearSolver linear_;                  // solve() and the damped Newton (sparse LU: exact zero pivots)
+  ActuationValues path_u_start_, path_u_end_;  // the path being followed: u(w) between them
+  double load_start_ = 1.0, load_end_ = 1.0;   // ... and the load factor f(w)
+  bool arc_length_ = false;
   SparseLinearSolver path_linear_;  // the continuation's tangent factorization (dense when filled)
   bool path_factor_valid_ = false;
   int path_factor_age_ = 0;        // load increments since the path factorization was made
