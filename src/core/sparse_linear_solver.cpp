@@ -141,6 +141,17 @@ bool SparseLinearSolver::factorize(const Eigen::SparseMatrix<double>& a)
     method_ = Method::kDense;
   }
   dense_ = a;
+  if (equilibrate_)
+  {
+    row_scale_ = dense_.cwiseAbs().rowwise().maxCoeff();
+    for (Eigen::Index i = 0; i < row_scale_.size(); ++i)
+      row_scale_(i) = row_scale_(i) > 0.0 ? 1.0 / row_scale_(i) : 1.0;
+    dense_ = row_scale_.asDiagonal() * dense_;
+    col_scale_ = dense_.cwiseAbs().colwise().maxCoeff().transpose();
+    for (Eigen::Index j = 0; j < col_scale_.size(); ++j)
+      col_scale_(j) = col_scale_(j) > 0.0 ? 1.0 / col_scale_(j) : 1.0;
+    dense_ = dense_ * col_scale_.asDiagonal();
+  }
   dense_lu_.compute(dense_);
   return dense_lu_.rcond() > 1e-14;
 }

@@ -73,7 +73,8 @@ ActuationValues blend(const ActuationValues& a, const ActuationValues& b, double
 StaticSolver::StaticSolver(const Model& model, const SolverOptions& options)
   : system_(model, spinLocks(model)), options_(options), jac_(system_.makeMatrix())
 {
-  path_linear_.allowDense(true);
+  path_linear_.allowDense(true, true);
+  linear_.allowDense(true, true);
   zero_q_.setZero(system_.nq());
   force_rows_.setZero(system_.nLambda());
   for (size_t c = 0; c < system_.constraints().size(); ++c)

@@ -32,11 +32,14 @@ namespace active_tensegrity::core
 class SparseLinearSolver
 {
 public:
-  /// Lets the solver choose the dense LU for small, filled matrices (dynamics; statics keeps the sparse
-  /// factors its mechanism detection and damped Newton were validated with).
-  void allowDense(bool allow)
+  /// Lets the solver choose the dense LU for small, filled matrices (dynamics; statics with equilibrate).
+  /// equilibrate: the dense matrix is scaled, rows then columns to a largest entry of 1, before it is
+  /// factorized and its condition judged (statics: stiff contact next to unit constraint rows would
+  /// otherwise read as singular); solves undo the scaling.
+  void allowDense(bool allow, bool equilibrate = false)
   {
     allow_dense_ = allow;
+    equilibrate_ = equilibrate;
   }
   /// Lets the solver choose the static-pivot LU for large matrices (modified Newton).
   void allowStaticPivot(bool allow)
@@ -80,7 +83,10 @@ public:
     switch (method_)
     {
       case Method::kDense:
-        x = dense_lu_.solve(b);
+        if (equilibrate_)
+          x = col_scale_.cwiseProduct(dense_lu_.solve(row_scale_.cwiseProduct(b)));
+        else
+          x = dense_lu_.solve(b);
         break;
       case Method::kStaticPivot:
         static_lu_.solve(b, x);
@@ -110,6 +116,8 @@ private:
   Eigen::Index analyzed_rows_ = -1, analyzed_nonzeros_ = -1;
   int analyses_ = 0;
   bool allow_dense_ = false;
+  bool equilibrate_ = false;
+  Eigen::VectorXd row_scale_, col_scale_;  // D_r, D_c of the equilibrated dense matrix D_r A D_c
   bool allow_static_pivot_ = false;
   bool decided_ = false;  // whether the dense LU was chosen or not for the current pattern
   Method method_ = Method::kSparse;
