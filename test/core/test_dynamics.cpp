@@ -851,3 +851,39 @@ TEST(StaticPivotLU, SolvesANonsymmetricMatrixWithSymmetricPatternExactlyAndRepor
   zlu.analyzePattern(z);
   EXPECT_FALSE(zlu.factorize(z));
 }
+
+TEST(LinearSolver, EquilibratedDenseFactorsJudgeTheStructureNotItsUnits)
+{
+  // a regular saddle matrix whose stiffness block is scaled by 1e12 against unit constraint rows: its
+  // reciprocal condition is about 1e-15 as it stands (the plain dense LU calls it singular); equilibrated,
+  // it factorizes and solves to round-off. Two equal rows stay singular either way.
+  std::mt19937 rng(13);
+  Eigen::SparseMatrix<double> a = saddleMatrix(120, 40, 0.3, rng);
+  for (int k = 0; k < a.outerSize(); ++k)
+    for (Eigen::SparseMatrix<double>::InnerIterator it(a, k); it; ++it)
+      if (it.row() < 120 && it.col() < 120)
+        it.valueRef() *= 1e12;
+  const Eigen::VectorXd b = Eigen::VectorXd::Random(a.rows());
+  SparseLinearSolver plain, scaled;
+  plain.allowDense(true);
+  scaled.allowDense(true, true);
+  ASSERT_TRUE(scaled.factorize(a));  // (first call: sparse factors, then the choice)
+  ASSERT_TRUE(scaled.factorize(a));
+  ASSERT_TRUE(scaled.dense());
+  Eigen::VectorXd x;
+  scaled.solve(b, x);
+  // backward error: the residual against the sizes it is made of
+  const double size = Eigen::MatrixXd(a).cwiseAbs().rowwise().sum().maxCoeff() * x.lpNorm<Eigen::Infinity>() +
+                      b.lpNorm<Eigen::Infinity>();
+  EXPECT_LT((a * x - b).lpNorm<Eigen::Infinity>() / size, 1e-13);
+  plain.factorize(a);
+  EXPECT_FALSE(plain.factorize(a));
+  EXPECT_TRUE(plain.dense());
+
+  Eigen::SparseMatrix<double> s = a;
+  for (int j = 0; j < a.cols(); ++j)
+    if (a.coeff(0, j) != 0.0 || a.coeff(1, j) != 0.0)
+      s.coeffRef(1, j) = a.coeff(0, j);
+  s.makeCompressed();
+  EXPECT_FALSE(scaled.factorize(s));
+}
