@@ -19,6 +19,8 @@ namespace
 {
 /// Absolute floor of positive definiteness (N/m): an all-slack structure's roundoff is not a stiffness.
 constexpr double kDefinitenessFloor = 1e-9;
+/// Relative stretch below which a tension-only element counts as slack.
+constexpr double kFreeLengthTolerance = 1e-12;
 
 /// One spin lock per strut about its axis at q (statics' locks refer to the model's initial orientation).
 std::vector<Constraint> spinLocksAt(const Model& model, const Eigen::VectorXd& q)
@@ -318,8 +320,12 @@ StructureReport checkStructure(const Model& model, const State& state)
   const ActuationValues u = actuationOf(model, state);
   const Eigen::VectorXd zero = Eigen::VectorXd::Zero(model.nq);
   for (const Cable& c : model.cables)
-    if (c.tension_only && evaluateCable(model, c, state.q, zero, u, false, nullptr, nullptr, 0.0, 0.0).slack)
+  {
+    // an element at its free length to round-off (lengths from q carry a few ulps) carries nothing either
+    const CableState st = evaluateCable(model, c, state.q, zero, u, false, nullptr, nullptr, 0.0, 0.0);
+    if (c.tension_only && (st.slack || st.length - st.rest_length <= kFreeLengthTolerance * st.rest_length))
       report.slack_cables.push_back(c.name);
+  }
   const System system(model, spinLocksAt(model, state.q));
   Eigen::VectorXd F, reaction;
   staticForce(system, state.q, u, F, nullptr);

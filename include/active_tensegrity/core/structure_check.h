@@ -73,8 +73,10 @@ struct StructureReport
   /// complement is empty)
   double smallest_stiffness_eigenvalue = 0.0;
   double largest_stiffness_eigenvalue = 0.0;
-  std::vector<std::string> slack_cables;  // tension-only elements carrying no tension at the state
-  double equilibrium_residual = 0.0;      // N: max norm of -F + Phi_q^T lambda with least-squares lambda
+  /// tension-only elements carrying no tension at the state: slack, or within 1e-12 (relative) of their free
+  /// length, where round-off alone decides whether they are taut
+  std::vector<std::string> slack_cables;
+  double equilibrium_residual = 0.0;  // N: max norm of -F + Phi_q^T lambda with least-squares lambda
 };
 
 /// The linearization of `model` about `state` (q; lambda when its size matches the model's constraints plus
