@@ -315,6 +315,10 @@ StructureReport checkStructure(const Model& model, const State& state)
     report.prestress_stable = symmetricEigenvalues(r.mechanisms.transpose() * r.stiffness * r.mechanisms)(0) > tol;
   else
     report.prestress_stable = kc.size() == 0 || kc(0) > tol;
+  const Eigen::VectorXd kr = symmetricEigenvalues(r.rigid.transpose() * r.stiffness * r.rigid);
+  report.smallest_rigid_mode_eigenvalue = kr.size() ? kr(0) : nan;
+  if (kr.size() && kr(0) < -tol)
+    report.prestress_stable = false;
 
   // slack elements and the force residual with least-squares multipliers (velocities zero)
   const ActuationValues u = actuationOf(model, state);

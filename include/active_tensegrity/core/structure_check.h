@@ -67,8 +67,12 @@ struct StructureReport
   int mechanisms = 0;
   int rigid_body_modes = 0;
   /// K_r positive definite on the mechanisms (beyond kDefinitenessTolerance); without mechanisms, K_r
-  /// positive definite on the complement of the rigid-body modes
+  /// positive definite on the complement of the rigid-body modes; and in both cases no negative eigenvalue
+  /// (beyond the tolerance) of K_r on the rigid-body modes (an inverted pendulum's swing is one)
   bool prestress_stable = false;
+  /// smallest eigenvalue of K_r on the rigid-body modes, N/m: 0 for a free structure, positive for a hanging
+  /// one, negative for an inverted pendulum (NaN without rigid-body modes)
+  double smallest_rigid_mode_eigenvalue = 0.0;
   /// smallest and largest eigenvalue of K_r on the complement of the rigid-body modes, N/m (NaN when that
   /// complement is empty)
   double smallest_stiffness_eigenvalue = 0.0;
