@@ -28,8 +28,7 @@ ModalAnalysis naturalModes(const Model& model, const State& state, int count)
   BlockSparseMatrix jac = system.makeMatrix();
   jac.setZero();
   system.addMass(state.q, jac, 1.0);
-  const Eigen::MatrixXd m = coordinateBlock(jac, model.nq);
-  Eigen::MatrixXd mr = r.basis.transpose() * m * r.basis;
+  Eigen::MatrixXd mr = r.basis.transpose() * (coordinateBlock(jac, model.nq) * r.basis);
   mr = 0.5 * (mr + mr.transpose());
   Eigen::GeneralizedSelfAdjointEigenSolver<Eigen::MatrixXd> eig(r.stiffness, mr);
   if (eig.info() != Eigen::Success)
@@ -59,7 +58,7 @@ ModalAnalysis naturalModes(const Model& model, const State& state, int count)
       mode.shape *= (top(axis) < 0.0 ? -1.0 : 1.0) / norm;
     // round-off of the unit displacement (a pinned node's 1e-16 m) written as 0
     const Eigen::VectorXd scaled =
-        (r.node_map * mode.shape).unaryExpr([](double x) { return std::abs(x) < 1e-12 ? 0.0 : x; });
+        Eigen::VectorXd(r.node_map * mode.shape).unaryExpr([](double x) { return std::abs(x) < 1e-12 ? 0.0 : x; });
     for (int i = 0; i < n_nodes; ++i)
       mode.node_displacements.push_back(scaled.segment<3>(3 * i));
     out.modes.push_back(mode);

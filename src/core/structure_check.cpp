@@ -7,8 +7,10 @@
 
 #include <Eigen/Dense>
 #include <Eigen/SVD>
+#include <Eigen/SparseCholesky>
 
 #include "active_tensegrity/core/cable.h"
+#include "active_tensegrity/core/constraints.h"
 #include "active_tensegrity/core/kinematics.h"
 #include "active_tensegrity/core/mechanics.h"
 #include "active_tensegrity/core/statics.h"
@@ -42,6 +44,107 @@ Eigen::MatrixXd nullSpace(const Eigen::MatrixXd& a)
   const int rank = static_cast<int>(qr.rank());
   const Eigen::MatrixXd q = qr.householderQ();
   return q.rightCols(n - rank);
+}
+
+/// Phi_q of a system at q (n_lambda x nq), sparse.
+Eigen::SparseMatrix<double> constraintJacobian(const System& system, const Eigen::VectorXd& q)
+{
+  BlockSparseMatrix m = system.makeMatrix();
+  m.setZero();
+  system.addConstraintJacobian(q, m);
+  const int nq = system.nq();
+  std::vector<Eigen::Triplet<double>> entries;
+  const Eigen::SparseMatrix<double>& s = m.matrix();
+  for (int k = 0; k < s.outerSize(); ++k)
+    for (Eigen::SparseMatrix<double>::InnerIterator it(s, k); it; ++it)
+      if (it.row() >= nq && it.col() < nq && it.value() != 0.0)
+        entries.emplace_back(static_cast<int>(it.row()) - nq, static_cast<int>(it.col()), it.value());
+  Eigen::SparseMatrix<double> out(system.nLambda(), nq);
+  out.setFromTriplets(entries.begin(), entries.end());
+  return out;
+}
+
+/// null(Phi_q) in two stages, so that the dense work is on the rows that couple bodies only: each body's own
+/// rows (its norm and spin lock, pins and drives on it alone) give a small local basis T_b of its coordinates;
+/// the coupling rows Phi_g (ball joints) are then taken on the product of the local bases, A = Phi_g T.
+struct MotionSpace
+{
+  std::vector<Eigen::MatrixXd> local;  // T_b, nq_b x t_b, orthonormal columns
+  std::vector<int> offset;             // first column of T_b in T
+  Eigen::MatrixXd coupling;            // A = Phi_g T
+  int size = 0;                        // columns of T
+
+  /// N0 = T Z for a basis Z of null(A) (orthonormal when Z is: T's blocks are).
+  Eigen::MatrixXd expand(const Model& model, const Eigen::MatrixXd& z) const
+  {
+    Eigen::MatrixXd n0 = Eigen::MatrixXd::Zero(model.nq, z.cols());
+    for (size_t b = 0; b < local.size(); ++b)
+      n0.middleRows(model.bodies[b].offset, local[b].rows()) = local[b] * z.middleRows(offset[b], local[b].cols());
+    return n0;
+  }
+};
+
+MotionSpace motionSpace(const Model& model, const System& system, const Eigen::SparseMatrix<double>& phi_q)
+{
+  // each row: the body it alone acts on, or -1 (coupling) and then its row among the coupling rows
+  const int n_rows = static_cast<int>(phi_q.rows());
+  std::vector<int> row_body(n_rows, -1), coupling_row(n_rows, -1);
+  int n_coupling = 0;
+  for (size_t c = 0; c < system.constraints().size(); ++c)
+  {
+    const Constraint& con = system.constraints()[c];
+    const ConstraintBodies bodies = constraintKind(con.kind).bodies(con);
+    for (int k = 0; k < con.rows(); ++k)
+    {
+      const int row = system.constraintRow(static_cast<int>(c)) + k;
+      if (bodies.count == 1)
+        row_body[row] = bodies.body[0];
+      else
+        coupling_row[row] = n_coupling++;
+    }
+  }
+  std::vector<int> col_body(model.nq);
+  for (size_t b = 0; b < model.bodies.size(); ++b)
+    for (int i = 0; i < model.bodies[b].nq; ++i)
+      col_body[model.bodies[b].offset + i] = static_cast<int>(b);
+
+  // local bases from each body's own rows
+  std::vector<Eigen::MatrixXd> own(model.bodies.size());
+  std::vector<std::vector<int>> own_rows(model.bodies.size());
+  for (int r = 0; r < n_rows; ++r)
+    if (row_body[r] >= 0)
+      own_rows[row_body[r]].push_back(r);
+  for (size_t b = 0; b < model.bodies.size(); ++b)
+    own[b] = Eigen::MatrixXd::Zero(own_rows[b].size(), model.bodies[b].nq);
+  for (int k = 0; k < phi_q.outerSize(); ++k)
+    for (Eigen::SparseMatrix<double>::InnerIterator it(phi_q, k); it; ++it)
+    {
+      const int b = row_body[it.row()];
+      if (b < 0)
+        continue;
+      const auto at = std::find(own_rows[b].begin(), own_rows[b].end(), static_cast<int>(it.row()));
+      own[b](at - own_rows[b].begin(), it.col() - model.bodies[b].offset) += it.value();
+    }
+  MotionSpace m;
+  for (size_t b = 0; b < model.bodies.size(); ++b)
+  {
+    m.local.push_back(nullSpace(own[b]));
+    m.offset.push_back(m.size);
+    m.size += static_cast<int>(m.local.back().cols());
+  }
+  // the coupling rows on T
+  m.coupling = Eigen::MatrixXd::Zero(n_coupling, m.size);
+  for (int k = 0; k < phi_q.outerSize(); ++k)
+    for (Eigen::SparseMatrix<double>::InnerIterator it(phi_q, k); it; ++it)
+    {
+      const int g = coupling_row[it.row()];
+      if (g < 0)
+        continue;
+      const int b = col_body[it.col()];
+      m.coupling.row(g).segment(m.offset[b], m.local[b].cols()) +=
+          it.value() * m.local[b].row(it.col() - model.bodies[b].offset);
+    }
+  return m;
 }
 
 /// Orthonormal basis of the orthogonal complement of the orthonormal columns of z in R^n.
@@ -144,14 +247,19 @@ ReducedStructure reduce(const Model& model, const State& state, const System& sy
   const std::vector<PointRef> points = metricPoints(model, q);
   const int n_points = static_cast<int>(points.size());
   out.node_rows = 3 * static_cast<int>(model.nodes.size());
-  out.node_map = Eigen::MatrixXd::Zero(3 * n_points, nq);
+  std::vector<Eigen::Triplet<double>> entries;
   for (int i = 0; i < n_points; ++i)
   {
     const PointKinematics k = pointKinematics(model, points[i], q, zero, false);
-    if (k.body >= 0)
-      out.node_map.block(3 * i, model.bodies[k.body].offset, 3, k.nq) = k.jac.leftCols(k.nq);
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < k.nq; ++c)
+        entries.emplace_back(3 * i + r, model.bodies[k.body].offset + c, k.jac(r, c));
   }
-  const Eigen::MatrixXd n0 = nullSpace(system.constraintJacobianDense(q));
+  out.node_map.resize(3 * n_points, nq);
+  out.node_map.setFromTriplets(entries.begin(), entries.end());
+  const Eigen::SparseMatrix<double> phi_q = constraintJacobian(system, q);
+  const MotionSpace space = motionSpace(model, system, phi_q);
+  const Eigen::MatrixXd n0 = space.expand(model, nullSpace(space.coupling));  // orthonormal
   const int f = static_cast<int>(n0.cols());
 
   // orthonormal in the node metric: N = N0 V D^(-1/2) with (P N0)^T (P N0) = V D V^T
@@ -234,15 +342,35 @@ ReducedStructure reduce(const Model& model, const State& state, const System& sy
     out.mechanisms = motions * svd.matrixU().rightCols(motions.cols() - inside);
   }
 
-  // the tangent stiffness on the manifold
-  out.lambda = state.lambda.size() == system.nLambda() && state.lambda.any() ? state.lambda :
-                                                                               leastSquaresMultipliers(system, q, u);
+  // the force residual with least-squares multipliers: -F + Phi_q^T lambda is minus the part of F in
+  // null(Phi_q) (the orthogonal complement of the range of Phi_q^T), N0 N0^T F with N0 orthonormal
   BlockSparseMatrix jac = system.makeMatrix();
   jac.setZero();
   Eigen::VectorXd F;
   staticForce(system, q, u, F, &jac);
+  out.residual = (n0 * (n0.transpose() * F)).lpNorm<Eigen::Infinity>();
+
+  // the tangent stiffness on the manifold, with the state's multipliers or the least-squares ones
+  if (state.lambda.size() == system.nLambda() && state.lambda.any())
+    out.lambda = state.lambda;
+  else
+  {
+    // normal equations Phi_q Phi_q^T lambda = Phi_q F (sparse): the rows are well conditioned, redundant
+    // rows make them singular and send it to the dense solve below
+    const Eigen::SparseMatrix<double> normal = phi_q * phi_q.transpose();
+    Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> ldlt(normal);
+    if (ldlt.info() == Eigen::Success)
+      out.lambda = ldlt.solve(phi_q * F);
+    // a consistent system (F less its residual lies in the range of Phi_q^T): else the dense solve
+    Eigen::VectorXd reaction;
+    if (out.lambda.size() == system.nLambda() && out.lambda.allFinite())
+      system.constraintForce(q, out.lambda, reaction);
+    if (reaction.size() == 0 ||
+        (reaction - F).lpNorm<Eigen::Infinity>() > 2.0 * out.residual + 1e-9 * (1.0 + F.lpNorm<Eigen::Infinity>()))
+      out.lambda = leastSquaresMultipliers(system, q, u);
+  }
   system.addLambdaHessian(q, out.lambda, jac, 1.0);
-  const Eigen::MatrixXd kr = out.basis.transpose() * coordinateBlock(jac, nq) * out.basis;
+  const Eigen::MatrixXd kr = out.basis.transpose() * (coordinateBlock(jac, nq) * out.basis);
   out.stiffness = 0.5 * (kr + kr.transpose());
   return out;
 }
@@ -256,14 +384,16 @@ Eigen::VectorXd symmetricEigenvalues(const Eigen::MatrixXd& a)
 }
 }  // namespace
 
-Eigen::MatrixXd coordinateBlock(const BlockSparseMatrix& m, int nq)
+Eigen::SparseMatrix<double> coordinateBlock(const BlockSparseMatrix& m, int nq)
 {
-  Eigen::MatrixXd out = Eigen::MatrixXd::Zero(nq, nq);
+  std::vector<Eigen::Triplet<double>> entries;
   const Eigen::SparseMatrix<double>& s = m.matrix();
   for (int k = 0; k < s.outerSize(); ++k)
     for (Eigen::SparseMatrix<double>::InnerIterator it(s, k); it; ++it)
       if (it.row() < nq && it.col() < nq)
-        out(it.row(), it.col()) += it.value();
+        entries.emplace_back(static_cast<int>(it.row()), static_cast<int>(it.col()), it.value());
+  Eigen::SparseMatrix<double> out(nq, nq);
+  out.setFromTriplets(entries.begin(), entries.end());
   return out;
 }
 
@@ -330,18 +460,19 @@ StructureReport checkStructure(const Model& model, const State& state)
     if (c.tension_only && (st.slack || st.length - st.rest_length <= kFreeLengthTolerance * st.rest_length))
       report.slack_cables.push_back(c.name);
   }
-  const System system(model, spinLocksAt(model, state.q));
-  Eigen::VectorXd F, reaction;
-  staticForce(system, state.q, u, F, nullptr);
-  system.constraintForce(state.q, leastSquaresMultipliers(system, state.q, u), reaction);
-  report.equilibrium_residual = (reaction - F).lpNorm<Eigen::Infinity>();
+  report.equilibrium_residual = r.residual;
   return report;
 }
 
 int freeCoordinates(const Model& model, const Eigen::VectorXd& q)
 {
   const System system(model, spinLocksAt(model, q));
-  return static_cast<int>(nullSpace(system.constraintJacobianDense(q)).cols());
+  const MotionSpace space = motionSpace(model, system, constraintJacobian(system, q));
+  if (space.coupling.rows() == 0)
+    return space.size;
+  Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(space.coupling);
+  qr.setThreshold(kRankTolerance);
+  return space.size - static_cast<int>(qr.rank());
 }
 
 }  // namespace active_tensegrity::core

@@ -24,6 +24,7 @@
 #include <vector>
 
 #include <Eigen/Core>
+#include <Eigen/SparseCore>
 
 #include "active_tensegrity/core/block_sparse.h"
 #include "active_tensegrity/core/model.h"
@@ -42,16 +43,17 @@ constexpr double kDefinitenessTolerance = 1e-8;
 /// The linearization of a model about a state on its constraint manifold (see the header comment).
 struct ReducedStructure
 {
-  Eigen::MatrixXd basis;          // N, nq x f
-  Eigen::MatrixXd node_map;       // P, 3 n_points x nq: the model's nodes first (Model::nodes order), then
-                                  // strut ends no node stands at; ground points give zero rows
-  int node_rows = 0;              // rows of P that belong to Model::nodes (3 per node)
-  Eigen::MatrixXd compatibility;  // C N, members x f (members: Model::cables order)
-  Eigen::MatrixXd stiffness;      // K_r, f x f, N/m
-  Eigen::MatrixXd rigid;          // f x (rigid-body modes): orthonormal basis of the rigid-body modes
-  Eigen::MatrixXd mechanisms;     // f x m: orthonormal basis of the mechanisms (null(C N) minus the rigid modes)
-  Eigen::VectorXd lambda;         // the multipliers used (the state's, or least squares)
-  int rank = 0;                   // rank of C N
+  Eigen::MatrixXd basis;                 // N, nq x f
+  Eigen::SparseMatrix<double> node_map;  // P, 3 n_points x nq: the model's nodes first (Model::nodes order), then
+                                         // strut ends no node stands at; ground points give zero rows
+  int node_rows = 0;                     // rows of P that belong to Model::nodes (3 per node)
+  Eigen::MatrixXd compatibility;         // C N, members x f (members: Model::cables order)
+  Eigen::MatrixXd stiffness;             // K_r, f x f, N/m
+  Eigen::MatrixXd rigid;                 // f x (rigid-body modes): orthonormal basis of the rigid-body modes
+  Eigen::MatrixXd mechanisms;            // f x m: orthonormal basis of the mechanisms (null(C N) minus the rigid modes)
+  Eigen::VectorXd lambda;                // the multipliers used (the state's, or least squares)
+  double residual = 0.0;                 // N: max norm of -F + Phi_q^T lambda with least-squares lambda
+  int rank = 0;                          // rank of C N
 };
 
 /// The diagnostics of checkStructure.
@@ -97,8 +99,8 @@ Eigen::MatrixXd rigidComplement(const ReducedStructure& r);
 /// "skipped: N coordinates, more than the limit of 3000") a model above kMaxStructureCoordinates.
 StructureReport checkStructure(const Model& model, const State& state);
 
-/// The coordinates' block (nq x nq, dense) of a [q; lambda] matrix such as System::makeMatrix() gives.
-Eigen::MatrixXd coordinateBlock(const BlockSparseMatrix& m, int nq);
+/// The coordinates' block (nq x nq) of a [q; lambda] matrix such as System::makeMatrix() gives.
+Eigen::SparseMatrix<double> coordinateBlock(const BlockSparseMatrix& m, int nq);
 
 /// dim null(Phi_q) at q, spin locks included: the coordinates the constraints leave free.
 int freeCoordinates(const Model& model, const Eigen::VectorXd& q);
