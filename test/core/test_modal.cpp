@@ -231,7 +231,9 @@ TEST(Modal, RunModalFollowsThePathAndNormalizesTheShapes)
   {
     EXPECT_NEAR(largestDisplacement(run.modal.modes[k]), 1.0, 1e-12);
     if (k > 0)
+    {
       EXPECT_GE(run.modal.modes[k].eigenvalue, run.modal.modes[k - 1].eigenvalue);
+    }
   }
   // the same modes from the equilibrium the static path gives
   State eq = initialState(m);

@@ -37,7 +37,7 @@ constexpr int kMaxStructureCoordinates = 3000;
 /// Relative tolerance of the ranks: singular values below this times the largest count as zero.
 constexpr double kRankTolerance = 1e-9;
 /// Relative tolerance of positive definiteness: eigenvalues of the reduced stiffness must exceed this times
-/// the largest eigenvalue magnitude on the complement of the rigid-body modes.
+/// the largest eigenvalue magnitude on the complement of the rigid-body modes (and 1e-9 N/m).
 constexpr double kDefinitenessTolerance = 1e-8;
 
 /// The linearization of a model about a state on its constraint manifold (see the header comment).
