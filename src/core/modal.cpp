@@ -104,8 +104,19 @@ ModalRun runModal(const Model& model)
     }
   }
   run.equilibrium = state;
-  run.structure = checkStructure(model, state);
-  run.modal = naturalModes(model, state, an.modes);
+  try
+  {
+    run.structure = checkStructure(model, state);
+    run.modal = naturalModes(model, state, an.modes);
+  }
+  catch (const std::invalid_argument& e)
+  {
+    // a degenerate equilibrium (a motion that moves no node, a mass matrix that is not positive definite)
+    run.summary.status = SolveStatus::kSingular;
+    run.summary.message = std::string("modal analysis: ") + e.what();
+    finish(run);
+    return run;
+  }
   std::vector<std::string>& warnings = run.summary.warnings;
   if (static_cast<int>(run.modal.modes.size()) < an.modes)
     warnings.push_back("analysis.modes asks for " + std::to_string(an.modes) + " modes; the structure has " +

@@ -122,7 +122,16 @@ std::string structureYaml(const at::StructureReport& r, const std::string& inden
 // --check: the diagnostics of the initial state on stdout
 int runCheck(const std::string& scene, const at::Model& model)
 {
-  const at::StructureReport r = at::checkStructure(model, at::initialState(model));
+  at::StructureReport r;
+  try
+  {
+    r = at::checkStructure(model, at::initialState(model));
+  }
+  catch (const std::invalid_argument& e)
+  {
+    std::cerr << "tensegrity_run: --check: " << e.what() << "\n";
+    return 3;
+  }
   std::cout << std::setprecision(10) << "scene: " << scene << "\n"
             << "name: " << model.name << "\n"
             << structureYaml(r, "");

@@ -59,7 +59,8 @@ struct ModalRun
 /// A modal scene's analysis: the equilibrium at the start (StaticSolver::solve), followed along the path to
 /// analysis.max_actuation in analysis.steps load steps (StaticSolver::followPath) when that is positive, then
 /// its analysis.modes lowest natural modes and its structural diagnostics. When a static solve fails the
-/// summary says so and there are no modes.
+/// summary says so and there are no modes; a degenerate equilibrium (a mass matrix that is not positive definite
+/// on the free coordinates) ends with status kSingular.
 ModalRun runModal(const Model& model);
 
 }  // namespace active_tensegrity::core
