@@ -15,6 +15,8 @@
 
 #include "active_tensegrity/core/contact.h"
 #include "active_tensegrity/core/mechanics.h"
+#include "active_tensegrity/core/modal.h"
+#include "active_tensegrity/core/structure_check.h"
 #include "active_tensegrity/core/text.h"
 
 namespace active_tensegrity::core
@@ -350,6 +352,8 @@ public:
     readOutputs();
     root_.finish();
     finalizeModel(model_);  // sizes again, now that every constraint is in
+    if (model_.analysis.type == AnalysisType::kModal)
+      checkModal();
     return std::move(model_);
   }
 
@@ -986,12 +990,17 @@ private:
       an.type = AnalysisType::kStatic;
     else if (type == "dynamic")
       an.type = AnalysisType::kDynamic;
+    else if (type == "modal")
+      an.type = AnalysisType::kModal;
     else
-      a.fail(a.key("type"), "expected 'static' or 'dynamic', got " + quoted(type));
-    // a scene without actuators (free motion, e.g. a drop) needs no actuation travel or speed
+      a.fail(a.key("type"), "expected 'static', 'dynamic' or 'modal', got " + quoted(type));
+    // a scene without actuators (free motion, e.g. a drop) needs no actuation travel or speed; the modes are
+    // about the start unless an actuation is given
     const bool actuated = !model_.actuators.empty();
-    an.max_actuation = actuated ? a.positive("max_actuation") : a.nonNegative("max_actuation", 0.0);
+    an.max_actuation =
+        actuated && an.type != AnalysisType::kModal ? a.positive("max_actuation") : a.nonNegative("max_actuation", 0.0);
     an.steps = a.integer("steps", an.steps, 1, kMaxLoadSteps);
+    an.modes = a.integer("modes", an.modes, 1, kMaxModes);
     an.duration = a.positive("duration", 1.0);
     an.output_interval = a.nonNegative("output_interval", 0.0);
     an.schedule.final_value = an.max_actuation;
@@ -1048,6 +1057,19 @@ private:
     an.arc_length = a.boolean("arc_length", false);
     if (an.arc_length && !is_static)
       a.fail(a.key("arc_length"), "arc-length continuation is for static paths only; this analysis is not static");
+  }
+
+  /// A modal analysis is dense (core/modal.h): bounded in size, and it needs a coordinate to vibrate.
+  void checkModal() const
+  {
+    const std::string modal = quoted("modal");
+    if (model_.nq > kMaxStructureCoordinates)
+      root_.fail("analysis.type", "a modal analysis takes at most " + std::to_string(kMaxStructureCoordinates) +
+                                      " coordinates, the scene has " + std::to_string(model_.nq) + ", got " + modal);
+    const int free = freeCoordinates(model_, model_.q0);
+    if (free == 0)
+      root_.fail("analysis.type", "a modal analysis needs a coordinate the constraints leave free; they hold all " +
+                                      std::to_string(model_.nq) + " (spin locks included), got " + modal);
   }
 
   /// A dynamic run's steps and output rows stay countable, and no step is shorter than solver.dt_min.

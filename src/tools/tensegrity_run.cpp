@@ -12,7 +12,9 @@
 #include <vector>
 
 #include "active_tensegrity/core/analysis.h"
+#include "active_tensegrity/core/modal.h"
 #include "active_tensegrity/core/scene.h"
+#include "active_tensegrity/core/structure_check.h"
 #include "active_tensegrity/ros/bag_writer.h"
 
 namespace at = active_tensegrity::core;
@@ -21,7 +23,8 @@ namespace
 {
 const char* kUsage =
     "usage: tensegrity_run SCENE.yaml [--set key=value]... [--out FILE.csv] [--summary FILE.yaml]\n"
-    "                     [--contacts FILE.csv] [--bag FILE.bag] [--bag-ns /NAME]\n"
+    "                     [--contacts FILE.csv] [--bag FILE.bag] [--bag-ns /NAME] [--modes FILE.csv]\n"
+    "       tensegrity_run SCENE.yaml [--set key=value]... --check\n"
     "  Runs the scene's analysis (static path or dynamic run) and writes one CSV row per output step\n"
     "  (stdout when --out is not given) and a YAML summary. Any scene key can be overridden with\n"
     "  --set, e.g. --set struts.radius=0.06 --set analysis.max_actuation=1.0\n"
@@ -29,7 +32,12 @@ const char* kUsage =
     "  --bag writes, per output step, what the tensegrity_sim node publishes (/tf, NS/contacts, NS/cables,\n"
     "  NS/actuators, NS/markers with NS = --bag-ns, default /tensegrity_sim), stamped in simulated time\n"
     "  from the wall time of the start; no master needed. Watch it with\n"
-    "  roslaunch active_tensegrity playback.launch bag:=$PWD/FILE.bag\n";
+    "  roslaunch active_tensegrity playback.launch bag:=$PWD/FILE.bag\n"
+    "  A modal scene (analysis.type: modal) writes one CSV row per mode (mode, frequency_hz, omega,\n"
+    "  eigenvalue) instead, and with --modes the mode shapes: one row per mode and node (mode, node,\n"
+    "  dx, dy, dz), the largest node displacement of each mode 1.\n"
+    "  --check runs no analysis: it prints the structural diagnostics of the scene's initial state as\n"
+    "  YAML on stdout (self-stress states, mechanisms, rigid-body modes, prestress stability, ...).\n";
 
 const char* kDefaultBagNs = "/tensegrity_sim";
 
@@ -68,11 +76,151 @@ std::string yamlString(const std::string& text)
   }
   return out + "\"";
 }
+
+// a YAML flow list of numbers
+std::string yamlNumbers(const std::vector<double>& values)
+{
+  std::string out = "[";
+  for (size_t i = 0; i < values.size(); ++i)
+    out += (i ? ", " : "") + csvNumber(values[i]);
+  return out + "]";
+}
+
+// a number for YAML: NaN as null
+std::string yamlNumber(double v)
+{
+  return std::isnan(v) ? "null" : csvNumber(v);
+}
+
+// The structural diagnostics (core/structure_check.h) as YAML lines, each indented by `indent`.
+std::string structureYaml(const at::StructureReport& r, const std::string& indent)
+{
+  std::ostringstream y;
+  y << indent << "checked: " << (r.checked ? "true" : "false") << "\n";
+  if (!r.note.empty())
+    y << indent << "note: " << yamlString(r.note) << "\n";
+  y << indent << "coordinates: " << r.coordinates << "\n" << indent << "members: " << r.members << "\n";
+  if (!r.checked)
+    return y.str();
+  y << indent << "free_coordinates: " << r.free_coordinates << "\n"
+    << indent << "equilibrium_matrix_rank: " << r.rank << "\n"
+    << indent << "self_stress_states: " << r.self_stress_states << "\n"
+    << indent << "mechanisms: " << r.mechanisms << "\n"
+    << indent << "rigid_body_modes: " << r.rigid_body_modes << "\n"
+    << indent << "prestress_stable: " << (r.prestress_stable ? "true" : "false") << "\n"
+    << indent << "smallest_stiffness_eigenvalue: " << yamlNumber(r.smallest_stiffness_eigenvalue) << "  # N/m\n"
+    << indent << "largest_stiffness_eigenvalue: " << yamlNumber(r.largest_stiffness_eigenvalue) << "  # N/m\n"
+    << indent << "smallest_rigid_mode_eigenvalue: " << yamlNumber(r.smallest_rigid_mode_eigenvalue) << "  # N/m\n"
+    << indent << "equilibrium_residual: " << csvNumber(r.equilibrium_residual) << "  # N\n"
+    << indent << "slack_cables: [";
+  for (size_t i = 0; i < r.slack_cables.size(); ++i)
+    y << (i ? ", " : "") << yamlString(r.slack_cables[i]);
+  y << "]\n";
+  return y.str();
+}
+
+// --check: the diagnostics of the initial state on stdout
+int runCheck(const std::string& scene, const at::Model& model)
+{
+  at::StructureReport r;
+  try
+  {
+    r = at::checkStructure(model, at::initialState(model));
+  }
+  catch (const std::invalid_argument& e)
+  {
+    std::cerr << "tensegrity_run: --check: " << e.what() << "\n";
+    return 3;
+  }
+  std::cout << std::setprecision(10) << "scene: " << scene << "\n"
+            << "name: " << model.name << "\n"
+            << structureYaml(r, "");
+  return 0;
+}
+
+// A modal scene: the frequencies (csv), the mode shapes (--modes) and the summary.
+int runModalScene(const std::string& scene, const at::Model& model, std::ostream& csv, std::ofstream& shapes,
+                  std::ofstream& summary_file, const std::string& summary_path)
+{
+  const at::ModalRun run = at::runModal(model);
+  csv << "mode,frequency_hz,omega,eigenvalue\n";
+  for (size_t k = 0; k < run.modal.modes.size(); ++k)
+  {
+    const at::NaturalMode& m = run.modal.modes[k];
+    csv << k + 1 << "," << csvNumber(m.frequency_hz) << "," << csvNumber(m.omega) << "," << csvNumber(m.eigenvalue)
+        << "\n";
+  }
+  csv.flush();
+  if (shapes.is_open())
+  {
+    shapes << "mode,node,dx,dy,dz\n";
+    for (size_t k = 0; k < run.modal.modes.size(); ++k)
+      for (size_t i = 0; i < model.nodes.size(); ++i)
+      {
+        const at::Vec3& d = run.modal.modes[k].node_displacements[i];
+        shapes << k + 1 << "," << model.nodes[i].name << "," << csvNumber(d.x()) << "," << csvNumber(d.y()) << ","
+               << csvNumber(d.z()) << "\n";
+      }
+    shapes.close();
+    if (!shapes)
+    {
+      std::cerr << "tensegrity_run: cannot write the mode shapes\n";
+      return 1;
+    }
+  }
+  std::vector<double> lowest;
+  for (size_t k = 0; k < std::min<size_t>(10, run.modal.modes.size()); ++k)
+    lowest.push_back(run.modal.modes[k].frequency_hz);
+  const std::vector<std::string> cols = at::csvColumns(model);
+  const std::vector<double> row = at::csvRow(model, run.equilibrium);
+  std::ostringstream summary;
+  summary << std::setprecision(10) << "scene: " << scene << "\n"
+          << "name: " << model.name << "\n"
+          << "analysis: modal\n"
+          << "status: " << at::toString(run.summary.status) << "\n"
+          << "message: " << yamlString(run.summary.message) << "\n"
+          << "newton_iterations: " << run.summary.iterations << "\n"
+          << "step_cuts: " << run.summary.step_cuts << "\n"
+          << "wall_time: " << run.wall_time << "\n"
+          << "free_coordinates: " << run.modal.free_coordinates << "\n"
+          << "modes: " << run.modal.modes.size() << "\n"
+          << "frequencies_hz: " << yamlNumbers(lowest) << "  # the lowest ten\n";
+  summary << "warnings:" << (run.summary.warnings.empty() ? " []" : "") << "\n";
+  for (const std::string& w : run.summary.warnings)
+    summary << "  - " << yamlString(w) << "\n";
+  if (run.summary.ok())
+    summary << "structure:  # the equilibrium's diagnostics (tensegrity_run --check)\n"
+            << structureYaml(run.structure, "  ");
+  summary << "equilibrium:\n";
+  for (size_t i = 0; i < cols.size(); ++i)
+    summary << "  " << cols[i] << ": " << csvNumber(row[i]) << "\n";
+  if (summary_file.is_open())
+  {
+    summary_file << summary.str();
+    summary_file.close();
+    if (!summary_file)
+    {
+      std::cerr << "tensegrity_run: cannot write '" << summary_path << "'\n";
+      return 1;
+    }
+  }
+  else
+    std::cerr << summary.str();
+  for (const std::string& w : run.summary.warnings)
+    std::cerr << "tensegrity_run: warning: " << w << "\n";
+  if (!run.summary.ok())
+  {
+    std::cerr << "tensegrity_run: the analysis stopped: " << run.summary.message << "\n";
+    return 3;
+  }
+  return 0;
+}
 }  // namespace
 
 int main(int argc, char** argv)
 {
-  std::string scene, out_path, summary_path, contacts_path, bag_path, bag_ns = kDefaultBagNs;
+  std::string scene, out_path, summary_path, contacts_path, bag_path, modes_path, bag_ns = kDefaultBagNs;
+  bool check = false;
   std::vector<at::Override> overrides;
   try
   {
@@ -102,6 +250,10 @@ int main(int argc, char** argv)
         bag_path = value("--bag");
       else if (arg == "--bag-ns")
         bag_ns = value("--bag-ns");
+      else if (arg == "--modes")
+        modes_path = value("--modes");
+      else if (arg == "--check")
+        check = true;
       else if (!arg.empty() && arg[0] == '-')
         throw std::invalid_argument("unknown option '" + arg + "'");
       else if (scene.empty())
@@ -115,6 +267,10 @@ int main(int argc, char** argv)
       active_tensegrity::ros_layer::BagWriter::checkNamespace(bag_ns);
     else if (bag_ns != kDefaultBagNs)
       throw std::invalid_argument("--bag-ns needs --bag");
+    if (check &&
+        !(out_path.empty() && summary_path.empty() && contacts_path.empty() && bag_path.empty() && modes_path.empty()))
+      throw std::invalid_argument("--check prints its report on stdout and runs no analysis: it takes no --out, "
+                                  "--summary, --contacts, --bag or --modes");
   }
   catch (const std::exception& e)
   {
@@ -133,6 +289,20 @@ int main(int argc, char** argv)
     return 1;
   }
 
+  if (check)
+    return runCheck(scene, model);
+  const bool modal = model.analysis.type == at::AnalysisType::kModal;
+  const char* misfit = nullptr;
+  if (modal && !(contacts_path.empty() && bag_path.empty()))
+    misfit = "a modal analysis writes no --contacts or --bag";
+  else if (!modal && !modes_path.empty())
+    misfit = "--modes writes the mode shapes of a modal analysis (analysis.type: modal)";
+  if (misfit)
+  {
+    std::cerr << "tensegrity_run: " << misfit << "\n" << kUsage;
+    return 2;
+  }
+
   // output files are opened before the run, so that a bad path costs no simulation
   const auto open = [](const std::string& path, std::ofstream& f)
   {
@@ -143,9 +313,12 @@ int main(int argc, char** argv)
       std::cerr << "tensegrity_run: cannot write '" << path << "'\n";
     return static_cast<bool>(f);
   };
-  std::ofstream file, contacts, summary_file;
-  if (!open(out_path, file) || !open(contacts_path, contacts) || !open(summary_path, summary_file))
+  std::ofstream file, contacts, summary_file, shapes;
+  if (!open(out_path, file) || !open(contacts_path, contacts) || !open(summary_path, summary_file) ||
+      !open(modes_path, shapes))
     return 1;
+  if (modal)
+    return runModalScene(scene, model, out_path.empty() ? std::cout : file, shapes, summary_file, summary_path);
   std::unique_ptr<active_tensegrity::ros_layer::BagWriter> bag;
   if (!bag_path.empty())
   {

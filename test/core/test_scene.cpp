@@ -707,8 +707,12 @@ TEST(SceneBounds, EveryIntegerKeyIsBounded)
 {
   const std::vector<std::tuple<std::string, std::string, std::string>> cases = {
     { "solver.max_iterations", "1073741824", "at most 1000" },  // 4 x 2^30 overflowed an int in statics
-    { "solver.max_step_cuts", "1e9", "at most 60" },           { "solver.max_jacobian_age", "3e9", "at most 1000000" },
-    { "analysis.steps", "2147483648", "at most 10000000" },    { "solver.max_step_cuts", "-1", "at least 0" },
+    { "solver.max_step_cuts", "1e9", "at most 60" },
+    { "solver.max_jacobian_age", "3e9", "at most 1000000" },
+    { "analysis.steps", "2147483648", "at most 10000000" },
+    { "solver.max_step_cuts", "-1", "at least 0" },
+    { "analysis.modes", "1e9", "at most 1000" },
+    { "analysis.modes", "0", "at least 1" },
   };
   for (const auto& [key, value, needle] : cases)
     EXPECT_TRUE(refused([&] { loadSceneFromString(kMini, "mini.yaml", { parseOverride(key + "=" + value) }); }, key,
@@ -964,6 +968,61 @@ TEST(SceneMessages, MessagesQuoteTheBadValue)
         loadSceneFromString(edited({ { "[1.0, 0.2, 1.0]", "[0.0, 0.0, 0.0]" } }), "mini.yaml");
       },
       "struts.members.S1", { "zero length", "'A' at [0, 0, 0]", "'D' at [0, 0, 0]" }));
+}
+
+TEST(SceneModal, TheModalKeysLoad)
+{
+  // a modal analysis needs no actuation travel (its modes are then about the start) and no fixed node (a
+  // floating structure has its rigid-body modes at 0 Hz)
+  const Model m = loadSceneFromString(edited({ { "type: static", "type: modal\n  modes: 4" },
+                                               { "  max_actuation: 0.3\n", "" },
+                                               { "fixed: true}\n  B", "fixed: false}\n  B" },
+                                               { "fixed: true}\n  C", "fixed: false}\n  C" } }),
+                                      "modal.yaml");
+  EXPECT_EQ(m.analysis.type, AnalysisType::kModal);
+  EXPECT_EQ(m.analysis.modes, 4);
+  EXPECT_EQ(m.analysis.max_actuation, 0.0);
+  EXPECT_EQ(loadSceneFromString(kMini, "mini.yaml").analysis.modes, 10);
+}
+
+TEST(SceneModal, BadModalInputIsRefusedNamingKeyAndValue)
+{
+  EXPECT_TRUE(refused(
+      []
+      {
+        loadSceneFromString(kMini, "mini.yaml",
+                            { parseOverride("analysis.type=modal"), parseOverride("analysis.modes=.nan") });
+      },
+      "analysis.modes", { "finite", "'.nan'" }));
+  EXPECT_TRUE(refused(
+      []
+      {
+        loadSceneFromString(kMini, "mini.yaml",
+                            { parseOverride("analysis.type=modal"), parseOverride("analysis.modes=2.5") });
+      },
+      "analysis.modes", { "integer", "'2.5'" }));
+  // every node fixed: each strut pinned at both ends, nothing to vibrate (7 coordinates, 6 + 1 + 1 rows each)
+  const std::string pinned =
+      edited({ { "  C: {position: [0.0, 0.8, 1.0]}", "  C: {position: [0.0, 0.8, 1.0], fixed: true}" },
+               { "  D: {position: [1.0, 0.2, 1.0]}", "  D: {position: [1.0, 0.2, 1.0], fixed: true}" },
+               { "  M: {position: [0.5, 0.5, 1.5], mass: 0.2}\n", "" },
+               { "springs:\n  holders:\n    stiffness: 500.0\n    prestress: 10.0\n    members: {K1: [C, M], K2: [D, "
+                 "M]}\n",
+                 "" },
+               { "actuators:\n  lift:\n    nodes: [M]\n    direction: [0.0, 0.0, -1.0]\n    range: [0.0, 0.5]\n", "" },
+               { "  max_actuation: 0.3\n", "" } });
+  EXPECT_NO_THROW(loadSceneFromString(pinned, "pinned.yaml"));
+  EXPECT_TRUE(refused([&] { loadSceneFromString(pinned, "pinned.yaml", { parseOverride("analysis.type=modal") }); },
+                      "analysis.type",
+                      { "--set analysis.type=modal (on pinned.yaml)", "leave free", "all 21", "'modal'" }));
+  // the dense analysis is bounded: 1001 point masses, 3003 coordinates
+  std::string extra;
+  for (int i = 0; i < 1001; ++i)
+    extra += "  G" + std::to_string(i) + ": {position: [" + std::to_string(i) + ".0, 5.0, 0.0], mass: 1.0}\n";
+  const std::string many = edited({ { "  M: {", extra + "  M: {" } });
+  EXPECT_NO_THROW(loadSceneFromString(many, "many.yaml"));
+  EXPECT_TRUE(refused([&] { loadSceneFromString(many, "many.yaml", { parseOverride("analysis.type=modal") }); },
+                      "analysis.type", { "at most 3000 coordinates", "has 3027", "'modal'" }));
 }
 
 TEST(SceneLoading, TwentyThousandNodesLoad)

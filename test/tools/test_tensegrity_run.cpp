@@ -1,5 +1,6 @@
 // The batch command as a user runs it: exit codes, CSV shape, messages on bad input.
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <sstream>
@@ -197,4 +198,96 @@ TEST(TensegrityRun, NoInfiniteOrNanFieldWhenNoPairIsChecked)
     EXPECT_EQ(row.find("nan"), std::string::npos) << row;
   }
   EXPECT_NE(rows[1].find(",0,,"), std::string::npos) << rows[1];  // active_contacts 0, min_gap empty
+}
+
+TEST(TensegrityRun, CheckPrintsTheDiagnosticsAndRunsNothing)
+{
+  // the pinned prism: one self-stress state of the prism and one per ring cable between two pins, one
+  // mechanism stiffened by the prestress (test_structure_check derives the counts)
+  const Result r = run(scene("prism_pinned.yaml") + " --check");
+  ASSERT_EQ(r.code, 0) << r.output;
+  for (const char* line : { "checked: true", "free_coordinates: 6", "self_stress_states: 4", "mechanisms: 1",
+                            "rigid_body_modes: 0", "prestress_stable: true", "slack_cables: []" })
+    EXPECT_NE(r.output.find(std::string("\n") + line + "\n"), std::string::npos) << line << "\n" << r.output;
+  EXPECT_EQ(r.output.find("status:"), std::string::npos) << "an analysis ran: " << r.output;
+  // overrides apply; the unstressed tower lists its slack elements
+  const Result free = run(scene("prism.yaml") + " --set actuators={} --check");
+  EXPECT_NE(free.output.find("\nrigid_body_modes: 6\n"), std::string::npos) << free.output;
+  const Result tower = run(scene("tower.yaml") + " --check");
+  EXPECT_NE(tower.output.find("\nprestress_stable: false\n"), std::string::npos) << tower.output;
+  EXPECT_NE(tower.output.find("\"L1\""), std::string::npos) << tower.output;
+}
+
+TEST(TensegrityRun, CheckRefusesABadSceneAndOutputOptions)
+{
+  const Result bad = run(scene("prism_pinned.yaml") + " --check --set struts.radius=-1");
+  EXPECT_EQ(bad.code, 1) << bad.output;
+  EXPECT_NE(bad.output.find("struts.radius"), std::string::npos) << bad.output;
+  const Result out = run(scene("prism_pinned.yaml") + " --check --out " + tmp("check.csv"));
+  EXPECT_EQ(out.code, 2) << out.output;
+  EXPECT_NE(out.output.find("--check"), std::string::npos) << out.output;
+}
+
+TEST(TensegrityRun, ModalSceneWritesFrequenciesShapesAndSummary)
+{
+  const std::string csv = tmp("modes.csv"), shapes = tmp("shapes.csv"), summary = tmp("modes.yaml");
+  const Result r = run(scene("prism_pinned.yaml") + " --set analysis.type=modal --out " + csv + " --modes " + shapes +
+                       " --summary " + summary);
+  ASSERT_EQ(r.code, 0) << r.output;
+  // six free coordinates: six modes (fewer than the ten asked for: a warning), ascending
+  const std::vector<std::string> rows = lines(csv);
+  ASSERT_EQ(rows.size(), 1u + 6u);
+  EXPECT_EQ(rows[0], "mode,frequency_hz,omega,eigenvalue");
+  double previous = 0.0;
+  for (size_t k = 1; k < rows.size(); ++k)
+  {
+    double f = 0.0, omega = 0.0, eigenvalue = 0.0;
+    int mode = 0;
+    ASSERT_EQ(std::sscanf(rows[k].c_str(), "%d,%lf,%lf,%lf", &mode, &f, &omega, &eigenvalue), 4) << rows[k];
+    EXPECT_EQ(mode, static_cast<int>(k));
+    EXPECT_GE(f, previous);
+    EXPECT_NEAR(omega, 2.0 * M_PI * f, 1e-8 * omega);
+    EXPECT_NEAR(eigenvalue, omega * omega, 1e-8 * eigenvalue);
+    previous = f;
+  }
+  // one row per mode and node, the largest node displacement of each mode 1, the pinned nodes still
+  const std::vector<std::string> s = lines(shapes);
+  ASSERT_EQ(s.size(), 1u + 6u * 6u);
+  EXPECT_EQ(s[0], "mode,node,dx,dy,dz");
+  std::vector<double> largest(7, 0.0);
+  for (size_t i = 1; i < s.size(); ++i)
+  {
+    int mode = 0;
+    char node[8] = {};
+    double dx = 0, dy = 0, dz = 0;
+    ASSERT_EQ(std::sscanf(s[i].c_str(), "%d,%7[^,],%lf,%lf,%lf", &mode, node, &dx, &dy, &dz), 5) << s[i];
+    largest[mode] = std::max(largest[mode], std::sqrt(dx * dx + dy * dy + dz * dz));
+    if (node[0] == 'B')
+    {
+      EXPECT_EQ(s[i].substr(s[i].find(node) + 2), ",0,0,0") << s[i];
+    }
+  }
+  for (int k = 1; k <= 6; ++k)
+    EXPECT_NEAR(largest[k], 1.0, 1e-8) << "mode " << k;
+  std::ostringstream all;
+  for (const auto& l : lines(summary))
+    all << l << "\n";
+  EXPECT_NE(all.str().find("analysis: modal\nstatus: converged\n"), std::string::npos) << all.str();
+  EXPECT_NE(all.str().find("frequencies_hz: [" + rows[1].substr(2, rows[1].find(',', 2) - 2) + ", "), std::string::npos)
+      << all.str();
+  EXPECT_NE(all.str().find("asks for 10 modes"), std::string::npos) << all.str();
+  EXPECT_NE(all.str().find("  mechanisms: 1\n"), std::string::npos) << all.str();
+}
+
+TEST(TensegrityRun, ModalOptionsOnlyWhereTheyApply)
+{
+  const Result modes = run(scene("prism_pinned.yaml") + " --modes " + tmp("m.csv"));
+  EXPECT_EQ(modes.code, 2) << modes.output;
+  EXPECT_NE(modes.output.find("--modes"), std::string::npos) << modes.output;
+  const Result contacts = run(scene("prism_pinned.yaml") + " --set analysis.type=modal --contacts " + tmp("mc.csv"));
+  EXPECT_EQ(contacts.code, 2) << contacts.output;
+  EXPECT_NE(contacts.output.find("modal"), std::string::npos) << contacts.output;
+  const Result huge = run(scene("prism_pinned.yaml") + " --set analysis.type=modal --set analysis.modes=1e9");
+  EXPECT_EQ(huge.code, 1) << huge.output;
+  EXPECT_NE(huge.output.find("analysis.modes: must be at most 1000, got '1e9'"), std::string::npos) << huge.output;
 }

@@ -192,7 +192,8 @@ struct SolverOptions
 enum class AnalysisType
 {
   kStatic,
-  kDynamic
+  kDynamic,
+  kModal  // natural modes about the equilibrium at max_actuation (core/modal.h)
 };
 
 struct AnalysisSettings
@@ -202,6 +203,7 @@ struct AnalysisSettings
   int steps = 100;               // static load steps
   double duration = 0.0;         // s (dynamic)
   double output_interval = 0.0;  // s (dynamic, 0 = every step)
+  int modes = 10;                // modal: how many of the lowest modes
   RampSchedule schedule;         // dynamic actuation law for every actuator
   /// static: the point loads' factor runs from start to end along the path (with the actuation)
   double load_factor_start = 1.0;

@@ -1,0 +1,310 @@
+// Structural diagnostics (core/structure_check): the counts of the equilibrium matrix on prisms whose counts
+// follow from Maxwell's rule and their self-stress, stability, slack elements, the force residual off an
+// equilibrium against its first-order prediction, and the reduced stiffness against finite differences of the
+// potential energy along the constraint manifold.
+#include <cmath>
+#include <fstream>
+#include <random>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Dense>
+
+#include "active_tensegrity/core/scene.h"
+#include "active_tensegrity/core/statics.h"
+#include "active_tensegrity/core/structure_check.h"
+#include "test_models.h"
+
+using namespace active_tensegrity::test;
+
+namespace
+{
+std::string scenePath(const std::string& name)
+{
+  return std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) + "/config/scenes/" + name;
+}
+
+std::string sceneText(const std::string& name)
+{
+  std::ifstream in(scenePath(name));
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+/// The text of a shipped scene with each `from` replaced by `to` (each must occur).
+std::string edited(const std::string& name, const std::vector<std::pair<std::string, std::string>>& edits)
+{
+  std::string text = sceneText(name);
+  for (const auto& [from, to] : edits)
+  {
+    const size_t at = text.find(from);
+    EXPECT_NE(at, std::string::npos) << from;
+    if (at != std::string::npos)
+      text.replace(at, from.size(), to);
+  }
+  return text;
+}
+
+/// The equilibrium of a model at actuation `value` (0: the start), as StaticSolver leaves it.
+State equilibrium(const Model& model, double value = 0.0, int steps = 20)
+{
+  State s = initialState(model);
+  StaticSolver solver(model, model.solver);
+  EXPECT_TRUE(solver.solve(s, s.u).ok());
+  if (value > 0.0)
+  {
+    ActuationValues end = s.u;
+    for (ActuationValue& u : end)
+      u.value = value;
+    EXPECT_TRUE(solver.followPath(s, end, steps, [](const State&, const Summary&) {}).ok());
+  }
+  return s;
+}
+
+/// The constraints the reduced coordinates respect: the model's, and a spin lock per strut at q's orientation.
+std::vector<Constraint> locksAt(const Model& model, const Eigen::VectorXd& q)
+{
+  std::vector<Constraint> locks = spinLocks(model);
+  for (Constraint& c : locks)
+    c.coefficients = spinLockCoefficients(thetaOf(q, model.bodies[c.body]));
+  return locks;
+}
+
+/// q moved back onto Phi = 0 by Gauss-Newton steps of least norm.
+Eigen::VectorXd project(const System& system, Eigen::VectorXd q, const ActuationValues& u)
+{
+  Eigen::VectorXd phi;
+  for (int it = 0; it < 20; ++it)
+  {
+    system.constraintValue(q, u, phi);
+    if (phi.lpNorm<Eigen::Infinity>() < 1e-15)
+      break;
+    q -= system.constraintJacobianDense(q).completeOrthogonalDecomposition().solve(phi);
+  }
+  return q;
+}
+
+/// d^2 V / ds^2 at s = 0 along the manifold curve s -> project(q + s N v), by central differences of
+/// step h (Richardson-extrapolated from h and 2h).
+double energyCurvature(const System& system, const State& s, const Eigen::VectorXd& dq, double h)
+{
+  const auto v = [&](double t) { return system.potentialEnergy(project(system, s.q + t * dq, s.u), s.u); };
+  const double v0 = v(0.0);
+  const double d1 = (v(h) - 2.0 * v0 + v(-h)) / (h * h);
+  const double d2 = (v(2.0 * h) - 2.0 * v0 + v(-2.0 * h)) / (4.0 * h * h);
+  return (4.0 * d1 - d2) / 3.0;
+}
+
+/// Checks v^T K_r v against the curvature of the energy along the manifold for the unit vectors of the
+/// mechanisms and for random directions, by differences of step h (m of node displacement per unit of v: N is
+/// orthonormal in the node metric), to a relative error `tol` (with a floor of 1e-7 of the largest entry of K_r).
+void checkCurvature(const Model& model, const State& s, int random_directions, double h = 1e-4, double tol = 1e-5)
+{
+  const ReducedStructure r = reduceStructure(model, s);
+  const System system(model, locksAt(model, s.q));
+  std::mt19937 rng(7);
+  std::vector<Eigen::VectorXd> directions;
+  for (int k = 0; k < r.mechanisms.cols(); ++k)
+    directions.push_back(r.mechanisms.col(k));
+  for (int k = 0; k < random_directions; ++k)
+    directions.push_back(randomVector(static_cast<int>(r.basis.cols()), 1.0, rng).normalized());
+  const double scale = r.stiffness.cwiseAbs().maxCoeff();
+  for (const Eigen::VectorXd& v : directions)
+  {
+    const double exact = v.dot(r.stiffness * v);
+    const double fd = energyCurvature(system, s, r.basis * v, h);
+    EXPECT_LT(std::abs(fd - exact) / (std::abs(exact) + 1e-7 * scale), tol)
+        << model.name << ": v^T K_r v " << exact << ", finite differences " << fd;
+  }
+}
+
+std::vector<std::string> names(std::initializer_list<const char*> list)
+{
+  return std::vector<std::string>(list.begin(), list.end());
+}
+}  // namespace
+
+// Maxwell's rule for a prism of rigid struts: f free coordinates (5 per free strut: 7 less the norm and the
+// spin; 2 per strut pinned at one end), members b, b - r self-stress states, f - r motions, of which the rigid
+// ones are no mechanism.
+
+TEST(StructureCheck, FreePrismHasOneSelfStressOneMechanismAndSixRigidModes)
+{
+  // without its actuator the prism floats: f = 15, 9 cables, the known self-stress (rank 8), 15 - 8 = 7
+  // motions: 6 rigid, 1 infinitesimal mechanism, stiffened by the prestress
+  const Model free = loadScene(scenePath("prism.yaml"), { parseOverride("actuators={}") });
+  const StructureReport r = checkStructure(free, initialState(free));
+  ASSERT_TRUE(r.checked) << r.note;
+  EXPECT_EQ(r.coordinates, 21);
+  EXPECT_EQ(r.free_coordinates, 15);
+  EXPECT_EQ(r.members, 9);
+  EXPECT_EQ(r.rank, 8);
+  EXPECT_EQ(r.self_stress_states, 1);
+  EXPECT_EQ(r.rigid_body_modes, 6);
+  EXPECT_EQ(r.mechanisms, 1);
+  EXPECT_TRUE(r.prestress_stable);
+  EXPECT_GT(r.smallest_stiffness_eigenvalue, 0.0);
+  EXPECT_TRUE(r.slack_cables.empty());
+  // the scene's tensions are given to 13 digits: in equilibrium to that precision of 291 N
+  EXPECT_LT(r.equilibrium_residual, 1e-7);
+
+  // the shipped scene's actuator holds T1's height: one translation less, the rest unchanged
+  const Model held = loadScene(scenePath("prism.yaml"));
+  const StructureReport h = checkStructure(held, initialState(held));
+  EXPECT_EQ(h.free_coordinates, 14);
+  EXPECT_EQ(h.rigid_body_modes, 5);
+  EXPECT_EQ(h.mechanisms, 1);
+  EXPECT_EQ(h.self_stress_states, 1);
+  EXPECT_TRUE(h.prestress_stable);
+}
+
+TEST(StructureCheck, PinnedPrismHasNoRigidModeAndOneMechanism)
+{
+  // f = 3 x 2; the three top rings and three verticals carry the prism's self-stress (rank 5), and each ring
+  // cable between two pins is a self-stress of its own (a zero row): s = 9 - 5 = 4, m = 6 - 5 = 1
+  const Model m = loadScene(scenePath("prism_pinned.yaml"));
+  const StructureReport r = checkStructure(m, initialState(m));
+  EXPECT_EQ(r.free_coordinates, 6);
+  EXPECT_EQ(r.members, 9);
+  EXPECT_EQ(r.rank, 5);
+  EXPECT_EQ(r.self_stress_states, 4);
+  EXPECT_EQ(r.rigid_body_modes, 0);
+  EXPECT_EQ(r.mechanisms, 1);
+  EXPECT_TRUE(r.prestress_stable);
+  EXPECT_GT(r.smallest_stiffness_eigenvalue, 0.0);
+  EXPECT_LT(r.equilibrium_residual, 1e-7);
+}
+
+TEST(StructureCheck, SlidingVerticalsMakeThreeMechanisms)
+{
+  // one cable of length V1 + V2 + V3 + const instead of three: its row is the sum of theirs, which the
+  // self-stress ties to the top rings' rows (T_ring (R4 + R5 + R6) + T_vert (V1 + V2 + V3) = 0): rank 3 of the
+  // four moving rows, s = 7 - 3 = 4, m = 6 - 3 = 3. The prism's stress is super stable (its stress matrix is
+  // positive semi-definite, zero only on affine motions, and no affine motion keeps the struts' lengths), so it
+  // stiffens every one of the three mechanisms.
+  const Model m = loadScene(scenePath("prism_pinned_sliding.yaml"));
+  ASSERT_EQ(m.cables.back().points.size(), 6u);
+  const StructureReport r = checkStructure(m, initialState(m));
+  EXPECT_EQ(r.members, 7);
+  EXPECT_EQ(r.rank, 3);
+  EXPECT_EQ(r.self_stress_states, 4);
+  EXPECT_EQ(r.rigid_body_modes, 0);
+  EXPECT_EQ(r.mechanisms, 3);
+  EXPECT_TRUE(r.prestress_stable);
+  EXPECT_LT(r.equilibrium_residual, 1e-7);
+}
+
+TEST(StructureCheck, TooFewMembersLeaveAFiniteMechanism)
+{
+  // the pinned prism without its verticals, the rings at their free length: the top triangle on three
+  // pinned struts has 6 - 3 = 3 degrees of freedom and nothing stiffens them
+  const Model m = loadSceneFromString(
+      edited("prism_pinned.yaml",
+             { { "    prestress: 173.2050807569\n", "" },
+               { "  verticals:\n    material: fibreglass\n    radius: 0.0015\n    prestress: 291.2704512527\n    "
+                 "members: {V1: [B1, T2], V2: [B2, T3], V3: [B3, T1]}\n",
+                 "" },
+               { "actuators:\n  tension:\n    cables: [V1, V2, V3]\n    range: [0.0, 0.002]\n", "" } }),
+      "rings_only.yaml");
+  const StructureReport r = checkStructure(m, initialState(m));
+  EXPECT_EQ(r.free_coordinates, 6);
+  EXPECT_EQ(r.members, 6);
+  EXPECT_EQ(r.rank, 3);
+  EXPECT_EQ(r.self_stress_states, 3);  // the bottom rings, between pins
+  EXPECT_EQ(r.rigid_body_modes, 0);
+  EXPECT_EQ(r.mechanisms, 3);
+  EXPECT_FALSE(r.prestress_stable);
+}
+
+TEST(StructureCheck, UnstressedPrismIsNotStableAndListsItsSlackCables)
+{
+  // every cable at its free length: the same counts as the prestressed prism, but no tension: every element
+  // is slack (to round-off), nothing stiffens the mechanism, and nothing is out of balance
+  const Model m = loadSceneFromString(edited("prism_pinned.yaml", { { "    prestress: 173.2050807569\n", "" },
+                                                                    { "    prestress: 291.2704512527\n", "" } }),
+                                      "unstressed.yaml");
+  const StructureReport r = checkStructure(m, initialState(m));
+  EXPECT_EQ(r.self_stress_states, 4);
+  EXPECT_EQ(r.mechanisms, 1);
+  EXPECT_FALSE(r.prestress_stable);
+  EXPECT_EQ(r.slack_cables, names({ "R1", "R2", "R3", "R4", "R5", "R6", "V1", "V2", "V3" }));
+  // a cable at its free length to round-off may count as taut in K_t, with k nn^T but a tension of round-off
+  // size: the mechanism stretches no cable, so its stiffness is round-off too
+  EXPECT_LT(std::abs(r.smallest_stiffness_eigenvalue), 1e-6);
+  EXPECT_LT(r.equilibrium_residual, 1e-6);
+}
+
+TEST(StructureCheck, ResidualOffTheEquilibriumIsTheReducedStiffnessTimesTheMove)
+{
+  // at q* + e N v (back on the manifold) the least-squares residual lies in null(Phi_q) = span(N) and its
+  // reduced part N^T r = -N^T F is e K_r v to first order, so r = e N (N^T N)^-1 K_r v + O(e^2)
+  const Model m = loadScene(scenePath("prism_pinned.yaml"));
+  const State eq = equilibrium(m);
+  const ReducedStructure red = reduceStructure(m, eq);
+  const System system(m, locksAt(m, eq.q));
+  std::mt19937 rng(3);
+  const Eigen::VectorXd v = randomVector(static_cast<int>(red.basis.cols()), 1.0, rng).normalized();
+  const Eigen::MatrixXd& n = red.basis;
+  const Eigen::VectorXd per_metre = n * (n.transpose() * n).ldlt().solve(red.stiffness * v);
+  for (double e : { 1e-5, 1e-6 })
+  {
+    State moved = eq;
+    moved.q = project(system, eq.q + e * n * v, eq.u);
+    moved.lambda.resize(0);
+    const StructureReport r = checkStructure(m, moved);
+    const double predicted = e * per_metre.lpNorm<Eigen::Infinity>();
+    EXPECT_GT(r.equilibrium_residual, 0.0);
+    EXPECT_NEAR(r.equilibrium_residual, predicted, 2e-3 * predicted) << "e = " << e;
+  }
+  EXPECT_LT(checkStructure(m, eq).equilibrium_residual, 1e-8);
+}
+
+TEST(StructureCheck, GivenMultipliersAndLeastSquaresOnesGiveTheSameStiffnessAtAnEquilibrium)
+{
+  const Model m = loadScene(scenePath("quadruplex.yaml"));
+  const State eq = equilibrium(m, 0.5, 25);
+  State bare = eq;
+  bare.lambda.resize(0);
+  const ReducedStructure given = reduceStructure(m, eq), fitted = reduceStructure(m, bare);
+  ASSERT_EQ(given.lambda.size(), eq.lambda.size());
+  EXPECT_LT((given.stiffness - fitted.stiffness).cwiseAbs().maxCoeff(), 1e-6 * given.stiffness.cwiseAbs().maxCoeff());
+}
+
+TEST(StructureCheck, ReducedStiffnessIsTheEnergyCurvatureAlongTheManifold)
+{
+  // pinned prism at its start and with the verticals pulled in; sliding verticals; the quadruplex part way
+  // down (actuated nodes: the constraints' curvature enters through the multipliers); the free prism (rigid
+  // modes); the tower folded 0.3 m (sliding cables, point masses, guided drives)
+  const Model pinned = loadScene(scenePath("prism_pinned.yaml"));
+  checkCurvature(pinned, equilibrium(pinned), 6);
+  checkCurvature(pinned, equilibrium(pinned, 0.0008, 8), 6);
+  const Model sliding = loadScene(scenePath("prism_pinned_sliding.yaml"));
+  checkCurvature(sliding, equilibrium(sliding, 0.0008, 8), 6);
+  const Model quadruplex = loadScene(scenePath("quadruplex.yaml"));
+  checkCurvature(quadruplex, equilibrium(quadruplex, 0.6, 30), 4);
+  const Model free = loadScene(scenePath("prism.yaml"), { parseOverride("actuators={}") });
+  checkCurvature(free, initialState(free), 6);
+  // the tower's fibreglass cables are stretched by only 2.7e-5 to 9.3e-5 m there: steps of 1e-4 m would make
+  // them slack (a kink of the energy), steps of 1e-5 m leave the round-off of its 40 J of spring energy
+  const Model tower = loadScene(scenePath("tower.yaml"), { parseOverride("contact.enabled=false") });
+  checkCurvature(tower, equilibrium(tower, 0.3, 30), 8, 1e-5, 3e-4);
+}
+
+TEST(StructureCheck, AboveTheLimitTheCheckIsSkippedAtOnce)
+{
+  Model big;
+  for (int i = 0; i < kMaxStructureCoordinates / 7 + 1; ++i)
+    big.bodies.push_back(makeStrut("S" + std::to_string(i), 1.0, 0.01, 7800.0));
+  finalizeModel(big);
+  ASSERT_GT(big.nq, kMaxStructureCoordinates);
+  State s;
+  s.q = Eigen::VectorXd::Zero(big.nq);
+  const StructureReport r = checkStructure(big, s);
+  EXPECT_FALSE(r.checked);
+  EXPECT_EQ(r.note, "skipped: " + std::to_string(big.nq) + " coordinates, more than the limit of 3000");
+  EXPECT_THROW(reduceStructure(big, s), std::invalid_argument);
+}
