@@ -10,6 +10,7 @@
 #include "active_tensegrity/core/broad_phase.h"
 #include "active_tensegrity/core/contact.h"
 #include "active_tensegrity/core/statics.h"
+#include "active_tensegrity/core/structure_check.h"
 
 namespace active_tensegrity::core
 {
@@ -316,6 +317,10 @@ RunResult runAnalysis(const Model& model, const std::function<void(const State&)
   RunResult result;
   State state = initialState(model);
   const AnalysisSettings& an = model.analysis;
+  // what the start is: in equilibrium, slack elements, prestress stable (structure_check.h)
+  const std::vector<std::string> start_warnings = startWarnings(model, state);
+  const auto with_start_warnings = [&](Summary& s)
+  { s.warnings.insert(s.warnings.begin(), start_warnings.begin(), start_warnings.end()); };
 
   if (an.type == AnalysisType::kStatic)
   {
@@ -329,6 +334,7 @@ RunResult runAnalysis(const Model& model, const std::function<void(const State&)
     {
       result.summary = first;
       result.summary.message = "initial equilibrium: " + first.message;
+      with_start_warnings(result.summary);
       result.final_state = state;
       return result;
     }
@@ -353,6 +359,7 @@ RunResult runAnalysis(const Model& model, const std::function<void(const State&)
                           });
     path.iterations += first.iterations;
     result.summary = path;
+    with_start_warnings(result.summary);
     result.solver_steps = an.arc_length ? result.steps - 1 : an.steps + path.step_cuts;
     result.timings = solver.timings();
   }
@@ -363,6 +370,7 @@ RunResult runAnalysis(const Model& model, const std::function<void(const State&)
     const size_t n_act = model.actuators.size();
     const ActuationLaw law = [schedule, n_act](double t) { return ActuationValues(n_act, schedule.evaluate(t)); };
     result.summary = solver.initialize(state, law);
+    with_start_warnings(result.summary);
     if (!result.summary.ok())
     {
       result.final_state = state;

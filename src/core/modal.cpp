@@ -73,8 +73,10 @@ ModalRun runModal(const Model& model)
   { run.wall_time = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(); };
   ModalRun run;
   State state = initialState(model);
+  const std::vector<std::string> start_warnings = startWarnings(model, state);
   StaticSolver solver(model, model.solver);
   run.summary = solver.solve(state, state.u);
+  run.summary.warnings.insert(run.summary.warnings.begin(), start_warnings.begin(), start_warnings.end());
   if (!run.summary.ok())
   {
     run.summary.message = "equilibrium at the start: " + run.summary.message;

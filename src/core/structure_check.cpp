@@ -9,11 +9,13 @@
 #include <Eigen/SVD>
 #include <Eigen/SparseCholesky>
 
+#include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/cable.h"
 #include "active_tensegrity/core/constraints.h"
 #include "active_tensegrity/core/kinematics.h"
 #include "active_tensegrity/core/mechanics.h"
 #include "active_tensegrity/core/statics.h"
+#include "active_tensegrity/core/text.h"
 
 namespace active_tensegrity::core
 {
@@ -473,6 +475,54 @@ int freeCoordinates(const Model& model, const Eigen::VectorXd& q)
   Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(space.coupling);
   qr.setThreshold(kRankTolerance);
   return space.size - static_cast<int>(qr.rank());
+}
+
+std::vector<std::string> startWarnings(const Model& model_in, const State& state)
+{
+  std::vector<std::string> warnings;
+  // a static path that scales its loads starts at its first load factor
+  Model scaled;
+  if (hasLoadPath(model_in))
+  {
+    scaled = model_in;
+    for (PointLoad& l : scaled.loads)
+      l.force *= scaled.analysis.load_factor_start;
+  }
+  const Model& model = hasLoadPath(model_in) ? scaled : model_in;
+  StructureReport report;
+  try
+  {
+    report = checkStructure(model, state);
+  }
+  catch (const std::invalid_argument& e)
+  {
+    warnings.push_back(std::string("the structural checks of the start failed: ") + e.what());
+    return warnings;
+  }
+  if (!report.checked)
+    return warnings;
+  double largest = 0.0;
+  for (const CableState& c : cableStates(model, state))
+    largest = std::max(largest, std::abs(c.tension));
+  if (report.equilibrium_residual > 1e-6 * (1.0 + largest))
+    warnings.push_back("the start is not in equilibrium: force residual " + shortestNumber(report.equilibrium_residual) +
+                       " N (largest member force " + shortestNumber(largest) + " N)");
+  if (!report.slack_cables.empty())
+  {
+    std::string names;
+    for (size_t i = 0; i < report.slack_cables.size() && i < 10; ++i)
+      names += (i ? ", " : "") + quoted(report.slack_cables[i]);
+    if (report.slack_cables.size() > 10)
+      names += ", ...";
+    warnings.push_back(std::to_string(report.slack_cables.size()) + " of " + std::to_string(report.members) +
+                       " tension elements are slack at the start: " + names);
+  }
+  if (!report.prestress_stable)
+    warnings.push_back("the start is not prestress stable: " + std::to_string(report.mechanisms) +
+                       " infinitesimal mechanisms, " + std::to_string(report.self_stress_states) +
+                       " self-stress states, smallest stiffness eigenvalue " +
+                       shortestNumber(report.smallest_stiffness_eigenvalue) + " N/m (tensegrity_run --check)");
+  return warnings;
 }
 
 }  // namespace active_tensegrity::core

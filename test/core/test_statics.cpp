@@ -354,10 +354,10 @@ struct TripodRun
   std::vector<std::pair<double, double>> rows;
 };
 
-TripodRun runTripod(bool arc_length)
+TripodRun runTripod(bool arc_length, std::vector<Override> overrides = {})
 {
-  const Model model = loadScene(std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) + "/test/scenes/snap_tripod.yaml",
-                                { { "analysis.arc_length", arc_length ? "true" : "false" } });
+  overrides.push_back({ "analysis.arc_length", arc_length ? "true" : "false" });
+  const Model model = loadScene(std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) + "/test/scenes/snap_tripod.yaml", overrides);
   TripodRun run;
   run.result = runAnalysis(model, [&](const State& s)
                            { run.rows.emplace_back(loadFactor(model, s), structureHeight(model, s.q)); });
@@ -405,4 +405,21 @@ TEST(ArcLength, PassesTheLimitPointsOfASnapThroughOnItsClosedForm)
   ASSERT_EQ(arc.result.summary.warnings.size(), 2u);
   for (const std::string& w : arc.result.summary.warnings)
     EXPECT_NE(w.find("limit_point"), std::string::npos) << w;
+}
+
+TEST(BranchJumpGuard, RefusesTheSnapToTheInvertedBranch)
+{
+  // load steps of 0.2 with three cuts: the increment from 0.4 towards 0.6 passes the limit point (0.45287),
+  // and Newton converges on the inverted branch 0.32 m away (the apex below the ground). The guard refuses
+  // it at every cut: status branch_jump, the path stopped on its branch, never "converged"
+  const TripodRun run = runTripod(false, { { "analysis.steps", "5" }, { "solver.max_step_cuts", "3" } });
+  EXPECT_EQ(run.result.summary.status, SolveStatus::kBranchJump) << run.result.summary.message;
+  EXPECT_NE(run.result.summary.message.find("jump to another branch"), std::string::npos);
+  ASSERT_FALSE(run.rows.empty());
+  for (const auto& [f, z] : run.rows)
+  {
+    EXPECT_GT(z, 0.1);  // on the rising branch only
+    EXPECT_NEAR(10.0 * f, tripodLoad(z), 1e-6);
+  }
+  EXPECT_NEAR(run.rows.back().first, 0.4, 1e-12);
 }

@@ -13,6 +13,7 @@
 
 #include <Eigen/Dense>
 
+#include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/scene.h"
 #include "active_tensegrity/core/statics.h"
 #include "active_tensegrity/core/structure_check.h"
@@ -307,4 +308,30 @@ TEST(StructureCheck, AboveTheLimitTheCheckIsSkippedAtOnce)
   EXPECT_FALSE(r.checked);
   EXPECT_EQ(r.note, "skipped: " + std::to_string(big.nq) + " coordinates, more than the limit of 3000");
   EXPECT_THROW(reduceStructure(big, s), std::invalid_argument);
+}
+
+TEST(StartWarnings, SayWhatTheStartIsAndNothingForASoundOne)
+{
+  // the prestressed pinned prism: nothing to say
+  EXPECT_TRUE(
+      startWarnings(loadScene(scenePath("prism_pinned.yaml")), initialState(loadScene(scenePath("prism_pinned.yaml"))))
+          .empty());
+  // the tower starts unstressed: all 20 elements slack, 13 mechanisms unstiffened
+  const Model tower = loadScene(scenePath("tower.yaml"));
+  const std::vector<std::string> t = startWarnings(tower, initialState(tower));
+  ASSERT_EQ(t.size(), 2u);
+  EXPECT_NE(t[0].find("20 of 20 tension elements are slack"), std::string::npos) << t[0];
+  EXPECT_NE(t[1].find("not prestress stable: 13 infinitesimal mechanisms"), std::string::npos) << t[1];
+  // a strut dropped under gravity starts out of equilibrium by its weight
+  const Model impact = loadScene(scenePath("impact.yaml"));
+  const std::vector<std::string> i = startWarnings(impact, initialState(impact));
+  ASSERT_FALSE(i.empty());
+  EXPECT_NE(i[0].find("not in equilibrium"), std::string::npos) << i[0];
+  // and runs carry them in their summaries
+  Model short_tower = loadScene(scenePath("tower.yaml"),
+                                { parseOverride("analysis.steps=2"), parseOverride("analysis.max_actuation=0.01") });
+  const RunResult run = runAnalysis(short_tower, [](const State&) {});
+  ASSERT_GE(run.summary.warnings.size(), 2u);
+  EXPECT_EQ(run.summary.warnings[0], t[0]);
+  EXPECT_EQ(run.summary.warnings[1], t[1]);
 }

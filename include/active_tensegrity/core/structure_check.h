@@ -105,4 +105,11 @@ Eigen::SparseMatrix<double> coordinateBlock(const BlockSparseMatrix& m, int nq);
 /// dim null(Phi_q) at q, spin locks included: the coordinates the constraints leave free.
 int freeCoordinates(const Model& model, const Eigen::VectorXd& q);
 
+/// What a run says about its start (runAnalysis, runModal): one warning each when the start is not in
+/// equilibrium (force residual above 1e-6 of the largest member force, plus 1e-6 N), when tension elements
+/// are slack there (named, the first ten), and when it is not prestress stable (the counts and the smallest
+/// stiffness). Nothing for a state the diagnostics skip (above kMaxStructureCoordinates coordinates). A static
+/// path that scales its loads is checked with them at its first load factor.
+std::vector<std::string> startWarnings(const Model& model, const State& state);
+
 }  // namespace active_tensegrity::core
