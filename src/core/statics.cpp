@@ -229,6 +229,7 @@ Summary StaticSolver::newton(State& s, const ActuationValues& u)
   const int nq = system_.nq();
   const int nl = system_.nLambda();
   Eigen::VectorXd q = s.q, lambda = s.lambda;
+  lambda.conservativeResizeLike(Eigen::VectorXd::Zero(nl));  // a state from dynamics has no spin-lock rows
   for (int it = 0; it < options_.max_iterations; ++it)
   {
     assemble(q, lambda, u, true);
@@ -291,6 +292,7 @@ Summary StaticSolver::dampedNewton(State& s, const ActuationValues& u)
   const int nq = system_.nq();
   const int nl = system_.nLambda();
   Eigen::VectorXd q = s.q, lambda = s.lambda;
+  lambda.conservativeResizeLike(Eigen::VectorXd::Zero(nl));
   double m_scale = 1e-12;
   for (const Body& b : system_.model().bodies)
     m_scale = std::max(m_scale, b.mass);
@@ -415,6 +417,19 @@ bool StaticSolver::factorizePath(const Eigen::VectorXd& q, const Eigen::VectorXd
   path_factor_w_ = w;
   path_factor_sign_ = ok ? path_linear_.determinantSign() : 0;
   return ok;
+}
+
+void StaticSolver::warnCriticalPoints(Summary& summary) const
+{
+  for (const CriticalPoint& c : critical_points_)
+  {
+    std::ostringstream msg;
+    msg << "a critical point (" << c.kind << ") was passed between path parameters " << c.previous_parameter << " and "
+        << c.parameter
+        << (c.kind == "limit_point" ? ": the path parameter turned back there" :
+                                      ": the tangent stiffness changed the sign of its determinant");
+    summary.warnings.push_back(msg.str());
+  }
 }
 
 void StaticSolver::confirmSign(double w)
@@ -692,13 +707,7 @@ Summary StaticSolver::followPath(State& s, const ActuationValues& u_end, int ste
     if (on_step)
       on_step(s, total);
   }
-  for (const CriticalPoint& c : critical_points_)
-  {
-    std::ostringstream msg;
-    msg << "a critical point (" << c.kind << ") was passed between path parameters " << c.previous_parameter << " and "
-        << c.parameter << ": the tangent stiffness changed the sign of its determinant";
-    total.warnings.push_back(msg.str());
-  }
+  warnCriticalPoints(total);
   return total;
 }
 
@@ -886,15 +895,7 @@ Summary StaticSolver::followArcLength(State& s, int steps,
     if (last)
       break;
   }
-  for (const CriticalPoint& c : critical_points_)
-  {
-    std::ostringstream msg;
-    msg << "a critical point (" << c.kind << ") was passed between path parameters " << c.previous_parameter << " and "
-        << c.parameter
-        << (c.kind == "limit_point" ? ": the path parameter turned back there" :
-                                      ": the tangent stiffness changed the sign of its determinant");
-    total.warnings.push_back(msg.str());
-  }
+  warnCriticalPoints(total);
   return total;
 }
 

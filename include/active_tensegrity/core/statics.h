@@ -128,6 +128,8 @@ private:
   /// At an accepted equilibrium (path parameter w): takes the sign of the path factorization as the
   /// path's, noting a critical point when it changed.
   void confirmSign(double w);
+  /// One warning per critical point passed, into summary.warnings.
+  void warnCriticalPoints(Summary& summary) const;
 
   System system_;
   SolverOptions options_;
