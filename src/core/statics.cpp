@@ -51,6 +51,21 @@ void unspin(const Model& model, Eigen::VectorXd& q)
   }
 }
 
+/// The branch-jump guard: refuses (status kBranchJump, with the distances) an equilibrium found further than
+/// `allowed` (max norm over the coordinates) from the predicted one. True when refused.
+bool jumped(const Eigen::VectorXd& found, const Eigen::VectorXd& predicted, double allowed, Summary& attempt)
+{
+  const double distance = (found - predicted).lpNorm<Eigen::Infinity>();
+  if (distance <= allowed)
+    return false;
+  attempt.status = SolveStatus::kBranchJump;
+  std::ostringstream msg;
+  msg << "the equilibrium found lies " << distance << " from the predicted one, more than the " << allowed
+      << " the increment allows: a jump to another branch of equilibria";
+  attempt.message = msg.str();
+  return true;
+}
+
 void accept(State& s, const Eigen::VectorXd& q, const Eigen::VectorXd& lambda, const ActuationValues& u)
 {
   s.q = q;
@@ -652,22 +667,12 @@ Summary StaticSolver::followPath(State& s, const ActuationValues& u_end, int ste
         // branch-jump guard: on a smooth path the corrector moves the prediction by O(dw^2); across a kink
         // (a cable going slack or taut, a contact starting) by at most dw times the change of the tangent;
         // a jump to another branch by a distance that does not shrink with dw
-        if (have_tangent)
-        {
-          const double distance = (trial.q - predicted).lpNorm<Eigen::Infinity>();
-          const double allowed = (w_next - w) * (tangent.head(nq).lpNorm<Eigen::Infinity>() +
-                                                 (have_next ? tangent_next.head(nq).lpNorm<Eigen::Infinity>() : 0.0)) +
-                                 floor;
-          if (!(distance <= allowed))
-          {
-            attempt.status = SolveStatus::kBranchJump;
-            std::ostringstream msg;
-            msg << "the equilibrium found lies " << distance << " from the predicted one, more than the " << allowed
-                << " the increment allows: a jump to another branch of equilibria";
-            attempt.message = msg.str();
-            path_factor_valid_ = false;
-          }
-        }
+        if (have_tangent && jumped(trial.q, predicted,
+                                   (w_next - w) * (tangent.head(nq).lpNorm<Eigen::Infinity>() +
+                                                   (have_next ? tangent_next.head(nq).lpNorm<Eigen::Infinity>() : 0.0)) +
+                                       floor,
+                                   attempt))
+          path_factor_valid_ = false;
       }
       if (attempt.ok())
       {
@@ -830,17 +835,9 @@ Summary StaticSolver::followArcLength(State& s, int steps,
       next = unit(tangent_next, 1.0);
       if (next.first.head(nq).dot(tx.head(nq)) + psi2 * next.second * tw < 0.0)
         next = unit(tangent_next, -1.0);
-      const double distance = (q - predicted).lpNorm<Eigen::Infinity>();
-      const double allowed =
-          ds_step * (tx.head(nq).lpNorm<Eigen::Infinity>() + next.first.head(nq).lpNorm<Eigen::Infinity>()) + floor;
-      if (!(distance <= allowed))
-      {
-        attempt.status = SolveStatus::kBranchJump;
-        std::ostringstream msg;
-        msg << "the equilibrium found lies " << distance << " from the predicted one, more than the " << allowed
-            << " the step allows: a jump to another branch of equilibria";
-        attempt.message = msg.str();
-      }
+      jumped(q, predicted,
+             ds_step * (tx.head(nq).lpNorm<Eigen::Infinity>() + next.first.head(nq).lpNorm<Eigen::Infinity>()) + floor,
+             attempt);
     }
     if (!attempt.ok())
     {

@@ -77,6 +77,33 @@ std::string yamlString(const std::string& text)
   return out + "\"";
 }
 
+// Writes the summary (to its file, or stderr), then the warnings and why the analysis stopped on stderr;
+// the exit status: 0, 1 (the summary file could not be written) or 3 (the analysis stopped early)
+int finish(const std::string& text, std::ofstream& summary_file, const std::string& summary_path,
+           const at::Summary& outcome)
+{
+  if (summary_file.is_open())
+  {
+    summary_file << text;
+    summary_file.close();
+    if (!summary_file)
+    {
+      std::cerr << "tensegrity_run: cannot write '" << summary_path << "'\n";
+      return 1;
+    }
+  }
+  else
+    std::cerr << text;
+  for (const std::string& w : outcome.warnings)
+    std::cerr << "tensegrity_run: warning: " << w << "\n";
+  if (!outcome.ok())
+  {
+    std::cerr << "tensegrity_run: the analysis stopped: " << outcome.message << "\n";
+    return 3;
+  }
+  return 0;
+}
+
 // a YAML flow list of numbers
 std::string yamlNumbers(const std::vector<double>& values)
 {
@@ -194,26 +221,7 @@ int runModalScene(const std::string& scene, const at::Model& model, std::ostream
   summary << "equilibrium:\n";
   for (size_t i = 0; i < cols.size(); ++i)
     summary << "  " << cols[i] << ": " << csvNumber(row[i]) << "\n";
-  if (summary_file.is_open())
-  {
-    summary_file << summary.str();
-    summary_file.close();
-    if (!summary_file)
-    {
-      std::cerr << "tensegrity_run: cannot write '" << summary_path << "'\n";
-      return 1;
-    }
-  }
-  else
-    std::cerr << summary.str();
-  for (const std::string& w : run.summary.warnings)
-    std::cerr << "tensegrity_run: warning: " << w << "\n";
-  if (!run.summary.ok())
-  {
-    std::cerr << "tensegrity_run: the analysis stopped: " << run.summary.message << "\n";
-    return 3;
-  }
-  return 0;
+  return finish(summary.str(), summary_file, summary_path, run.summary);
 }
 }  // namespace
 
@@ -449,24 +457,5 @@ int main(int argc, char** argv)
   for (size_t k = 0; k < peak_cols.size(); ++k)
     summary << "  " << peak_names[k] << ": {value: " << csvNumber(peak_value[k]) << ", t: " << csvNumber(peak_time[k])
             << "}\n";
-  if (summary_file.is_open())
-  {
-    summary_file << summary.str();
-    summary_file.close();
-    if (!summary_file)
-    {
-      std::cerr << "tensegrity_run: cannot write '" << summary_path << "'\n";
-      return 1;
-    }
-  }
-  else
-    std::cerr << summary.str();
-  for (const std::string& w : result.summary.warnings)
-    std::cerr << "tensegrity_run: warning: " << w << "\n";
-  if (!result.summary.ok())
-  {
-    std::cerr << "tensegrity_run: the analysis stopped: " << result.summary.message << "\n";
-    return 3;
-  }
-  return 0;
+  return finish(summary.str(), summary_file, summary_path, result.summary);
 }
