@@ -10,6 +10,8 @@
 #include <string>
 
 #include <gtest/gtest.h>
+
+#include "../tools/command.h"
 #include <rosbag/bag.h>
 #include <rosbag/view.h>
 #include <tf2_msgs/TFMessage.h>
@@ -30,15 +32,10 @@ std::string scene(const std::string& name)
 
 int run(const std::string& args, std::string& output)
 {
-  const std::string cmd = std::string(TENSEGRITY_RUN_PATH) + " " + args + " 2>&1";
-  FILE* pipe = popen(cmd.c_str(), "r");
-  if (!pipe)
-    return -1;
-  char buffer[4096];
-  while (fgets(buffer, sizeof buffer, pipe))
-    output += buffer;
-  const int status = pclose(pipe);
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  const active_tensegrity::test::CommandResult r =
+      active_tensegrity::test::runCommand(std::string(TENSEGRITY_RUN_PATH) + " " + args + " 2>&1");
+  output += r.output;
+  return r.code;
 }
 
 at::Vec3 vec(const geometry_msgs::Point& p)

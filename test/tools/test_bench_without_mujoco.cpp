@@ -8,27 +8,15 @@
 
 #include <gtest/gtest.h>
 
+#include "command.h"
+
 namespace
 {
-struct Result
-{
-  int code = -1;
-  std::string output;  // stdout and stderr together
-};
+using Result = active_tensegrity::test::CommandResult;
 
 Result bench(const std::string& args)
 {
-  const std::string cmd = std::string(TENSEGRITY_BENCH_PATH) + " " + args + " 2>&1";
-  Result r;
-  FILE* pipe = popen(cmd.c_str(), "r");
-  if (!pipe)
-    return r;
-  char buffer[4096];
-  while (fgets(buffer, sizeof buffer, pipe))
-    r.output += buffer;
-  const int status = pclose(pipe);
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
+  return active_tensegrity::test::runCommand(std::string(TENSEGRITY_BENCH_PATH) + " " + args + " 2>&1");
 }
 
 const std::string kPrism = std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) + "/config/scenes/prism.yaml";

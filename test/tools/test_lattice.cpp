@@ -9,6 +9,8 @@
 
 #include <gtest/gtest.h>
 
+#include "command.h"
+
 #include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/scene.h"
 #include "active_tensegrity/core/statics.h"
@@ -223,15 +225,9 @@ namespace
 // exit status and output (stdout and stderr) of tensegrity_bench with the arguments
 std::pair<int, std::string> bench(const std::string& args)
 {
-  FILE* pipe = popen((std::string(TENSEGRITY_BENCH_PATH) + " " + args + " 2>&1").c_str(), "r");
-  std::string out;
-  if (pipe == nullptr)
-    return { -1, out };
-  char buf[4096];
-  while (fgets(buf, sizeof buf, pipe))
-    out += buf;
-  const int status = pclose(pipe);
-  return { WIFEXITED(status) ? WEXITSTATUS(status) : -1, out };
+  const active_tensegrity::test::CommandResult r =
+      active_tensegrity::test::runCommand(std::string(TENSEGRITY_BENCH_PATH) + " " + args + " 2>&1");
+  return { r.code, r.output };
 }
 }  // namespace
 

@@ -9,27 +9,15 @@
 
 #include <gtest/gtest.h>
 
+#include "command.h"
+
 namespace
 {
-struct Result
-{
-  int code = -1;
-  std::string output;  // stdout and stderr together
-};
+using Result = active_tensegrity::test::CommandResult;
 
 Result run(const std::string& args)
 {
-  const std::string cmd = std::string(TENSEGRITY_RUN_PATH) + " " + args + " 2>&1";
-  Result r;
-  FILE* pipe = popen(cmd.c_str(), "r");
-  if (!pipe)
-    return r;
-  char buffer[4096];
-  while (fgets(buffer, sizeof buffer, pipe))
-    r.output += buffer;
-  const int status = pclose(pipe);
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
+  return active_tensegrity::test::runCommand(std::string(TENSEGRITY_RUN_PATH) + " " + args + " 2>&1");
 }
 
 std::string scene(const std::string& name)
