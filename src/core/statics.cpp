@@ -478,7 +478,8 @@ bool StaticSolver::pathTangent(const Eigen::VectorXd& q, double w, Eigen::Vector
   return tangent.allFinite();
 }
 
-Summary StaticSolver::correct(Eigen::VectorXd& q, Eigen::VectorXd& lambda, const ActuationValues& u, double w)
+Summary StaticSolver::correct(Eigen::VectorXd& q, Eigen::VectorXd& lambda, const ActuationValues& u, double w,
+                              double predicted_step)
 {
   // Modified Newton with the path factorization, rebuilt when it contracts slowly (rate > 0.5), after
   // max_jacobian_age increments, or at every iteration without reuse_jacobian. An iterate is accepted as in
@@ -528,10 +529,22 @@ Summary StaticSolver::correct(Eigen::VectorXd& q, Eigen::VectorXd& lambda, const
       path_factor_valid_ = false;
       return sum;
     }
+    const double tol = options_.newton_tolerance;
+    const double step = dx_.head(nq).lpNorm<Eigen::Infinity>();
+    // An older matrix whose increment is larger than half the predicted step (on a smooth path the
+    // prediction is off by the square of the step), or grows from the last one (diverging), is not trusted:
+    // a cable gone taut or slack, a contact begun since the matrix was made, changes the stiffness it lacks,
+    // and the increment that such a matrix gives can throw the iterate far off the path (seen on the
+    // planner's tower: a first correction 150x the prediction error, then divergence). The increment is
+    // dropped and the matrix rebuilt where the iterate is.
+    if (!build && (step > 0.5 * predicted_step + 100.0 * tol || (previous > 0.0 && step / tol > previous)))
+    {
+      rebuild = true;
+      continue;
+    }
     q += dx_.head(nq);
     lambda += dx_.tail(nl);
-    sum.residual = dx_.head(nq).lpNorm<Eigen::Infinity>();
-    const double tol = options_.newton_tolerance;
+    sum.residual = step;
     const double q_part = sum.residual / tol;
     // the multipliers of joints, pins and driven nodes (forces), relative to their size; those of the
     // quaternion norms and spin locks are not judged (they move no point and feed no output)
@@ -629,7 +642,7 @@ Summary StaticSolver::followPath(State& s, const ActuationValues& u_end, int ste
       }
       const Eigen::VectorXd predicted = trial.q;
       trial.u = u;
-      Summary attempt = correct(trial.q, trial.lambda, u, w_next);
+      Summary attempt = correct(trial.q, trial.lambda, u, w_next, (predicted - s.q).lpNorm<Eigen::Infinity>());
       total.iterations += attempt.iterations;
       if (!attempt.ok())
       {

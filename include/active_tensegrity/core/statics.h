@@ -123,8 +123,10 @@ private:
   /// followPath with setArcLength(true); tangent: dx/dw at the start, when have_tangent.
   Summary followArcLength(State& state, int steps, const std::function<void(const State&, const Summary&)>& on_step,
                           Eigen::VectorXd tangent, bool have_tangent);
-  /// Modified-Newton correction of (q, lambda) to the equilibrium under u (w: for the determinant record).
-  Summary correct(Eigen::VectorXd& q, Eigen::VectorXd& lambda, const ActuationValues& u, double w);
+  /// Modified-Newton correction of (q, lambda) to the equilibrium under u (w: for the determinant record;
+  /// predicted_step: how far the predictor moved the coordinates, max norm).
+  Summary correct(Eigen::VectorXd& q, Eigen::VectorXd& lambda, const ActuationValues& u, double w,
+                  double predicted_step);
   /// At an accepted equilibrium (path parameter w): takes the sign of the path factorization as the
   /// path's, noting a critical point when it changed.
   void confirmSign(double w);
