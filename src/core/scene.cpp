@@ -218,6 +218,16 @@ public:
     }
     return out;
   }
+  /// A list of names none of which may repeat (an actuator's cables or nodes, output node lists).
+  std::vector<std::string> uniqueNames(const std::string& k)
+  {
+    std::vector<std::string> out = names(k);
+    std::set<std::string> seen;
+    for (const std::string& n : out)
+      if (!seen.insert(n).second)
+        fail(key(k), "lists " + quoted(n) + " twice");
+    return out;
+  }
   Reader map(const std::string& k)
   {
     return Reader(raw(k), key(k), *source_);
@@ -766,7 +776,7 @@ private:
     {
       // pull-in: each cable's rest length becomes l0 - s
       a.optional("nodes");
-      for (const std::string& cn : a.names("cables"))
+      for (const std::string& cn : a.uniqueNames("cables"))
       {
         const auto it = cable_index_.find(cn);
         if (it == cable_index_.end())
@@ -797,7 +807,7 @@ private:
       const Vec3 any = std::abs(d.x()) < 0.9 ? Vec3::UnitX() : Vec3::UnitY();
       const Vec3 across1 = d.cross(any).normalized();
       const Vec3 across2 = d.cross(across1);
-      for (const std::string& nn : a.names("nodes"))
+      for (const std::string& nn : a.uniqueNames("nodes"))
       {
         const NodeInfo& info = nodeRef(a, a.key("nodes"), nn);
         if (info.fixed)
@@ -1106,7 +1116,7 @@ private:
             [&](Reader& o)
             {
               if (o.has("height_nodes"))
-                for (const std::string& n : o.names("height_nodes"))
+                for (const std::string& n : o.uniqueNames("height_nodes"))
                 {
                   nodeRef(o, o.key("height_nodes"), n);
                   model_.height_nodes.push_back(node_index_.at(n));
@@ -1120,7 +1130,7 @@ private:
                         {
                           OutputLayer layer;
                           layer.name = name;
-                          for (const std::string& n : layers.names(name))
+                          for (const std::string& n : layers.uniqueNames(name))
                           {
                             nodeRef(layers, layers.key(name), n);
                             layer.nodes.push_back(node_index_.at(n));
