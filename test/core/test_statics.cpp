@@ -325,7 +325,7 @@ TEST(Statics, RelaxationFindsTheEquilibriumWhereNewtonFails)
 
 TEST(Statics, RelaxationThatFindsNothingSaysSo)
 {
-  // thrown 20 cm off, the tower does not settle within 2000 relaxation steps: a status and a message, and
+  // thrown 20 cm off, the tower does not settle within 300 relaxation steps: a status and a message, and
   // the state left as it was
   const std::string path = std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) + "/config/scenes/tower.yaml";
   const Model model = loadScene(path, { { "analysis.max_actuation", "0.8" }, { "analysis.steps", "160" } });
@@ -339,9 +339,9 @@ TEST(Statics, RelaxationThatFindsNothingSaysSo)
       s.q(b.offset + k) += push(rng);
   const State before = s;
   StaticSolver solver(model, model.solver);
-  const Summary eq = solver.relax(s, s.u, 2000);
+  const Summary eq = solver.relax(s, s.u, 300);
   EXPECT_FALSE(eq.ok());
-  EXPECT_NE(eq.message.find("2000 steps of dynamic relaxation"), std::string::npos) << eq.message;
+  EXPECT_NE(eq.message.find("300 steps of dynamic relaxation"), std::string::npos) << eq.message;
   EXPECT_EQ(s.q, before.q);
 }
 
