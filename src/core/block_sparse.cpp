@@ -79,6 +79,12 @@ void BlockSparseMatrix::setZero()
   std::fill(matrix_.valuePtr(), matrix_.valuePtr() + matrix_.nonZeros(), 0.0);
 }
 
+int BlockSparseMatrix::blockIndex(int gr, int gc) const
+{
+  const auto it = block_index_.find(key(gr, gc));
+  return it == block_index_.end() ? -1 : it->second;
+}
+
 bool BlockSparseMatrix::hasBlock(int gr, int gc) const
 {
   return block_index_.count(key(gr, gc)) > 0;

@@ -86,7 +86,10 @@ ActuationValues blend(const ActuationValues& a, const ActuationValues& b, double
 }  // namespace
 
 StaticSolver::StaticSolver(const Model& model, const SolverOptions& options)
-  : system_(model, spinLocks(model)), options_(options), jac_(system_.makeMatrix())
+  : system_(model, spinLocks(model))
+  , options_(options)
+  , jac_(system_.makeMatrix())
+  , nbodies_(static_cast<int>(model.bodies.size()))
 {
   path_linear_.allowDense(true, true);
   linear_.allowDense(true, true);
@@ -233,7 +236,7 @@ bool StaticSolver::factorizeFull()
 {
   const ScopeTimer timer(timings_.factorization);
   ++timings_.factorizations;
-  const bool ok = linear_.factorize(jac_.matrix());
+  const bool ok = linear_.factorize(jac_, nbodies_);
   timings_.analyses = path_linear_.analyses() + linear_.analyses();
   return ok;
 }
@@ -421,7 +424,7 @@ bool StaticSolver::factorizePath(const Eigen::VectorXd& q, const Eigen::VectorXd
   bool ok = false;
   {
     const ScopeTimer timer(timings_.factorization);
-    ok = r_.allFinite() && path_linear_.factorize(jac_.matrix());
+    ok = r_.allFinite() && path_linear_.factorize(jac_, nbodies_);
   }
   ++timings_.factorizations;
   timings_.analyses = path_linear_.analyses() + linear_.analyses();

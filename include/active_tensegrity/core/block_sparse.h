@@ -36,6 +36,52 @@ public:
   {
     return matrix_;
   }
+  /// The pattern's blocks (row group, column group), diagonal ones included, sorted; an index into it
+  /// names a block for block() and addBlock().
+  const std::vector<std::pair<int, int>>& blocks() const
+  {
+    return blocks_;
+  }
+  /// Index of block (gr, gc) in blocks(), or -1 when it is not in the pattern.
+  int blockIndex(int gr, int gc) const;
+  /// Copies block `index` of blocks() into out (resized to its rows and columns).
+  template <class Out>
+  void block(int index, Out& out) const
+  {
+    const auto& [gr, gc] = blocks_[index];
+    const std::vector<int>& starts = block_starts_[index];
+    const double* values = matrix_.valuePtr();
+    out.resize(sizes_[gr], sizes_[gc]);
+    for (int j = 0; j < sizes_[gc]; ++j)
+      for (int i = 0; i < sizes_[gr]; ++i)
+        out(i, j) = values[starts[j] + i];
+  }
+  /// Adds `block` into block `index` of blocks() (its size must match).
+  template <class In>
+  void addBlock(int index, const In& block)
+  {
+    const std::vector<int>& starts = block_starts_[index];
+    double* values = matrix_.valuePtr();
+    for (int j = 0; j < block.cols(); ++j)
+      for (int i = 0; i < block.rows(); ++i)
+        values[starts[j] + i] += block(i, j);
+  }
+  /// Adds block `index` of `other` (same group sizes) into block `index_here` of this matrix.
+  void addBlock(int index_here, const BlockSparseMatrix& other, int index)
+  {
+    const auto& [gr, gc] = other.blocks_[index];
+    const std::vector<int>& to = block_starts_[index_here];
+    const std::vector<int>& from = other.block_starts_[index];
+    double* values = matrix_.valuePtr();
+    const double* source = other.matrix_.valuePtr();
+    for (int j = 0; j < other.sizes_[gc]; ++j)
+      for (int i = 0; i < other.sizes_[gr]; ++i)
+        values[to[j] + i] += source[from[j] + i];
+  }
+  int groups() const
+  {
+    return static_cast<int>(sizes_.size());
+  }
   int groupOffset(int g) const
   {
     return offsets_[g];

@@ -10,7 +10,7 @@
 #include <vector>
 
 #include "active_tensegrity/core/mechanics.h"
-#include "active_tensegrity/core/sparse_linear_solver.h"
+#include "active_tensegrity/core/reduced_linear_solver.h"
 #include "active_tensegrity/core/state.h"
 #include "active_tensegrity/core/summary.h"
 
@@ -136,11 +136,12 @@ private:
   System system_;
   SolverOptions options_;
   BlockSparseMatrix jac_;
-  SparseLinearSolver linear_;                  // solve() and the damped Newton (sparse LU: exact zero pivots)
+  int nbodies_ = 0;                            // jac_'s first groups: the bodies' coordinates
+  ReducedLinearSolver linear_;                 // solve() and the damped Newton
   ActuationValues path_u_start_, path_u_end_;  // the path being followed: u(w) between them
   double load_start_ = 1.0, load_end_ = 1.0;   // ... and the load factor f(w)
   bool arc_length_ = false;
-  SparseLinearSolver path_linear_;  // the continuation's tangent factorization (dense when filled)
+  ReducedLinearSolver path_linear_;  // the continuation's tangent factorization
   bool path_factor_valid_ = false;
   int path_factor_age_ = 0;        // load increments since the path factorization was made
   double path_theta_ = 0.0;        // largest contraction rate measured with it

@@ -1,0 +1,326 @@
+#include "active_tensegrity/core/reduced_linear_solver.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <Eigen/QR>
+
+namespace active_tensegrity::core
+{
+namespace
+{
+using SmallVector = Eigen::Matrix<double, Eigen::Dynamic, 1, Eigen::ColMajor, 8, 1>;
+
+/// Copies block `index` of m into the top left of a zero 8 x 8 matrix.
+void padded(const BlockSparseMatrix& m, int index, Eigen::Matrix<double, 8, 8>& out)
+{
+  out.setZero();
+  Eigen::Block<Eigen::Matrix<double, 8, 8>> view =
+      out.topLeftCorner(m.groupSize(m.blocks()[index].first), m.groupSize(m.blocks()[index].second));
+  m.block(index, view);
+}
+}  // namespace
+
+void ReducedLinearSolver::analyze(const BlockSparseMatrix& m, int coordinate_groups)
+{
+  analyzed_rows_ = m.rows();
+  analyzed_nonzeros_ = m.matrix().nonZeros();
+  analyzed_groups_ = m.groups();
+  const int groups = m.groups();
+  bodies_.clear();
+  group_body_.assign(groups, -1);
+  group_map_.assign(groups, -1);
+  reducible_ = false;
+  bool small = true;
+  for (int g = 0; g < groups; ++g)
+    small = small && m.groupSize(g) <= kMaxGroup;
+  // the one coordinate group each constraint group is coupled with (-1: none yet, -2: more than one, or
+  // another constraint group)
+  std::vector<int> partner(groups, -1);
+  for (const auto& [gr, gc] : m.blocks())
+  {
+    if (gr == gc)
+      continue;
+    for (const auto& [c, other] : { std::make_pair(gr, gc), std::make_pair(gc, gr) })
+    {
+      if (c < coordinate_groups)
+        continue;
+      if (other >= coordinate_groups)
+        partner[c] = -2;
+      else if (partner[c] == -1)
+        partner[c] = other;
+      else if (partner[c] != other)
+        partner[c] = -2;
+    }
+  }
+  std::vector<bool> eliminated(groups, false);
+  if (small)
+  {
+    for (int c = coordinate_groups; c < groups; ++c)
+    {
+      const int g = partner[c];
+      if (g < 0 || m.blockIndex(c, g) < 0 || m.blockIndex(g, c) < 0)
+        continue;
+      if (group_body_[g] < 0)
+      {
+        Body b;
+        b.group = g;
+        b.offset = m.groupOffset(g);
+        b.size = m.groupSize(g);
+        group_body_[g] = static_cast<int>(bodies_.size());
+        bodies_.push_back(b);
+      }
+      Body& b = bodies_[group_body_[g]];
+      if (static_cast<int>(b.rows.size()) + m.groupSize(c) > b.size)
+        continue;  // more one-body rows than coordinates: the rest stay (the matrix is then singular anyway)
+      for (int i = 0; i < m.groupSize(c); ++i)
+        b.rows.push_back(m.groupOffset(c) + i);
+      b.row_blocks.push_back(m.blockIndex(c, g));
+      b.col_blocks.push_back(m.blockIndex(g, c));
+      b.diag_blocks.push_back(m.blockIndex(c, c));
+      eliminated[c] = true;
+    }
+  }
+  reducible_ = !bodies_.empty();
+  if (!reducible_)
+    return;
+  std::vector<int> sizes;
+  for (int g = 0; g < groups; ++g)
+  {
+    if (eliminated[g])
+      continue;
+    group_map_[g] = static_cast<int>(sizes.size());
+    const int body = group_body_[g];
+    sizes.push_back(body >= 0 ? m.groupSize(g) - static_cast<int>(bodies_[body].rows.size()) : m.groupSize(g));
+  }
+  std::vector<std::pair<int, int>> blocks;
+  for (const auto& [gr, gc] : m.blocks())
+    if (group_map_[gr] >= 0 && group_map_[gc] >= 0)
+      blocks.emplace_back(group_map_[gr], group_map_[gc]);
+  reduced_.init(sizes, blocks);
+  block_map_.assign(m.blocks().size(), -1);
+  for (size_t i = 0; i < m.blocks().size(); ++i)
+  {
+    const auto& [gr, gc] = m.blocks()[i];
+    if (group_map_[gr] >= 0 && group_map_[gc] >= 0)
+      block_map_[i] = reduced_.blockIndex(group_map_[gr], group_map_[gc]);
+  }
+  kept_offset_.assign(groups, -1);
+  full_offset_.resize(groups);
+  full_size_.resize(groups);
+  for (int g = 0; g < groups; ++g)
+  {
+    full_offset_[g] = m.groupOffset(g);
+    full_size_[g] = m.groupSize(g);
+  }
+  eliminated_rows_ = 0;
+  for (int g = 0; g < groups; ++g)
+    if (group_map_[g] >= 0)
+      kept_offset_[g] = reduced_.groupOffset(group_map_[g]);
+  for (const Body& b : bodies_)
+    eliminated_rows_ += static_cast<int>(b.rows.size());
+  // the blocks of the two products in solve(): A xp into the kept rows; A x into the eliminated bodies' rows
+  blocks_ = m.blocks();
+  rhs_blocks_.clear();
+  force_blocks_.clear();
+  rhs_position_.assign(m.blocks().size(), -1);
+  force_position_.assign(m.blocks().size(), -1);
+  for (size_t i = 0; i < m.blocks().size(); ++i)
+  {
+    const auto& [gr, gc] = m.blocks()[i];
+    if (group_body_[gc] >= 0 && group_map_[gr] >= 0)
+    {
+      rhs_position_[i] = static_cast<int>(rhs_blocks_.size());
+      rhs_blocks_.push_back(static_cast<int>(i));
+    }
+    if (group_body_[gr] >= 0 && group_map_[gc] >= 0)
+    {
+      force_position_[i] = static_cast<int>(force_blocks_.size());
+      force_blocks_.push_back(static_cast<int>(i));
+    }
+  }
+  rhs_ops_.resize(rhs_blocks_.size());
+  force_ops_.resize(force_blocks_.size());
+  bl_.resize(bodies_.size());
+}
+
+bool ReducedLinearSolver::bases(const BlockSparseMatrix& m)
+{
+  Small block, bt, ct;
+  for (Body& b : bodies_)
+  {
+    const int n = b.size;
+    const int k = static_cast<int>(b.rows.size());
+    bt.resize(n, k);  // B^T
+    ct.resize(n, k);  // the multipliers' columns, which must equal B^T
+    int row = 0;
+    for (size_t i = 0; i < b.row_blocks.size(); ++i)
+    {
+      m.block(b.row_blocks[i], block);
+      const int kc = static_cast<int>(block.rows());
+      bt.middleCols(row, kc) = block.transpose();
+      m.block(b.col_blocks[i], block);
+      ct.middleCols(row, kc) = block;
+      m.block(b.diag_blocks[i], block);
+      if (block.cwiseAbs().maxCoeff() != 0.0)
+        return false;
+      row += kc;
+    }
+    const double scale = bt.cwiseAbs().maxCoeff();
+    if (!(scale > 0.0) || !((ct - bt).cwiseAbs().maxCoeff() <= 1e-12 * scale))
+      return false;
+    const Eigen::HouseholderQR<Small> qr(bt);
+    const auto r = qr.matrixQR().topLeftCorner(k, k);
+    const double largest = r.diagonal().cwiseAbs().maxCoeff();
+    if (!(r.diagonal().cwiseAbs().minCoeff() > 1e-10 * largest))
+      return false;  // the body's rows are dependent
+    Small q(n, n);
+    SmallVector workspace(n);
+    qr.householderQ().evalTo(q, workspace);
+    b.z.setZero();
+    b.z.topLeftCorner(n, n - k) = q.rightCols(n - k);
+    // B = R^T Q1^T, so Y = Q1 R^-T gives B Y = I
+    Small t = q.leftCols(k).transpose();
+    r.triangularView<Eigen::Upper>().solveInPlace(t);
+    b.y.setZero();
+    b.y.topLeftCorner(n, k) = t.transpose();
+  }
+  return true;
+}
+
+bool ReducedLinearSolver::factorize(const BlockSparseMatrix& m, int coordinate_groups)
+{
+  const bool new_pattern =
+      m.rows() != analyzed_rows_ || m.matrix().nonZeros() != analyzed_nonzeros_ || m.groups() != analyzed_groups_;
+  if (new_pattern)
+    analyze(m, coordinate_groups);
+  use_reduced_ = allow_reduction_ && reducible_ && bases(m);
+  if (!use_reduced_)
+  {
+    factorized_size_ = m.rows();
+    return full_solver_.factorize(m.matrix());
+  }
+  reduced_.setZero();
+  // every product on 8 x 8 matrices padded with zeros (fixed sizes: unrolled and vectorized; a strut has 7
+  // coordinates)
+  Mat8 block, left, out;
+  for (size_t i = 0; i < m.blocks().size(); ++i)
+  {
+    const int j = block_map_[i];
+    if (j < 0)
+      continue;
+    const auto& [gr, gc] = m.blocks()[i];
+    const int br = group_body_[gr], bc = group_body_[gc];
+    const int index = static_cast<int>(i);
+    if (br < 0 && bc < 0)
+    {
+      reduced_.addBlock(j, m, index);
+      continue;
+    }
+    padded(m, index, block);
+    if (force_position_[i] >= 0)
+      force_ops_[force_position_[i]].noalias() = bodies_[br].y.transpose().lazyProduct(block);
+    if (br >= 0)
+      left.noalias() = bodies_[br].z.transpose().lazyProduct(block);
+    else
+      left = block;
+    const int rr = reduced_.groupSize(group_map_[gr]), rc = reduced_.groupSize(group_map_[gc]);
+    if (bc >= 0)
+    {
+      out.noalias() = left.lazyProduct(bodies_[bc].z);
+      rhs_ops_[rhs_position_[i]].noalias() = left.lazyProduct(bodies_[bc].y);
+      reduced_.addBlock(j, out.topLeftCorner(rr, rc));
+    }
+    else
+      reduced_.addBlock(j, left.topLeftCorner(rr, rc));
+  }
+  factorized_size_ = reduced_.rows();
+  return reduced_solver_.factorize(reduced_.matrix());
+}
+
+void ReducedLinearSolver::solve(const Eigen::VectorXd& b, Eigen::VectorXd& x) const
+{
+  if (!use_reduced_)
+  {
+    full_solver_.solve(b, x);
+    return;
+  }
+  using Vec8 = Eigen::Matrix<double, 8, 1>;
+  const auto load = [](const Eigen::VectorXd& v, int offset, int size)
+  {
+    Vec8 out = Vec8::Zero();
+    out.head(size) = v.segment(offset, size);
+    return out;
+  };
+  // the one-body rows' right-hand sides b_L, body by body (padded)
+  for (size_t i = 0; i < bodies_.size(); ++i)
+  {
+    const Body& body = bodies_[i];
+    bl_[i].setZero();
+    for (size_t r = 0; r < body.rows.size(); ++r)
+      bl_[i](static_cast<Eigen::Index>(r)) = b(body.rows[r]);
+  }
+  // the reduced right-hand side T^T (b - A xp), xp = Y b_L the particular solution of the one-body rows
+  // (T^T A Y is kept per block from the factorization)
+  rhs_.resize(reduced_.rows());
+  const int groups = static_cast<int>(group_map_.size());
+  for (int g = 0; g < groups; ++g)
+  {
+    if (group_map_[g] < 0)
+      continue;
+    const int offset = full_offset_[g], size = full_size_[g], reduced = reduced_.groupSize(group_map_[g]);
+    const int body = group_body_[g];
+    if (body >= 0)
+      rhs_.segment(kept_offset_[g], reduced) =
+          bodies_[body].z.transpose().lazyProduct(load(b, offset, size)).head(reduced);
+    else
+      rhs_.segment(kept_offset_[g], size) = b.segment(offset, size);
+  }
+  for (size_t p = 0; p < rhs_blocks_.size(); ++p)
+  {
+    const auto& [gr, gc] = blocks_[rhs_blocks_[p]];
+    const int reduced = reduced_.groupSize(group_map_[gr]);
+    rhs_.segment(kept_offset_[gr], reduced) -= rhs_ops_[p].lazyProduct(bl_[group_body_[gc]]).head(reduced);
+  }
+  reduced_solver_.solve(rhs_, xr_);
+  // x = xp + T xr
+  x.resize(b.size());
+  for (int g = 0; g < groups; ++g)
+  {
+    if (group_map_[g] < 0)
+      continue;
+    const int offset = full_offset_[g], size = full_size_[g];
+    const int body = group_body_[g];
+    if (body >= 0)
+    {
+      const Body& bd = bodies_[body];
+      x.segment(offset, size) = (bd.y.lazyProduct(bl_[body]) +
+                                 bd.z.lazyProduct(load(xr_, kept_offset_[g], reduced_.groupSize(group_map_[g]))))
+                                    .head(size);
+    }
+    else
+      x.segment(offset, size) = xr_.segment(kept_offset_[g], size);
+  }
+  // the eliminated multipliers from the body's force rows: B^T dlambda_L = b_q - (A x)_q, and Y^T B^T = I
+  // (Y^T A is kept per block)
+  for (size_t i = 0; i < bodies_.size(); ++i)
+    bl_[i].noalias() = bodies_[i].y.transpose().lazyProduct(load(b, bodies_[i].offset, bodies_[i].size));
+  for (size_t p = 0; p < force_blocks_.size(); ++p)
+  {
+    const auto& [gr, gc] = blocks_[force_blocks_[p]];
+    bl_[group_body_[gr]].noalias() -= force_ops_[p].lazyProduct(load(x, full_offset_[gc], full_size_[gc]));
+  }
+  for (size_t i = 0; i < bodies_.size(); ++i)
+    for (size_t r = 0; r < bodies_[i].rows.size(); ++r)
+      x(bodies_[i].rows[r]) = bl_[i](static_cast<Eigen::Index>(r));
+}
+
+int ReducedLinearSolver::determinantSign() const
+{
+  if (!use_reduced_)
+    return full_solver_.determinantSign();
+  const int s = reduced_solver_.determinantSign();
+  return eliminated_rows_ % 2 == 0 ? s : -s;
+}
+
+}  // namespace active_tensegrity::core
