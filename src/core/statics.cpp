@@ -8,6 +8,7 @@
 #include <Eigen/Dense>
 
 #include "active_tensegrity/core/dynamics.h"
+#include "active_tensegrity/core/structure_check.h"
 
 namespace active_tensegrity::core
 {
@@ -433,6 +434,8 @@ bool StaticSolver::factorizePath(const Eigen::VectorXd& q, const Eigen::VectorXd
   path_theta_ = 0.0;
   path_factor_q_ = q;
   path_factor_w_ = w;
+  path_factor_lambda_ = lambda;
+  path_factor_u_ = u;
   path_factor_sign_ = ok ? path_linear_.determinantSign() : 0;
   return ok;
 }
@@ -446,6 +449,9 @@ void StaticSolver::warnCriticalPoints(Summary& summary) const
         << c.parameter
         << (c.kind == "limit_point" ? ": the path parameter turned back there" :
                                       ": the tangent stiffness changed the sign of its determinant");
+    if (c.negative_before >= 0)
+      msg << " (reduced stiffness: eigenvalue nearest zero " << c.eigenvalue_before << " -> " << c.eigenvalue_after
+          << " N/m, negative eigenvalues " << c.negative_before << " -> " << c.negative_after << ")";
     summary.warnings.push_back(msg.str());
   }
 }
@@ -462,10 +468,29 @@ void StaticSolver::confirmSign(double w)
     c.previous_parameter = sign_parameter_;
     c.sign_before = sign_;
     c.sign_after = path_factor_sign_;
+    // the stiffness on both sides (a dense eigenproblem each, at the first kMaxCriticalPointSpectra
+    // critical points of a path only)
+    State after;
+    after.q = path_factor_q_;
+    after.lambda = path_factor_lambda_;
+    after.u = path_factor_u_;
+    const int limit = critical_points_.size() < kMaxCriticalPointSpectra ? kMaxCriticalPointCoordinates : 0;
+    const StiffnessSpectrum before_spectrum = stiffnessSpectrum(system_.model(), sign_state_, limit);
+    const StiffnessSpectrum after_spectrum = stiffnessSpectrum(system_.model(), after, limit);
+    if (before_spectrum.computed && after_spectrum.computed)
+    {
+      c.eigenvalue_before = before_spectrum.nearest_zero;
+      c.eigenvalue_after = after_spectrum.nearest_zero;
+      c.negative_before = before_spectrum.negative;
+      c.negative_after = after_spectrum.negative;
+    }
     critical_points_.push_back(c);
   }
   sign_ = path_factor_sign_;
   sign_parameter_ = path_factor_w_;
+  sign_state_.q = path_factor_q_;
+  sign_state_.lambda = path_factor_lambda_;
+  sign_state_.u = path_factor_u_;
 }
 
 bool StaticSolver::pathTangent(const Eigen::VectorXd& q, double w, Eigen::VectorXd& tangent)

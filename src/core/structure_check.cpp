@@ -416,6 +416,35 @@ ReducedStructure reduceStructure(const Model& model, const State& state)
   return reduce(model, state, system, actuationOf(model, state));
 }
 
+StiffnessSpectrum stiffnessSpectrum(const Model& model, const State& state, int max_coordinates)
+{
+  StiffnessSpectrum out;
+  if (model.nq > std::min(max_coordinates, kMaxStructureCoordinates))
+    return out;
+  try
+  {
+    const ReducedStructure r = reduceStructure(model, state);
+    const Eigen::MatrixXd qc = rigidComplement(r);
+    const Eigen::VectorXd k = symmetricEigenvalues(qc.transpose() * r.stiffness * qc);
+    out.computed = true;
+    if (k.size() == 0)
+    {
+      out.nearest_zero = std::numeric_limits<double>::quiet_NaN();
+      return out;
+    }
+    out.tolerance = std::max(kDefinitenessTolerance * k.cwiseAbs().maxCoeff(), kDefinitenessFloor);
+    Eigen::Index nearest = 0;
+    k.cwiseAbs().minCoeff(&nearest);
+    out.nearest_zero = k(nearest);
+    out.negative = static_cast<int>((k.array() < -out.tolerance).count());
+  }
+  catch (const std::invalid_argument&)
+  {
+    out.computed = false;
+  }
+  return out;
+}
+
 StructureReport checkStructure(const Model& model, const State& state)
 {
   StructureReport report;

@@ -370,7 +370,64 @@ double tripodLoad(double z)
   const double k = 1000.0, a = 1.0, l0 = std::sqrt(1.0 + 0.2 * 0.2);
   return 3.0 * k * z * (l0 / std::hypot(a, z) - 1.0);
 }
+
+/// The apex's vertical stiffness at height z, -dP/dz = 3 k (z^2 L0 / L^3 - (L0 / L - 1)): zero at the limit
+/// points, where the load is largest.
+double tripodVerticalStiffness(double z)
+{
+  const double k = 1000.0, a = 1.0, l0 = std::sqrt(1.0 + 0.2 * 0.2), l = std::hypot(a, z);
+  return 3.0 * k * (z * z * l0 / (l * l * l) - (l0 / l - 1.0));
+}
+
+/// The height in [lo, hi] where the tripod holds the load p (bisection; P monotonic there).
+double tripodHeight(double p, double lo, double hi)
+{
+  const double sign = tripodLoad(hi) > tripodLoad(lo) ? 1.0 : -1.0;
+  for (int i = 0; i < 200; ++i)
+  {
+    const double mid = 0.5 * (lo + hi);
+    (sign * (tripodLoad(mid) - p) > 0.0 ? hi : lo) = mid;
+  }
+  return 0.5 * (lo + hi);
+}
 }  // namespace
+
+TEST(CriticalPoints, CarryTheReducedStiffnessOnBothSidesOnItsClosedForm)
+{
+  // the tripod's arc-length path passes two limit points; on each side of each, the reduced stiffness's
+  // eigenvalue nearest zero is the apex's vertical stiffness -dP/dz at the bracketing equilibrium (the
+  // lateral stiffness is about 1500 N/m there), and the count of negative eigenvalues goes 0 -> 1 over the
+  // first (the rising branch turns unstable) and 1 -> 0 over the mirror one
+  const Model model = loadScene(std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) + "/test/scenes/snap_tripod.yaml");
+  StaticSolver solver(model, model.solver);
+  solver.setLoadPath(0.0, 1.0);
+  solver.setArcLength(true);
+  State s = initialState(model);
+  ASSERT_TRUE(solver.followPath(s, {}, 40, {}).ok());
+  const std::vector<CriticalPoint>& points = solver.criticalPoints();
+  ASSERT_EQ(points.size(), 2u);
+  const double z_star = std::sqrt(std::pow(std::sqrt(1.04), 2.0 / 3.0) - 1.0);
+  // (z range of the equilibrium before, of the one after) for each point, from the path's shape
+  const std::pair<double, double> before[2] = { { z_star, 0.2 }, { -z_star, 0.0 } };
+  const std::pair<double, double> after[2] = { { 0.0, z_star }, { -0.4, -z_star } };
+  for (size_t i = 0; i < 2; ++i)
+  {
+    const CriticalPoint& c = points[i];
+    SCOPED_TRACE(i);
+    EXPECT_EQ(c.kind, "limit_point");
+    EXPECT_EQ(c.negative_before, i == 0 ? 0 : 1);
+    EXPECT_EQ(c.negative_after, i == 0 ? 1 : 0);
+    const double zb = tripodHeight(10.0 * c.previous_parameter, before[i].first, before[i].second);
+    const double za = tripodHeight(10.0 * c.parameter, after[i].first, after[i].second);
+    std::cerr << "[ measured ] limit point " << i << ": eigenvalue " << c.eigenvalue_before << " (closed form "
+              << tripodVerticalStiffness(zb) << ") -> " << c.eigenvalue_after << " (" << tripodVerticalStiffness(za)
+              << ") N/m\n";
+    EXPECT_NEAR(c.eigenvalue_before, tripodVerticalStiffness(zb), 1e-3);
+    EXPECT_NEAR(c.eigenvalue_after, tripodVerticalStiffness(za), 1e-3);
+    EXPECT_GT(c.eigenvalue_before * (i == 0 ? 1.0 : -1.0), 0.0);
+    EXPECT_LT(c.eigenvalue_after * (i == 0 ? 1.0 : -1.0), 0.0);
+  }
+}
 
 TEST(ArcLength, PassesTheLimitPointsOfASnapThroughOnItsClosedForm)
 {

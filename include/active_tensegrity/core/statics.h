@@ -6,6 +6,7 @@
 #pragma once
 
 #include <functional>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -34,7 +35,20 @@ struct CriticalPoint
   double parameter = 0.0;           // path parameter at the equilibrium where the new sign was found
   double previous_parameter = 0.0;  // ... and where the old sign was last seen (the point lies between)
   int sign_before = 0, sign_after = 0;
+  /// The reduced tangent stiffness at the two equilibria that bracket the point (StiffnessSpectrum, N/m):
+  /// its eigenvalue nearest zero and its number of negative eigenvalues; NaN and -1 where not computed (a
+  /// model of more than kMaxCriticalPointCoordinates coordinates, a point after the first
+  /// kMaxCriticalPointSpectra of a path).
+  double eigenvalue_before = std::numeric_limits<double>::quiet_NaN();
+  double eigenvalue_after = std::numeric_limits<double>::quiet_NaN();
+  int negative_before = -1, negative_after = -1;
 };
+
+/// Largest model (coordinates) whose critical points get the stiffness spectrum on both sides (a dense
+/// eigenproblem of the reduced stiffness per side).
+constexpr int kMaxCriticalPointCoordinates = 1000;
+/// ... and for the first this many critical points of a path.
+constexpr size_t kMaxCriticalPointSpectra = 20;
 
 class StaticSolver
 {
@@ -147,9 +161,12 @@ private:
   double path_theta_ = 0.0;        // largest contraction rate measured with it
   Eigen::VectorXd path_factor_q_;  // the state it was made at
   double path_factor_w_ = 0.0;     // ... and the path parameter it was made at
-  int path_factor_sign_ = 0;       // the sign of its determinant
-  int sign_ = 0;                   // the path's determinant sign at the last accepted equilibrium (0: none yet)
-  double sign_parameter_ = 0.0;    // the path parameter of the factorization that showed it
+  Eigen::VectorXd path_factor_lambda_;
+  ActuationValues path_factor_u_;
+  int path_factor_sign_ = 0;     // the sign of its determinant
+  int sign_ = 0;                 // the path's determinant sign at the last accepted equilibrium (0: none yet)
+  double sign_parameter_ = 0.0;  // the path parameter of the factorization that showed it
+  State sign_state_;             // ... and the state it was made at (q, lambda, u)
   std::vector<CriticalPoint> critical_points_;
   StepTimings timings_;
   Eigen::VectorXd force_rows_;  // 1 on the multipliers of kPoints constraints (forces), else 0

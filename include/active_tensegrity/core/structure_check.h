@@ -95,6 +95,19 @@ ReducedStructure reduceStructure(const Model& model, const State& state);
 /// coordinates of r.
 Eigen::MatrixXd rigidComplement(const ReducedStructure& r);
 
+/// The spectrum of the reduced tangent stiffness K_r of a state on the complement of the rigid-body modes
+/// (N/m, the node metric of StructureReport): what a critical point of an equilibrium path is judged by.
+struct StiffnessSpectrum
+{
+  bool computed = false;      // false above `max_coordinates`, or when the state cannot be reduced
+  int negative = 0;           // eigenvalues below -tol (the state's index of instability)
+  double nearest_zero = 0.0;  // the eigenvalue of least magnitude (NaN with an empty complement)
+  double tolerance = 0.0;     // tol: kDefinitenessTolerance times the largest magnitude, at least 1e-9 N/m
+};
+
+/// StiffnessSpectrum of `state`; not computed for a model of more than `max_coordinates` coordinates.
+StiffnessSpectrum stiffnessSpectrum(const Model& model, const State& state, int max_coordinates);
+
 /// Counts, stability and residual of a state (see StructureReport). Refuses (checked = false, note
 /// "skipped: N coordinates, more than the limit of 3000") a model above kMaxStructureCoordinates.
 StructureReport checkStructure(const Model& model, const State& state);
