@@ -141,7 +141,8 @@ void ReducedLinearSolver::analyze(const BlockSparseMatrix& m, int coordinate_gro
   }
   rhs_ops_.resize(rhs_blocks_.size());
   force_ops_.resize(force_blocks_.size());
-  bl_.resize(bodies_.size());
+  tb_.resize(bodies_.size());
+  blt_.resize(bodies_.size());
 }
 
 bool ReducedLinearSolver::bases(const BlockSparseMatrix& m)
@@ -177,13 +178,13 @@ bool ReducedLinearSolver::bases(const BlockSparseMatrix& m)
     Small q(n, n);
     SmallVector workspace(n);
     qr.householderQ().evalTo(q, workspace);
-    b.z.setZero();
-    b.z.topLeftCorner(n, n - k) = q.rightCols(n - k);
-    // B = R^T Q1^T, so Y = Q1 R^-T gives B Y = I
+    // T = [Z Y]: Z the null-space basis Q2, Y = Q1 R^-T the right inverse (B = R^T Q1^T, so B Y = I)
     Small t = q.leftCols(k).transpose();
     r.triangularView<Eigen::Upper>().solveInPlace(t);
-    b.y.setZero();
-    b.y.topLeftCorner(n, k) = t.transpose();
+    b.t.setZero();
+    b.t.topLeftCorner(n, n - k) = q.rightCols(n - k);
+    b.t.block(0, n - k, n, k) = t.transpose();
+    b.tt = b.t.transpose();  // kept transposed: products with a plain left factor vectorize by columns
   }
   return true;
 }
@@ -218,18 +219,20 @@ bool ReducedLinearSolver::factorize(const BlockSparseMatrix& m, int coordinate_g
       continue;
     }
     padded(m, index, block);
-    if (force_position_[i] >= 0)
-      force_ops_[force_position_[i]].noalias() = bodies_[br].y.transpose().lazyProduct(block);
+    // with T = [Z Y] per body: T_r^T A T_c in one pair of products; its Z-Z part goes into A_r, and the
+    // products solve() needs are kept whole: T_r^T A (rows of Y_r^T A) and (T_r^T) A T_c (columns of A Y_c)
     if (br >= 0)
-      left.noalias() = bodies_[br].z.transpose().lazyProduct(block);
+      left.noalias() = bodies_[br].tt.lazyProduct(block);
     else
       left = block;
+    if (force_position_[i] >= 0)
+      force_ops_[force_position_[i]] = left;
     const int rr = reduced_.groupSize(group_map_[gr]), rc = reduced_.groupSize(group_map_[gc]);
     if (bc >= 0)
     {
-      out.noalias() = left.lazyProduct(bodies_[bc].z);
-      rhs_ops_[rhs_position_[i]].noalias() = left.lazyProduct(bodies_[bc].y);
-      reduced_.addBlock(j, out.topLeftCorner(rr, rc));
+      Mat8& whole = rhs_ops_[rhs_position_[i]];
+      whole.noalias() = left.lazyProduct(bodies_[bc].t);
+      reduced_.addBlock(j, whole.topLeftCorner(rr, rc));
     }
     else
       reduced_.addBlock(j, left.topLeftCorner(rr, rc));
@@ -252,16 +255,18 @@ void ReducedLinearSolver::solve(const Eigen::VectorXd& b, Eigen::VectorXd& x) co
     out.head(size) = v.segment(offset, size);
     return out;
   };
-  // the one-body rows' right-hand sides b_L, body by body (padded)
+  // per body: T^T b_q (Z^T b_q, then Y^T b_q) and the one-body rows' right-hand sides b_L, placed after
+  // the Z part (the kept products have A Y_c in the columns after Z_c's; zeros against Z_c)
   for (size_t i = 0; i < bodies_.size(); ++i)
   {
     const Body& body = bodies_[i];
-    bl_[i].setZero();
-    for (size_t r = 0; r < body.rows.size(); ++r)
-      bl_[i](static_cast<Eigen::Index>(r)) = b(body.rows[r]);
+    const int k = static_cast<int>(body.rows.size());
+    tb_[i].noalias() = body.tt.lazyProduct(load(b, body.offset, body.size));
+    blt_[i].setZero();
+    for (int r = 0; r < k; ++r)
+      blt_[i](body.size - k + r) = b(body.rows[r]);
   }
-  // the reduced right-hand side T^T (b - A xp), xp = Y b_L the particular solution of the one-body rows
-  // (T^T A Y is kept per block from the factorization)
+  // the reduced right-hand side Z^T (b - A xp), xp = Y b_L the particular solution of the one-body rows
   rhs_.resize(reduced_.rows());
   const int groups = static_cast<int>(group_map_.size());
   for (int g = 0; g < groups; ++g)
@@ -271,8 +276,7 @@ void ReducedLinearSolver::solve(const Eigen::VectorXd& b, Eigen::VectorXd& x) co
     const int offset = full_offset_[g], size = full_size_[g], reduced = reduced_.groupSize(group_map_[g]);
     const int body = group_body_[g];
     if (body >= 0)
-      rhs_.segment(kept_offset_[g], reduced) =
-          bodies_[body].z.transpose().lazyProduct(load(b, offset, size)).head(reduced);
+      rhs_.segment(kept_offset_[g], reduced) = tb_[body].head(reduced);
     else
       rhs_.segment(kept_offset_[g], size) = b.segment(offset, size);
   }
@@ -280,10 +284,11 @@ void ReducedLinearSolver::solve(const Eigen::VectorXd& b, Eigen::VectorXd& x) co
   {
     const auto& [gr, gc] = blocks_[rhs_blocks_[p]];
     const int reduced = reduced_.groupSize(group_map_[gr]);
-    rhs_.segment(kept_offset_[gr], reduced) -= rhs_ops_[p].lazyProduct(bl_[group_body_[gc]]).head(reduced);
+    const Vec8 product = rhs_ops_[p].lazyProduct(blt_[group_body_[gc]]);  // whole: vectorized by columns
+    rhs_.segment(kept_offset_[gr], reduced) -= product.head(reduced);
   }
   reduced_solver_.solve(rhs_, xr_);
-  // x = xp + T xr
+  // x = xp + Z xr = T [xr; b_L]
   x.resize(b.size());
   for (int g = 0; g < groups; ++g)
   {
@@ -293,26 +298,29 @@ void ReducedLinearSolver::solve(const Eigen::VectorXd& b, Eigen::VectorXd& x) co
     const int body = group_body_[g];
     if (body >= 0)
     {
-      const Body& bd = bodies_[body];
-      x.segment(offset, size) = (bd.y.lazyProduct(bl_[body]) +
-                                 bd.z.lazyProduct(load(xr_, kept_offset_[g], reduced_.groupSize(group_map_[g]))))
-                                    .head(size);
+      Vec8& v = blt_[body];
+      const int reduced = reduced_.groupSize(group_map_[g]);
+      v.head(reduced) = xr_.segment(kept_offset_[g], reduced);
+      const Vec8 xb = bodies_[body].t.lazyProduct(v);
+      x.segment(offset, size) = xb.head(size);
     }
     else
       x.segment(offset, size) = xr_.segment(kept_offset_[g], size);
   }
-  // the eliminated multipliers from the body's force rows: B^T dlambda_L = b_q - (A x)_q, and Y^T B^T = I
-  // (Y^T A is kept per block)
-  for (size_t i = 0; i < bodies_.size(); ++i)
-    bl_[i].noalias() = bodies_[i].y.transpose().lazyProduct(load(b, bodies_[i].offset, bodies_[i].size));
+  // the eliminated multipliers from the body's force rows: B^T dlambda_L = b_q - (A x)_q, and Y^T B^T = I;
+  // in T^T A (kept per block) the rows after Z_r's are Y_r^T A
   for (size_t p = 0; p < force_blocks_.size(); ++p)
   {
     const auto& [gr, gc] = blocks_[force_blocks_[p]];
-    bl_[group_body_[gr]].noalias() -= force_ops_[p].lazyProduct(load(x, full_offset_[gc], full_size_[gc]));
+    tb_[group_body_[gr]].noalias() -= force_ops_[p].lazyProduct(load(x, full_offset_[gc], full_size_[gc]));
   }
   for (size_t i = 0; i < bodies_.size(); ++i)
-    for (size_t r = 0; r < bodies_[i].rows.size(); ++r)
-      x(bodies_[i].rows[r]) = bl_[i](static_cast<Eigen::Index>(r));
+  {
+    const Body& body = bodies_[i];
+    const int k = static_cast<int>(body.rows.size());
+    for (int r = 0; r < k; ++r)
+      x(body.rows[r]) = tb_[i](body.size - k + r);
+  }
 }
 
 int ReducedLinearSolver::determinantSign() const

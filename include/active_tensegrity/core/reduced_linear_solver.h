@@ -23,7 +23,9 @@ namespace active_tensegrity::core
 /// with Z the block diagonal of the bodies' bases (identity for bodies without one-body rows). Its
 /// blocks are those of A between the groups kept, each multiplied by small dense bases, so A_r keeps A's
 /// block pattern; it is factorized by a SparseLinearSolver (dense LU when it fills, sparse LU otherwise).
-/// The eliminated multipliers come back from Y^T times the body's force rows. On the tower (216
+/// Each block is transformed once, as T_r^T A_i T_c with T = [Z Y] per body (8 x 8, padded with zeros),
+/// which also gives the products the solve needs (A Y for the particular solution, Y^T A for the
+/// multipliers). The eliminated multipliers come back from Y^T times the body's force rows. On the tower (216
 /// unknowns) A_r has 104; the dense LU's work falls with the cube of the size.
 ///
 /// The elimination needs each eliminated row's column to be its row transposed (true of the constraint
@@ -82,7 +84,7 @@ private:
     std::vector<int> row_blocks;   // blocks (c, group) of its constraint groups c, in order
     std::vector<int> col_blocks;   // blocks (group, c)
     std::vector<int> diag_blocks;  // blocks (c, c)
-    Mat8 z, y;                     // null-space basis (size x (size - k)), right inverse (size x k), padded
+    Mat8 t, tt;  // [Z Y]: null-space basis (size x (size - k)), right inverse (size x k); padded; and T^T
   };
   /// Analyzes m's pattern: the one-body constraint groups, the reduced groups and A_r's pattern.
   void analyze(const BlockSparseMatrix& m, int coordinate_groups);
@@ -105,13 +107,15 @@ private:
   std::vector<int> rhs_blocks_, force_blocks_;      // A's blocks (kept rows, eliminated body's columns), and
                                                     // (eliminated body's rows, kept columns)
   std::vector<int> rhs_position_, force_position_;  // A's block -> index into those lists, or -1
-  std::vector<Mat8, Eigen::aligned_allocator<Mat8>> rhs_ops_, force_ops_;  // per such block T_r^T A_i Y_c,
-                                                                           // and Y_r^T A_i (padded)
+  // per such block T_r^T A_i T_c (A_i T_c where the rows are kept whole), and T_r^T A_i, with T = [Z Y]
+  // per body (padded)
+  std::vector<Mat8, Eigen::aligned_allocator<Mat8>> rhs_ops_, force_ops_;
   BlockSparseMatrix reduced_;
   SparseLinearSolver reduced_solver_, full_solver_;
   std::vector<std::pair<int, int>> blocks_;  // A's blocks (its pattern analyzed)
   mutable Eigen::VectorXd rhs_, xr_;
-  mutable std::vector<Eigen::Matrix<double, kMaxGroup, 1>> bl_;  // per body: its rows' right-hand sides
+  mutable std::vector<Eigen::Matrix<double, kMaxGroup, 1>> tb_;   // per body: T^T b_q (padded)
+  mutable std::vector<Eigen::Matrix<double, kMaxGroup, 1>> blt_;  // ... its rows' b_L after the Z part
 };
 
 }  // namespace active_tensegrity::core
