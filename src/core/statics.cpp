@@ -94,6 +94,18 @@ StaticSolver::StaticSolver(const Model& model, const SolverOptions& options)
 {
   path_linear_.allowDense(true, true);
   linear_.allowDense(true, true);
+  if (!model.nodes.empty())
+  {
+    Vec3 lo = Vec3::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+    for (const Node& n : model.nodes)
+    {
+      const Vec3 p = pointPosition(model, n.point, model.q0);
+      lo = lo.cwiseMin(p);
+      hi = hi.cwiseMax(p);
+    }
+    if ((hi - lo).allFinite())
+      wander_bound_ = std::max(2.0, (hi - lo).norm());
+  }
   zero_q_.setZero(system_.nq());
   force_rows_.setZero(system_.nLambda());
   for (size_t c = 0; c < system_.constraints().size(); ++c)
@@ -249,6 +261,7 @@ Summary StaticSolver::newton(State& s, const ActuationValues& u)
   const int nl = system_.nLambda();
   Eigen::VectorXd q = s.q, lambda = s.lambda;
   lambda.conservativeResizeLike(Eigen::VectorXd::Zero(nl));  // a state from dynamics has no spin-lock rows
+  int wanders = 0;
   for (int it = 0; it < options_.max_iterations; ++it)
   {
     assemble(q, lambda, u, true);
@@ -289,6 +302,18 @@ Summary StaticSolver::newton(State& s, const ActuationValues& u)
     if (sum.residual <= options_.newton_tolerance)
     {
       accept(s, q, lambda, u);
+      return sum;
+    }
+    // increments larger than the structure (or than 2, a quaternion's whole range) twice: Newton is far outside
+    // its region of convergence and the damped Newton takes over (left to run, it wanders through all its
+    // iterations, each a factorization; measured on the tower's plans, it never came back from there)
+    if (sum.residual > wander_bound_ && ++wanders >= 2)
+    {
+      sum.status = SolveStatus::kMaxIterations;
+      std::ostringstream msg;
+      msg << "static Newton diverged (an increment of " << sum.residual << " after " << it + 1
+          << " iterations, the second larger than the structure's size " << wander_bound_ << ")";
+      sum.message = msg.str();
       return sum;
     }
   }
@@ -519,6 +544,8 @@ Summary StaticSolver::correct(Eigen::VectorXd& q, Eigen::VectorXd& lambda, const
   const bool reuse = options_.reuse_jacobian;
   bool rebuild = !reuse || !path_factor_valid_ || path_factor_age_ >= options_.max_jacobian_age;
   double previous = -1.0;
+  double fresh_step = 0.0;  // the last increment made with a matrix built in its iteration
+  int growths = 0;
   for (int it = 0; it < options_.max_iterations; ++it)
   {
     const bool build = rebuild;
@@ -569,6 +596,21 @@ Summary StaticSolver::correct(Eigen::VectorXd& q, Eigen::VectorXd& lambda, const
     {
       rebuild = true;
       continue;
+    }
+    // Newton's own increments (fresh matrices) that grew twice: the iterate is not in Newton's region of
+    // convergence; the full solver's damped Newton is what finds the equilibrium from here (left to run,
+    // this loop wanders through all its iterations, a factorization every other one)
+    if (build)
+    {
+      if (fresh_step > 0.0 && step >= fresh_step && ++growths >= 2)
+      {
+        sum.status = SolveStatus::kMaxIterations;
+        std::ostringstream msg;
+        msg << "static Newton diverged (its increment grew twice, to " << step << " after " << it + 1 << " iterations)";
+        sum.message = msg.str();
+        return sum;
+      }
+      fresh_step = step;
     }
     q += dx_.head(nq);
     lambda += dx_.tail(nl);
