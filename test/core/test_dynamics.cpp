@@ -887,3 +887,41 @@ TEST(LinearSolver, EquilibratedDenseFactorsJudgeTheStructureNotItsUnits)
   s.makeCompressed();
   EXPECT_FALSE(scaled.factorize(s));
 }
+
+TEST(LinearSolver, DenseFactorsTellSingularFromIllConditionedByTheirCondition)
+{
+  // A = U diag(s) V^T with s from 1 down to 10^-e: the condition is estimated only when the pivots spread
+  // over more than 8 decades; either way a reciprocal condition above 1e-14 factorizes and one below does not
+  std::mt19937 rng(5);
+  std::normal_distribution<double> g;
+  const int n = 60;
+  const auto orthogonal = [&]()
+  {
+    Eigen::MatrixXd m(n, n);
+    for (int i = 0; i < n; ++i)
+      for (int j = 0; j < n; ++j)
+        m(i, j) = g(rng);
+    return Eigen::MatrixXd(Eigen::HouseholderQR<Eigen::MatrixXd>(m).householderQ());
+  };
+  for (const auto& [decades, regular] : { std::make_pair(4.0, true), std::make_pair(11.0, true),
+                                          std::make_pair(17.0, false), std::make_pair(30.0, false) })
+  {
+    Eigen::VectorXd s(n);
+    for (int i = 0; i < n; ++i)
+      s(i) = std::pow(10.0, -decades * i / (n - 1));
+    const Eigen::MatrixXd a = orthogonal() * s.asDiagonal() * orthogonal().transpose();
+    const Eigen::SparseMatrix<double> sparse = a.sparseView();
+    SparseLinearSolver solver;
+    solver.allowDense(true);
+    solver.factorize(sparse);  // (first call: sparse factors, then the choice)
+    EXPECT_EQ(solver.factorize(sparse), regular) << "condition 1e" << decades;
+    EXPECT_TRUE(solver.dense());
+    if (regular)
+    {
+      const Eigen::VectorXd b = Eigen::VectorXd::Random(n);
+      Eigen::VectorXd x;
+      solver.solve(b, x);
+      EXPECT_LT((a * x - b).norm() / (a.norm() * x.norm()), 1e-13) << "condition 1e" << decades;
+    }
+  }
+}
