@@ -49,6 +49,7 @@
 #include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/contact.h"
 #include "active_tensegrity/core/dynamics.h"
+#include "active_tensegrity/core/statics.h"
 #include "active_tensegrity/core/text.h"
 
 namespace ob = ompl::base;
@@ -539,7 +540,21 @@ std::vector<std::string> plannerNames()
   return names;
 }
 
-PlanResult planFolding(const core::Model& model, const core::State& start, const PlanRequest& r)
+std::string startEquilibrium(const core::Model& model, const core::State& state, core::State& start)
+{
+  start = state;
+  for (core::ActuationValue& u : start.u)
+    u.rate = u.accel = 0.0;
+  start.qd.setZero();
+  core::Model statics = model;
+  statics.analysis.type = core::AnalysisType::kStatic;
+  core::StaticSolver solver(statics, statics.solver);
+  const core::Summary eq = solver.relax(start, start.u);
+  return eq.ok() ? std::string() : "no quasi-static equilibrium at the current actuation: " + eq.message;
+}
+
+PlanResult planFolding(const core::Model& model, const core::State& start, const PlanRequest& r,
+                       const PlanControl& control)
 {
   PlanResult out;
   std::vector<int> idx;
@@ -617,11 +632,11 @@ PlanResult planFolding(const core::Model& model, const core::State& start, const
   std::atomic<bool> time_limit_reached{ false };
   const ob::PlannerTerminationCondition timed = ob::timedPlannerTerminationCondition(r.time_limit);
   const ob::PlannerTerminationCondition ptc(
-      [&timed, &time_limit_reached]
+      [&timed, &time_limit_reached, &control]
       {
         if (!time_limit_reached && timed())
           time_limit_reached = true;
-        return time_limit_reached.load();
+        return time_limit_reached.load() || (control.cancelled && control.cancelled());
       });
   const ob::PlannerStatus status = planner->solve(ptc);
   out.stopped_by_time_limit = time_limit_reached;

@@ -6,6 +6,7 @@
 /// dynamic peaks and the slowest-needed time scale. ROS-free.
 #pragma once
 
+#include <functional>
 #include <limits>
 #include <string>
 #include <vector>
@@ -43,19 +44,57 @@ struct PlanRequest
   std::vector<double> max_speeds{ 0.1 };
   std::vector<double> max_accelerations{ 0.5 };
   std::string planner = "RRTConnect";
-  double time_limit = 10.0;  // s of planning
+  /// s of wall time for the whole request: search, shortcutting, following the path from the start and
+  /// the dynamic verification; the answer comes within time_limit + 0.5 s
+  double time_limit = 10.0;
   unsigned seed = 1;
   double continuation_step = 0.02;  // m: largest actuation increment between checked equilibria
   double range = 0.0;               // m: planner step (0: 0.2 of the largest actuator range)
   double sample_dt = 0.05;          // s between trajectory points
-  /// dynamic verification: simulate the trajectory (DynamicsSolver), report peak contact force and strut
-  /// bending stress; with find_speed_limit, slow it down (time scale, bisection) until they stay below
-  /// limits.max_contact_force and max_bending_stress
+  /// height goals: before searching, one continuation to every actuator's upper bound; a target below
+  /// the lowest height met on it is answered at once as unreachable (kInvalidGoal). Holds for structures
+  /// that fold as their cables are pulled in; turn off for others.
+  bool reachability_check = true;
+  /// dynamic verification: simulate the trajectory (DynamicsSolver) from the start equilibrium at rest
+  /// until the structure is at rest again; report peak contact force, strut bending stress and the
+  /// smallest gap; with find_speed_limit, slow it down (time scale, bisection) until they stay within
+  /// the limits (max_contact_force or min_clearance, max_bending_stress)
   bool verify_dynamics = false;
   bool find_speed_limit = false;
   double max_bending_stress = std::numeric_limits<double>::infinity();  // Pa
-  double settle_time = 0.5;                                             // s simulated after the trajectory ends
+  /// s simulated after the trajectory ends; 0: until at rest (every body's speed, as the RMS over the
+  /// mass, below rest_speed for a whole window of the structure's longest natural period), at most
+  /// max_settle_time
+  double settle_time = 0.0;
+  double rest_speed = 1e-3;             // m/s
+  double max_settle_time = 30.0;        // s
   double speed_limit_tolerance = 0.05;  // relative width of the final time-scale bracket (> 0)
+  /// corners blended within this tube (m, max norm in actuation space) around the validated path,
+  /// the blended curve checked by continuation; 0: rest to rest at every waypoint
+  double blend_tolerance = 0.0;
+};
+
+/// What a running request reports (PlanControl::progress).
+struct PlanProgress
+{
+  double elapsed = 0.0;         // s of wall time since the request started
+  long equilibrium_solves = 0;  // continuation increments so far
+  /// the best valid equilibrium seen so far: its height (m) and its distance to the goal (m: height
+  /// above the target, or the max-norm distance to the target values); +inf before the first
+  double best_height = std::numeric_limits<double>::infinity();
+  double best_distance = std::numeric_limits<double>::infinity();
+  std::string phase;  // "search", "shortcut", "follow", "verify"
+};
+
+/// Hooks of a running request (all optional). Both are called from the planning thread.
+struct PlanControl
+{
+  /// polled often (between equilibrium increments); true stops the request, which answers within
+  /// 0.5 s with the best path found so far (approximate) and PlanResult::cancelled set
+  std::function<bool()> cancelled;
+  /// called at most every progress_period s
+  std::function<void(const PlanProgress&)> progress;
+  double progress_period = 0.2;
 };
 
 struct PlanResult
@@ -68,25 +107,34 @@ struct PlanResult
   std::vector<double> times;
   std::vector<std::vector<double>> positions, velocities, accelerations;
   double duration = 0.0;
+  double rest_to_rest_duration = 0.0;  // the same path stopping at every waypoint (== duration unblended)
   // along the path (quasi-static, every continuation increment)
   double min_gap = std::numeric_limits<double>::infinity();
   double peak_contact_force = 0.0;
   double final_height = 0.0;
   long equilibrium_solves = 0;
-  double planning_time = 0.0;          // s wall, OMPL solve and simplification
-  bool stopped_by_time_limit = false;  // the search ran until its time_limit (its termination condition fired)
+  double planning_time = 0.0;          // s wall, the whole request
+  bool stopped_by_time_limit = false;  // the request's deadline ended the search (or a later phase)
+  bool cancelled = false;              // PlanControl::cancelled ended it
   // dynamic verification
-  bool dynamics_verified = false;
-  bool dynamics_within_limits = false;
+  bool dynamics_verified = false;       // the simulation ran to rest (or settle_time) without failing
+  bool dynamics_within_limits = false;  // verified, and the peaks and the gap within the limits
   double dynamic_peak_contact_force = 0.0;
   double dynamic_peak_bending_stress = 0.0;
+  double dynamic_min_gap = std::numeric_limits<double>::infinity();  // m
+  double settle_duration = 0.0;                                      // s simulated after the trajectory's end
   double time_scale = 1.0;  // the returned trajectory is the planned one slowed by this factor
   int dynamic_runs = 0;
 };
 
-/// Plans from `start` (a converged quasi-static equilibrium of `model`, e.g. StaticSolver::solve at the
-/// current actuation). Never throws on a bad request: status kInvalidRequest and a message.
-PlanResult planFolding(const core::Model& model, const core::State& start, const PlanRequest& request);
+/// Plans from `start` (a converged quasi-static equilibrium of `model`: startEquilibrium below). Never
+/// throws on a bad request: status kInvalidRequest and a message naming the field and the value.
+PlanResult planFolding(const core::Model& model, const core::State& start, const PlanRequest& request,
+                       const PlanControl& control = {});
+
+/// The quasi-static equilibrium to plan from, nearest to `state` (folded, moving: velocities and rates
+/// are dropped, then StaticSolver::relax at its actuation). Empty message on success, else why not.
+std::string startEquilibrium(const core::Model& model, const core::State& state, core::State& start);
 
 /// Names of the OMPL geometric planners planFolding accepts.
 std::vector<std::string> plannerNames();
