@@ -55,7 +55,7 @@ EquilibriumOracle::EquilibriumOracle(const core::Model& model, std::vector<int> 
   model_.analysis.type = core::AnalysisType::kStatic;
   core::Summary ok;
   start_ = measure(start, ok);
-  cache_.push_back(start_);
+  cache_.push_back({ start_, values(start_.state), ~0ul });
 }
 
 EquilibriumOracle::~EquilibriumOracle() = default;
@@ -72,6 +72,24 @@ long EquilibriumOracle::solves() const
 {
   const std::lock_guard<std::mutex> lock(mutex_);
   return solves_;
+}
+
+size_t EquilibriumOracle::cached() const
+{
+  const std::lock_guard<std::mutex> lock(mutex_);
+  return cache_.size();
+}
+
+double EquilibriumOracle::bestDistance() const
+{
+  const std::lock_guard<std::mutex> lock(mutex_);
+  return best_distance_;
+}
+
+double EquilibriumOracle::bestHeight() const
+{
+  const std::lock_guard<std::mutex> lock(mutex_);
+  return best_height_;
 }
 
 Equilibrium EquilibriumOracle::measure(const core::State& s, const core::Summary& sum) const
@@ -112,8 +130,27 @@ void EquilibriumOracle::remember(const Equilibrium& e) const
 {
   if (!e.converged)
     return;
+  const double d = distance_ && valid(e) ? distance_(e) : std::numeric_limits<double>::infinity();
+  std::vector<double> v = values(e.state);
   const std::lock_guard<std::mutex> lock(mutex_);
-  cache_.push_back(e);
+  if (d < best_distance_)
+  {
+    best_distance_ = d;
+    best_height_ = e.height;
+  }
+  if (cache_.size() >= kCacheCapacity)
+  {
+    // drop the least recently used quarter (the start, used at ~0, stays)
+    std::vector<unsigned long> used;
+    for (const Entry& c : cache_)
+      used.push_back(c.used);
+    const size_t drop = kCacheCapacity / 4;
+    std::nth_element(used.begin(), used.begin() + static_cast<long>(drop), used.end());
+    const unsigned long threshold = used[drop];
+    cache_.erase(std::remove_if(cache_.begin(), cache_.end(), [&](const Entry& c) { return c.used < threshold; }),
+                 cache_.end());
+  }
+  cache_.push_back({ e, std::move(v), ++clock_ });
 }
 
 bool EquilibriumOracle::follow(const Equilibrium& from, const std::vector<double>& u, Equilibrium& end, bool check,
@@ -126,6 +163,12 @@ bool EquilibriumOracle::follow(const Equilibrium& from, const std::vector<double
   end = from;
   for (int k = 1; k <= n; ++k)
   {
+    if (stop_ && stop_())
+    {
+      end.converged = false;
+      end.message = "stopped (the request's time limit, or cancelled)";
+      return false;
+    }
     core::ActuationValues target = s.u;
     for (size_t i = 0; i < actuators_.size(); ++i)
     {
@@ -155,15 +198,19 @@ Equilibrium EquilibriumOracle::at(const std::vector<double>& u) const
   {
     const std::lock_guard<std::mutex> lock(mutex_);
     double best = INFINITY;
-    for (const Equilibrium& e : cache_)
+    Entry* nearest = nullptr;
+    for (Entry& c : cache_)
     {
-      const double d = actuationDistance(values(e.state), u);
+      const double d = actuationDistance(c.values, u);
       if (d < best)
       {
         best = d;
-        from = e;
+        nearest = &c;
       }
     }
+    if (nearest->used != ~0ul)
+      nearest->used = ++clock_;
+    from = nearest->equilibrium;
     if (best == 0.0)
       return from;
   }

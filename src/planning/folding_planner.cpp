@@ -6,6 +6,7 @@
 #include <cmath>
 #include <functional>
 #include <map>
+#include <mutex>
 #include <random>
 #include <set>
 #include <sstream>
@@ -49,6 +50,8 @@
 #include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/contact.h"
 #include "active_tensegrity/core/dynamics.h"
+#include "active_tensegrity/core/mechanics.h"
+#include "active_tensegrity/core/modal.h"
 #include "active_tensegrity/core/statics.h"
 #include "active_tensegrity/core/text.h"
 
@@ -255,14 +258,15 @@ public:
           v[i] = lo[i] + f * (hi[i] - lo[i]);
         return v;
       };
-      if (oracle_.at(point(1.0)).height > target_)
-        continue;  // not even at the upper bounds
+      const auto above = [this](const Equilibrium& e) { return !e.converged || e.height > target_; };
+      if (above(oracle_.at(point(1.0))))
+        continue;  // not even at the upper bounds (or stopped)
       double f0 = 0.0, f1 = 1.0;
-      if (oracle_.at(point(0.0)).height > target_)
+      if (above(oracle_.at(point(0.0))))
         for (int k = 0; k < 8; ++k)
         {
           const double f = 0.5 * (f0 + f1);
-          (oracle_.at(point(f)).height <= target_ ? f1 : f0) = f;
+          (above(oracle_.at(point(f))) ? f0 : f1) = f;
         }
       else
         f1 = 0.0;
@@ -369,12 +373,15 @@ std::string checkRequest(const core::Model& model, const PlanRequest& r, std::ve
          std::make_tuple(r.limits.max_contact_force, "max_contact_force", true),
          std::make_tuple(r.limits.max_cable_stress, "max_cable_stress", true),
          std::make_tuple(r.max_bending_stress, "max_bending_stress", true),
-         std::make_tuple(r.settle_time, "settle_time", false), std::make_tuple(r.range, "range", false) })
+         std::make_tuple(r.settle_time, "settle_time", false), std::make_tuple(r.range, "range", false),
+         std::make_tuple(r.blend_tolerance, "blend_tolerance", false) })
     if (!(err = nonneg(x, what, inf)).empty())
       return err;
   for (const auto& [x, what] :
        { std::make_pair(r.time_limit, "time_limit"), std::make_pair(r.continuation_step, "continuation_step"),
-         std::make_pair(r.sample_dt, "sample_dt") })
+         std::make_pair(r.sample_dt, "sample_dt"), std::make_pair(r.rest_speed, "rest_speed"),
+         std::make_pair(r.max_settle_time, "max_settle_time"),
+         std::make_pair(r.speed_limit_tolerance, "speed_limit_tolerance") })
     if (!std::isfinite(x) || x <= 0.0)
     {
       msg << what << " must be finite and > 0, got " << x;
@@ -448,15 +455,135 @@ void timeParameterize(const std::vector<Values>& waypoints, const PlanRequest& r
   out.duration = t0;
 }
 
-struct DynamicPeaks
+/// The request's one deadline, its cancel and its progress reports (PlanControl). Planners may poll from
+/// several threads: the flags are atomic, the reports serialized.
+class RequestClock
 {
-  bool ok = false;  // the simulation ran to the end
-  std::string message;
-  double contact = 0.0, bending = 0.0;
+public:
+  using Clock = std::chrono::steady_clock;
+
+  RequestClock(double time_limit, const PlanControl& control)
+    : control_(control)
+    , t0_(Clock::now())
+    , main_(t0_ + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(time_limit)))
+    , end_(main_)
+  {
+  }
+  void watch(const EquilibriumOracle* oracle)
+  {
+    oracle_ = oracle;
+  }
+  double elapsed() const
+  {
+    return std::chrono::duration<double>(Clock::now() - t0_).count();
+  }
+  void phase(const char* name)
+  {
+    const std::lock_guard<std::mutex> lock(report_mutex_);
+    phase_ = name;
+  }
+  /// Whether the current phase must stop: past its end, or cancelled (before the answer is being made).
+  bool stop()
+  {
+    report();
+    const Clock::time_point t = Clock::now();
+    if (t > main_)
+      timed_out_ = true;
+    if (!answering_ && !cancelled_ && control_.cancelled && control_.cancelled())
+      cancelled_ = true;
+    return t > end_.load() || (!answering_ && cancelled_);
+  }
+  /// The request ran out: its deadline passed or it was cancelled.
+  bool out()
+  {
+    stop();
+    if (!cancelled_ && control_.cancelled && control_.cancelled())
+      cancelled_ = true;
+    return timed_out_ || cancelled_;
+  }
+  /// From now on the answer is being made: a cancel no longer stops the phase, which ends at the deadline
+  /// or, when that is less than `grace` s away, `grace` s from now.
+  void answering(double grace)
+  {
+    answering_ = true;
+    end_ = std::max(main_,
+                    Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(grace)));
+  }
+  bool timedOut() const
+  {
+    return timed_out_;
+  }
+  bool cancelled() const
+  {
+    return cancelled_;
+  }
+
+private:
+  void report()
+  {
+    if (!control_.progress)
+      return;
+    std::unique_lock<std::mutex> lock(report_mutex_, std::try_to_lock);
+    if (!lock.owns_lock())
+      return;
+    const double now = elapsed();
+    if (reported_ && now - last_report_ < control_.progress_period)
+      return;
+    reported_ = true;
+    last_report_ = now;
+    PlanProgress p;
+    p.elapsed = now;
+    p.phase = phase_;
+    if (oracle_)
+    {
+      p.equilibrium_solves = oracle_->solves();
+      p.best_distance = oracle_->bestDistance();
+      p.best_height = oracle_->bestHeight();
+    }
+    control_.progress(p);
+  }
+
+  const PlanControl& control_;
+  const EquilibriumOracle* oracle_ = nullptr;
+  Clock::time_point t0_, main_;
+  std::atomic<Clock::time_point> end_;
+  std::atomic<bool> timed_out_{ false }, cancelled_{ false }, answering_{ false };
+  std::mutex report_mutex_;
+  std::string phase_ = "search";
+  bool reported_ = false;
+  double last_report_ = 0.0;
 };
 
-DynamicPeaks simulate(const core::Model& model, const core::State& start, const std::vector<std::string>& names,
-                      const PlanResult& plan, double scale, double settle)
+struct DynamicPeaks
+{
+  bool ran = false;      // the simulation ran to its end without failing
+  bool settled = false;  // ... and the structure came to rest (or settle_time was simulated)
+  std::string message;
+  double contact = 0.0, bending = 0.0;
+  double min_gap = std::numeric_limits<double>::infinity();
+  double settle = 0.0;  // s simulated after the trajectory's end
+};
+
+/// The window the structure must stay below the rest speed: 1.5 of its longest natural period at the
+/// end of the path (0.25 to 5 s; 1 s when the modal analysis fails or the end is a mechanism).
+double restWindow(const core::Model& model, const core::State& end)
+{
+  try
+  {
+    const core::ModalAnalysis m = core::naturalModes(model, end, 1);
+    if (!m.modes.empty() && m.modes.front().omega > 0.0)
+      return std::clamp(1.5 * 2.0 * M_PI / m.modes.front().omega, 0.25, 5.0);
+  }
+  catch (const std::exception&)
+  {
+  }
+  return 1.0;
+}
+
+/// Simulates `plan` slowed by `scale` from `start` at rest, then until the structure is at rest (or for
+/// settle_time); polls `stop` every step.
+DynamicPeaks simulate(const core::Model& model, const core::State& start, const PlanRequest& r, const PlanResult& plan,
+                      double scale, double rest_window, const std::function<bool()>& stop)
 {
   DynamicPeaks peaks;
   core::Model dyn = model;
@@ -475,19 +602,32 @@ DynamicPeaks simulate(const core::Model& model, const core::State& start, const 
       x /= scale;
     vel.push_back(v);
   }
-  const std::string err = control.setTrajectory(0.0, names, times, plan.positions, vel);
+  const std::string err = control.setTrajectory(0.0, r.actuators, times, plan.positions, vel);
   if (!err.empty())
   {
     peaks.message = "trajectory refused: " + err;
     return peaks;
   }
   core::DynamicsSolver solver(dyn, dyn.solver);
+  const core::System system(dyn);
+  double mass = 0.0;
+  for (const core::Body& b : dyn.bodies)
+    mass += b.mass;
   const core::ActuationLaw law = [&control](double t) { return control.values(t); };
   core::Summary sum = solver.initialize(s, law);
   const double dt = dyn.solver.dt;
-  const long steps = std::lround(std::ceil((times.back() + settle) / dt));
-  for (long k = 1; k <= steps && sum.ok(); ++k)
+  const double t_end = times.back();
+  const double settle_limit = r.settle_time > 0.0 ? r.settle_time : r.max_settle_time;
+  double quiet_since = t_end;
+  for (long k = 1; sum.ok(); ++k)
   {
+    if (stop())
+    {
+      std::ostringstream msg;
+      msg << "stopped by the time limit (or cancelled) at t = " << s.t << " s of " << t_end << " s";
+      peaks.message = msg.str();
+      return peaks;
+    }
     sum = solver.step(s, k * dt - s.t, law);
     if (!sum.ok())
       break;
@@ -497,10 +637,251 @@ DynamicPeaks simulate(const core::Model& model, const core::State& start, const 
       peaks.contact = std::max(peaks.contact, c.normal_force);
     if (!contacts.empty())
       peaks.bending = std::max(peaks.bending, core::maxStrutBendingStress(dyn, s.q, contacts));
+    peaks.min_gap = std::min(peaks.min_gap, core::minimumGap(dyn, s.q));
+    if (s.t < t_end)
+      continue;
+    peaks.settle = s.t - t_end;
+    if (r.settle_time > 0.0)
+    {
+      if (peaks.settle >= r.settle_time - 0.5 * dt)
+      {
+        peaks.settled = true;
+        break;
+      }
+      continue;
+    }
+    const double speed = mass > 0.0 ? std::sqrt(2.0 * system.kineticEnergy(s.q, s.qd) / mass) : 0.0;
+    if (speed >= r.rest_speed)
+      quiet_since = s.t;
+    else if (s.t - quiet_since >= rest_window)
+    {
+      peaks.settled = true;
+      break;
+    }
+    if (peaks.settle >= settle_limit - 0.5 * dt)
+      break;
   }
-  peaks.ok = sum.ok();
-  peaks.message = sum.message;
+  peaks.ran = sum.ok();
+  if (!sum.ok())
+    peaks.message = "the simulation failed at t = " + core::shortestNumber(s.t) + " s: " + sum.message;
+  else if (!peaks.settled)
+  {
+    std::ostringstream msg;
+    msg << "still moving " << peaks.settle << " s after the trajectory's end (RMS speed above rest_speed "
+        << r.rest_speed << " m/s within the last " << rest_window << " s)";
+    peaks.message = msg.str();
+  }
   return peaks;
+}
+
+/// The goal's distance of an equilibrium (0 at the goal).
+std::function<double(const Equilibrium&)> goalDistance(const EquilibriumOracle& oracle, const PlanRequest& r)
+{
+  if (r.target_values.empty())
+    return [target = r.target_height](const Equilibrium& e) { return std::max(0.0, e.height - target); };
+  return [&oracle, target = r.target_values](const Equilibrium& e)
+  { return actuationDistance(oracle.values(e.state), target); };
+}
+
+/// The end of the followed path meets the goal (valid, at or below the target height, or at the target values).
+bool meetsGoal(const EquilibriumOracle& oracle, const PlanRequest& r, const Equilibrium& e)
+{
+  if (!oracle.valid(e))
+    return false;
+  if (r.target_values.empty())
+    return e.height <= r.target_height;
+  return actuationDistance(oracle.values(e.state), r.target_values) <= 1e-9;
+}
+
+/// A one-point plan: the start meets the goal.
+void stayAtStart(const EquilibriumOracle& oracle, const PlanRequest& r, PlanResult& out)
+{
+  const Values v = oracle.values(oracle.start().state);
+  out.status = PlanStatus::kExactSolution;
+  out.message = "exact solution: the start meets the goal";
+  out.waypoints = { v };
+  out.times = { 0.0 };
+  out.positions = { v };
+  out.velocities = out.accelerations = { Values(v.size(), 0.0) };
+  out.min_gap = oracle.start().min_gap;
+  out.peak_contact_force = oracle.start().max_contact;
+  out.final_height = oracle.start().height;
+  if (r.verify_dynamics || r.find_speed_limit)
+  {
+    // no motion: the start is an equilibrium at rest
+    out.dynamics_verified = out.dynamics_within_limits = true;
+    out.dynamic_peak_contact_force = oracle.start().max_contact;
+    out.dynamic_min_gap = oracle.start().min_gap;
+  }
+}
+
+/// One continuation to every actuator's upper bound: a height target below the lowest height met on it
+/// is reported as unreachable (empty when that is not so, or nothing can be concluded).
+std::string reachability(const EquilibriumOracle& oracle, const PlanRequest& r, const std::vector<double>& upper)
+{
+  double lowest = oracle.start().height;
+  Equilibrium end;
+  const bool done = oracle.follow(oracle.start(), upper, end, false,
+                                  [&lowest](const Equilibrium& e) { lowest = std::min(lowest, e.height); });
+  if (!done || r.target_height >= lowest)
+    return "";
+  std::ostringstream msg;
+  msg << "target_height " << core::shortestNumber(r.target_height)
+      << " m is below the lowest height met when every actuator is pulled to its upper bound ("
+      << core::shortestNumber(lowest) << " m, by continuation from the start): taken as unreachable "
+      << "(a structure that folds as its cables are pulled in goes no lower; set reachability_check off to search "
+         "anyway)";
+  return msg.str();
+}
+
+/// Greedy deterministic shortcutting: from each kept waypoint, the farthest one reachable in one valid edge.
+/// Once `stop` fires the remaining waypoints are kept as they are.
+std::vector<Values> shortcut(const ob::SpaceInformationPtr& si, const std::vector<Values>& raw, RequestClock& clock)
+{
+  const ob::StateSpacePtr& space = si->getStateSpace();
+  std::vector<Values> simple = { raw.front() };
+  for (size_t i = 0; i + 1 < raw.size();)
+  {
+    size_t j = raw.size() - 1;
+    for (; j > i + 1 && !clock.stop(); --j)
+    {
+      ob::ScopedState<> a(space), b(space);
+      setValues(a.get(), raw[i]);
+      setValues(b.get(), raw[j]);
+      if (si->checkMotion(a.get(), b.get()))
+        break;
+    }
+    if (clock.stop())
+      j = i + 1;
+    simple.push_back(raw[j]);
+    i = j;
+  }
+  return simple;
+}
+
+/// Follows the path from the start through every waypoint (the path the trajectory drives); fills the
+/// figures along it, the waypoints reached and the status. Returns the last equilibrium reached.
+Equilibrium followFromStart(const EquilibriumOracle& oracle, const PlanRequest& r, const std::vector<Values>& simple,
+                            RequestClock& clock, PlanResult& out)
+{
+  Equilibrium e = oracle.start();
+  out.waypoints = { simple.front() };
+  const auto visit = [&out](const Equilibrium& q)
+  {
+    out.min_gap = std::min(out.min_gap, q.min_gap);
+    out.peak_contact_force = std::max(out.peak_contact_force, q.max_contact);
+  };
+  visit(e);
+  std::string why;
+  for (size_t k = 1; k < simple.size(); ++k)
+  {
+    Equilibrium end;
+    if (!oracle.follow(e, simple[k], end, true, visit))
+    {
+      oracle.valid(end, &why);
+      out.message = (clock.stop() ? "following the path from the start was stopped by the time limit before waypoint " :
+                                    "followed from the start, the path stops being valid before waypoint ") +
+                    std::to_string(k) + " (" + why + "); the trajectory ends at the last valid waypoint";
+      break;
+    }
+    e = end;
+    out.waypoints.push_back(simple[k]);
+  }
+  out.final_height = e.height;
+  const bool followed = out.waypoints.size() == simple.size();
+  if (meetsGoal(oracle, r, e))
+  {
+    out.status = PlanStatus::kExactSolution;
+    out.message = "exact solution";
+  }
+  else
+  {
+    out.status = PlanStatus::kApproximateSolution;
+    if (followed)
+    {
+      std::ostringstream msg;
+      if (r.target_values.empty())
+        msg << "approximate: followed from the start, the path ends at height " << e.height << " m, above the target "
+            << r.target_height << " m";
+      else
+        msg << "approximate: followed from the start, the path ends at "
+            << actuationDistance(oracle.values(e.state), r.target_values) << " m from the target values";
+      out.message = msg.str();
+    }
+  }
+  return e;
+}
+
+/// The dynamic verification (and the speed-limit search) of out's trajectory; scales it in place.
+void verify(const core::Model& model, const core::State& start, const PlanRequest& r, const core::State& end,
+            RequestClock& clock, PlanResult& out)
+{
+  const double window = r.settle_time > 0.0 ? 0.0 : restWindow(model, end);
+  const auto within = [&](const DynamicPeaks& p)
+  {
+    const double force_limit = r.limits.allow_contact ? r.limits.max_contact_force : 0.0;
+    const bool gap_ok = r.limits.allow_contact || p.min_gap >= r.limits.min_clearance;
+    return p.ran && p.settled && p.contact <= force_limit && p.bending <= r.max_bending_stress && gap_ok;
+  };
+  const auto run = [&](double scale)
+  {
+    ++out.dynamic_runs;
+    return simulate(model, start, r, out, scale, window, [&clock] { return clock.stop(); });
+  };
+  double scale = 1.0;
+  DynamicPeaks peaks = run(scale);
+  if (r.find_speed_limit && !within(peaks) && !clock.out())
+  {
+    // double the time scale until within, then bisect (geometrically) to the tolerance
+    double lo = 1.0, hi = 2.0;
+    DynamicPeaks at_hi = run(hi);
+    while (!within(at_hi) && hi < 64.0 && !clock.out())
+    {
+      lo = hi;
+      hi *= 2.0;
+      at_hi = run(hi);
+    }
+    if (within(at_hi))
+      while (hi / lo > 1.0 + r.speed_limit_tolerance && !clock.out())
+      {
+        const double mid = std::sqrt(lo * hi);
+        const DynamicPeaks p = run(mid);
+        if (within(p))
+        {
+          hi = mid;
+          at_hi = p;
+        }
+        else
+          lo = mid;
+      }
+    scale = hi;
+    peaks = at_hi;
+    if (clock.out() && within(at_hi))
+      out.message += "; the speed-limit search was stopped by the time limit: the time scale is an upper bound";
+  }
+  out.dynamics_verified = peaks.ran && peaks.settled;
+  out.dynamics_within_limits = within(peaks);
+  out.dynamic_peak_contact_force = peaks.contact;
+  out.dynamic_peak_bending_stress = peaks.bending;
+  out.dynamic_min_gap = peaks.min_gap;
+  out.settle_duration = peaks.settle;
+  out.time_scale = scale;
+  if (!out.dynamics_verified)
+    out.message += "; dynamic verification incomplete: " + peaks.message;
+  if (scale != 1.0)
+  {
+    for (size_t k = 0; k < out.times.size(); ++k)
+    {
+      out.times[k] *= scale;
+      for (size_t i = 0; i < out.velocities[k].size(); ++i)
+      {
+        out.velocities[k][i] /= scale;
+        out.accelerations[k][i] /= scale * scale;
+      }
+    }
+    out.duration *= scale;
+    out.rest_to_rest_duration *= scale;
+  }
 }
 }  // namespace
 
@@ -566,26 +947,54 @@ PlanResult planFolding(const core::Model& model, const core::State& start, const
   }
   out.names = r.actuators;
   const size_t n = idx.size();
-  const auto wall0 = std::chrono::steady_clock::now();
+  RequestClock clock(r.time_limit, control);
   ompl::msg::setLogLevel(ompl::msg::LOG_WARN);
 
   EquilibriumOracle oracle(model, idx, start, r.limits, r.continuation_step);
+  oracle.setStop([&clock] { return clock.stop(); });
+  oracle.setGoalDistance(goalDistance(oracle, r));
+  clock.watch(&oracle);
+  const auto finish = [&]() -> PlanResult&
+  {
+    out.stopped_by_time_limit = clock.timedOut();
+    out.cancelled = clock.cancelled();
+    out.equilibrium_solves = oracle.solves();
+    out.planning_time = clock.elapsed();
+    return out;
+  };
   std::string why;
   if (!oracle.valid(oracle.start(), &why))
   {
     out.status = PlanStatus::kInvalidStart;
     out.message = "the start is not valid: " + why;
-    return out;
+    return finish();
+  }
+  if (meetsGoal(oracle, r, oracle.start()))
+  {
+    stayAtStart(oracle, r, out);
+    return finish();
   }
 
   auto space = std::make_shared<ob::RealVectorStateSpace>(static_cast<unsigned>(n));
   ob::RealVectorBounds bounds(static_cast<unsigned>(n));
   double extent = 0.0;
+  std::vector<double> upper(n);
   for (size_t i = 0; i < n; ++i)
   {
-    bounds.setLow(i, model.actuators[idx[i]].min_value);
-    bounds.setHigh(i, model.actuators[idx[i]].max_value);
-    extent = std::max(extent, model.actuators[idx[i]].max_value - model.actuators[idx[i]].min_value);
+    const core::Actuator& a = model.actuators[idx[i]];
+    bounds.setLow(i, a.min_value);
+    bounds.setHigh(i, upper[i] = a.max_value);
+    extent = std::max(extent, a.max_value - a.min_value);
+  }
+  if (r.target_values.empty() && r.reachability_check)
+  {
+    clock.phase("reachability");
+    out.message = reachability(oracle, r, upper);
+    if (!out.message.empty())
+    {
+      out.status = PlanStatus::kInvalidGoal;
+      return finish();
+    }
   }
   space->setBounds(bounds);
   const unsigned seed = r.seed;
@@ -628,157 +1037,44 @@ PlanResult planFolding(const core::Model& model, const core::State& start, const
     rrt->setNearestNeighbors<ompl::NearestNeighborsLinear>();
   }
   planner->setProblemDefinition(pdef);  // solve() runs setup()
-  // the time limit as OMPL's timed condition, remembering whether it fired (it stays true once it has)
-  std::atomic<bool> time_limit_reached{ false };
-  const ob::PlannerTerminationCondition timed = ob::timedPlannerTerminationCondition(r.time_limit);
-  const ob::PlannerTerminationCondition ptc(
-      [&timed, &time_limit_reached, &control]
-      {
-        if (!time_limit_reached && timed())
-          time_limit_reached = true;
-        return time_limit_reached.load() || (control.cancelled && control.cancelled());
-      });
-  const ob::PlannerStatus status = planner->solve(ptc);
-  out.stopped_by_time_limit = time_limit_reached;
-  out.status = static_cast<PlanStatus>(static_cast<int>(ob::PlannerStatus::StatusType(status)));
+  clock.phase("search");
+  const ob::PlannerStatus status = planner->solve(ob::PlannerTerminationCondition([&clock] { return clock.stop(); }));
   if (!pdef->hasSolution())
   {
-    out.message = std::string("no path: ") + status.asString();
-    out.equilibrium_solves = oracle.solves();
-    out.planning_time = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
-    return out;
+    out.status = static_cast<PlanStatus>(static_cast<int>(ob::PlannerStatus::StatusType(status)));
+    out.message = std::string("no path: ") + status.asString() +
+                  (clock.cancelled() ? " (cancelled)" :
+                   clock.timedOut()  ? " (the time limit ended the search)" :
+                                       "");
+    return finish();
   }
-
-  // deterministic shortcutting: from each kept waypoint, the farthest one reachable in one valid edge
   auto path = pdef->getSolutionPath()->as<og::PathGeometric>();
   std::vector<Values> raw;
   for (size_t k = 0; k < path->getStateCount(); ++k)
     raw.push_back(valuesOf(path->getState(k), n));
-  std::vector<Values> simple = { raw.front() };
-  for (size_t i = 0; i + 1 < raw.size();)
-  {
-    size_t j = raw.size() - 1;
-    for (; j > i + 1; --j)
-    {
-      ob::ScopedState<> a(space), b(space);
-      setValues(a.get(), raw[i]);
-      setValues(b.get(), raw[j]);
-      if (si->checkMotion(a.get(), b.get()))
-        break;
-    }
-    simple.push_back(raw[j]);
-    i = j;
-  }
+  clock.phase("shortcut");
+  const std::vector<Values> simple = shortcut(si, raw, clock);
 
-  // the path as it will be followed: continuation from the start through every waypoint
-  Equilibrium e = oracle.start();
-  out.waypoints = { simple.front() };
-  const auto visit = [&out](const Equilibrium& q)
-  {
-    out.min_gap = std::min(out.min_gap, q.min_gap);
-    out.peak_contact_force = std::max(out.peak_contact_force, q.max_contact);
-  };
-  visit(e);
-  bool followed = true;
-  for (size_t k = 1; k < simple.size(); ++k)
-  {
-    Equilibrium end;
-    if (!oracle.follow(e, simple[k], end, true, visit))
-    {
-      oracle.valid(end, &why);
-      out.message = "followed from the start, the path stops being valid before waypoint " + std::to_string(k) + " (" +
-                    why + "); the trajectory ends at the last valid waypoint";
-      followed = false;
-      break;
-    }
-    e = end;
-    out.waypoints.push_back(simple[k]);
-  }
-  out.final_height = e.height;
-  // the goal as reached by following the path from the start (equilibria depend on the path: a goal
-  // state's equilibrium found from elsewhere may lie on another branch)
-  bool reached = true;
-  if (followed && r.target_values.empty() && e.height > r.target_height)
-  {
-    reached = false;
-    std::ostringstream msg;
-    msg << "followed from the start, the path ends at height " << e.height << " m, above the target " << r.target_height
-        << " m (the goal state's equilibrium was found on another branch)";
-    out.message = msg.str();
-  }
-  if (!followed || !reached)
-    out.status = PlanStatus::kApproximateSolution;
-  else if (out.status == PlanStatus::kExactSolution)
-    out.message = "exact solution";
-  else
-    out.message = std::string(status.asString()) + " (the goal is not reached)";
+  // the answer from here: the path as it will be followed, within the deadline or, past it, a grace period
+  clock.answering(0.3);
+  clock.phase("follow");
+  const Equilibrium end = followFromStart(oracle, r, simple, clock, out);
+  if (clock.cancelled())
+    out.message += " (cancelled: the best path found so far)";
+  else if (clock.timedOut() && out.status != PlanStatus::kExactSolution)
+    out.message += " (the time limit ended the search)";
   timeParameterize(out.waypoints, r, out);
-  out.planning_time = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
+  out.rest_to_rest_duration = out.duration;
 
-  if (r.verify_dynamics || r.find_speed_limit)
+  if ((r.verify_dynamics || r.find_speed_limit) && out.waypoints.size() > 1)
   {
-    const auto within = [&](const DynamicPeaks& p)
-    {
-      const double force_limit = r.limits.allow_contact ? r.limits.max_contact_force : 0.0;
-      return p.ok && p.contact <= force_limit && p.bending <= r.max_bending_stress;
-    };
-    const auto run = [&](double scale)
-    {
-      ++out.dynamic_runs;
-      return simulate(model, start, r.actuators, out, scale, r.settle_time);
-    };
-    double scale = 1.0;
-    DynamicPeaks peaks = run(scale);
-    if (r.find_speed_limit && !within(peaks))
-    {
-      // double the time scale until within, then bisect (geometric) to the tolerance
-      double lo = 1.0, hi = 2.0;
-      DynamicPeaks at_hi = run(hi);
-      while (!within(at_hi) && hi < 64.0)
-      {
-        lo = hi;
-        hi *= 2.0;
-        at_hi = run(hi);
-      }
-      if (within(at_hi))
-        while (hi / lo > 1.0 + r.speed_limit_tolerance)
-        {
-          const double mid = std::sqrt(lo * hi);
-          const DynamicPeaks p = run(mid);
-          if (within(p))
-          {
-            hi = mid;
-            at_hi = p;
-          }
-          else
-            lo = mid;
-        }
-      scale = hi;
-      peaks = at_hi;
-    }
-    out.dynamics_verified = peaks.ok;
-    out.dynamics_within_limits = within(peaks);
-    out.dynamic_peak_contact_force = peaks.contact;
-    out.dynamic_peak_bending_stress = peaks.bending;
-    out.time_scale = scale;
-    if (!peaks.ok)
-      out.message += "; dynamic verification failed: " + peaks.message;
-    if (scale != 1.0)
-    {
-      for (size_t k = 0; k < out.times.size(); ++k)
-      {
-        out.times[k] *= scale;
-        for (size_t i = 0; i < n; ++i)
-        {
-          out.velocities[k][i] /= scale;
-          out.accelerations[k][i] /= scale * scale;
-        }
-      }
-      out.duration *= scale;
-    }
+    clock.phase("verify");
+    if (clock.out())
+      out.message += "; no dynamic verification: the time limit was reached";
+    else
+      verify(model, start, r, end.state, clock, out);
   }
-  out.equilibrium_solves = oracle.solves();
-  return out;
+  return finish();
 }
 
 }  // namespace active_tensegrity::planning

@@ -1,8 +1,9 @@
 /// Quasi-static equilibria as functions of the actuation values of chosen actuators, for planning
 /// (docs/planning.md). Equilibria of a tensegrity depend on the path: every equilibrium here is reached
 /// by continuation (the core's StaticSolver::followPath, warm-started) along a straight line in
-/// actuation space from a known one, the nearest in a cache that starts with the start state. ROS-free
-/// and thread-safe: solvers come from a pool, the cache is guarded.
+/// actuation space from a known one, the nearest in a cache that starts with the start state (bounded:
+/// the least recently used equilibria are dropped beyond kCacheCapacity). ROS-free and thread-safe:
+/// solvers come from a pool, the cache is guarded.
 #pragma once
 
 #include <functional>
@@ -43,6 +44,9 @@ struct Equilibrium
   double height = 0.0;            // m (the scene's height nodes)
 };
 
+/// Most equilibria an oracle keeps (about 3 kB each for the tower).
+constexpr size_t kCacheCapacity = 4096;
+
 class EquilibriumOracle
 {
 public:
@@ -79,6 +83,23 @@ public:
   }
   /// Static solves (continuation increments) done so far.
   long solves() const;
+  /// Equilibria in the cache.
+  size_t cached() const;
+
+  /// Polled before every continuation increment: when it returns true, follow() stops (returns false,
+  /// `end` not converged, message "stopped") and at() answers with a non-converged equilibrium.
+  void setStop(std::function<bool()> stop)
+  {
+    stop_ = std::move(stop);
+  }
+  /// The goal's distance of an equilibrium (>= 0, 0 at the goal): the oracle keeps the valid equilibrium
+  /// nearest to the goal it has seen (bestDistance, bestHeight; +inf before the first).
+  void setGoalDistance(std::function<double(const Equilibrium&)> distance)
+  {
+    distance_ = std::move(distance);
+  }
+  double bestDistance() const;
+  double bestHeight() const;
 
 private:
   class SolverLease;
@@ -91,10 +112,22 @@ private:
   double step_;
   Equilibrium start_;
 
+  struct Entry
+  {
+    Equilibrium equilibrium;
+    std::vector<double> values;  // the chosen actuators' values
+    unsigned long used = 0;      // the clock of the last use (the start: never dropped)
+  };
+
+  std::function<bool()> stop_;
+  std::function<double(const Equilibrium&)> distance_;
   mutable std::mutex mutex_;
   mutable std::vector<std::unique_ptr<core::StaticSolver>> pool_;
-  mutable std::vector<Equilibrium> cache_;
+  mutable std::vector<Entry> cache_;
+  mutable unsigned long clock_ = 0;
   mutable long solves_ = 0;
+  mutable double best_distance_ = std::numeric_limits<double>::infinity();
+  mutable double best_height_ = std::numeric_limits<double>::infinity();
 };
 
 /// Max-norm distance between two actuation vectors.
