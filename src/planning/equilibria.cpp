@@ -192,6 +192,18 @@ bool EquilibriumOracle::follow(const Equilibrium& from, const std::vector<double
   return true;
 }
 
+bool EquilibriumOracle::known(const std::vector<double>& u, Equilibrium& e) const
+{
+  const std::lock_guard<std::mutex> lock(mutex_);
+  for (const Entry& c : cache_)
+    if (c.values == u)
+    {
+      e = c.equilibrium;
+      return true;
+    }
+  return false;
+}
+
 Equilibrium EquilibriumOracle::at(const std::vector<double>& u) const
 {
   Equilibrium from;

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <deque>
 #include <cmath>
 #include <functional>
 #include <map>
@@ -12,6 +13,7 @@
 #include <sstream>
 
 #include <ompl/base/MotionValidator.h>
+#include <ompl/base/PlannerData.h>
 #include <ompl/base/PlannerTerminationCondition.h>
 #include <ompl/base/ProblemDefinition.h>
 #include <ompl/base/SpaceInformation.h>
@@ -759,6 +761,49 @@ std::vector<Values> shortcut(const ob::SpaceInformationPtr& si, const std::vecto
   return simple;
 }
 
+/// When the search found no path: the path in the planner's graph from the start to the known valid state
+/// nearest to the goal (nearer than the start), or empty.
+std::vector<Values> bestPartialPath(const ob::SpaceInformationPtr& si, const ob::Planner& planner,
+                                    const EquilibriumOracle& oracle, const PlanRequest& r, size_t n)
+{
+  ob::PlannerData data(si);
+  planner.getPlannerData(data);
+  const auto distance = goalDistance(oracle, r);
+  double best = distance(oracle.start());
+  long best_vertex = -1;
+  std::vector<long> parent(data.numVertices(), -2);
+  std::deque<unsigned> queue;
+  for (unsigned i = 0; i < data.numStartVertices(); ++i)
+  {
+    parent[data.getStartIndex(i)] = -1;
+    queue.push_back(data.getStartIndex(i));
+  }
+  std::vector<unsigned> edges;
+  while (!queue.empty())
+  {
+    const unsigned v = queue.front();
+    queue.pop_front();
+    Equilibrium e;
+    if (oracle.known(valuesOf(data.getVertex(v).getState(), n), e) && oracle.valid(e) && distance(e) < best)
+    {
+      best = distance(e);
+      best_vertex = v;
+    }
+    data.getEdges(v, edges);
+    for (unsigned w : edges)
+      if (parent[w] == -2)
+      {
+        parent[w] = v;
+        queue.push_back(w);
+      }
+  }
+  std::vector<Values> path;
+  for (long v = best_vertex; v >= 0; v = parent[v])
+    path.push_back(valuesOf(data.getVertex(static_cast<unsigned>(v)).getState(), n));
+  std::reverse(path.begin(), path.end());
+  return path;
+}
+
 /// Follows the path from the start through every waypoint (the path the trajectory drives); fills the
 /// figures along it, the waypoints reached and the status. Returns the last equilibrium reached.
 Equilibrium followFromStart(const EquilibriumOracle& oracle, const PlanRequest& r, const std::vector<Values>& simple,
@@ -948,7 +993,9 @@ PlanResult planFolding(const core::Model& model, const core::State& start, const
   out.names = r.actuators;
   const size_t n = idx.size();
   RequestClock clock(r.time_limit, control);
-  ompl::msg::setLogLevel(ompl::msg::LOG_WARN);
+  // OMPL's own console output off: what it would say (no valid goal sampled, skipped states) is in the
+  // status and the message
+  ompl::msg::setLogLevel(ompl::msg::LOG_NONE);
 
   EquilibriumOracle oracle(model, idx, start, r.limits, r.continuation_step);
   oracle.setStop([&clock] { return clock.stop(); });
@@ -1039,21 +1086,33 @@ PlanResult planFolding(const core::Model& model, const core::State& start, const
   planner->setProblemDefinition(pdef);  // solve() runs setup()
   clock.phase("search");
   const ob::PlannerStatus status = planner->solve(ob::PlannerTerminationCondition([&clock] { return clock.stop(); }));
-  if (!pdef->hasSolution())
+  std::vector<Values> raw;
+  if (pdef->hasSolution())
+  {
+    auto path = pdef->getSolutionPath()->as<og::PathGeometric>();
+    for (size_t k = 0; k < path->getStateCount(); ++k)
+      raw.push_back(valuesOf(path->getState(k), n));
+  }
+  else if (clock.out())
+    raw = bestPartialPath(si, *planner, oracle, r, n);  // stopped: the best the search has, as an approximation
+  if (raw.size() < 2)
   {
     out.status = static_cast<PlanStatus>(static_cast<int>(ob::PlannerStatus::StatusType(status)));
-    out.message = std::string("no path: ") + status.asString() +
-                  (clock.cancelled() ? " (cancelled)" :
-                   clock.timedOut()  ? " (the time limit ended the search)" :
-                                       "");
+    // a planner that found no valid goal (or start) state before the deadline or the cancel says
+    // invalid_goal: it ran out of time, the goal is not known to be invalid
+    if (clock.out() && (out.status == PlanStatus::kInvalidGoal || out.status == PlanStatus::kInvalidStart))
+      out.status = PlanStatus::kTimeout;
+    out.message = std::string("no path: ") + (clock.cancelled() ? "cancelled" :
+                                              clock.timedOut()  ? "the time limit ended the search" :
+                                                                  status.asString());
     return finish();
   }
-  auto path = pdef->getSolutionPath()->as<og::PathGeometric>();
-  std::vector<Values> raw;
-  for (size_t k = 0; k < path->getStateCount(); ++k)
-    raw.push_back(valuesOf(path->getState(k), n));
-  clock.phase("shortcut");
-  const std::vector<Values> simple = shortcut(si, raw, clock);
+  std::vector<Values> simple = raw;
+  if (pdef->hasSolution())
+  {
+    clock.phase("shortcut");
+    simple = shortcut(si, raw, clock);
+  }
 
   // the answer from here: the path as it will be followed, within the deadline or, past it, a grace period
   clock.answering(0.3);

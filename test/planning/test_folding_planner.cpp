@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <random>
 
 #include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/scene.h"
@@ -332,4 +333,211 @@ TEST(FoldingPlanner, SpeedLimitSlowsTheTrajectoryUntilTheDynamicForceIsUnderTheL
   // not to the last digit: the slower trajectory is sampled at more points (every sample_dt), so the
   // actuator's cubic pieces differ slightly where the trapezoid changes phase
   EXPECT_NEAR(again.dynamic_peak_contact_force, plan.dynamic_peak_contact_force, 1e-3 * plan.dynamic_peak_contact_force);
+}
+
+namespace
+{
+/// Continuation increments needed to follow `waypoints` from the first (increments of `step`, max norm).
+long followCost(const std::vector<std::vector<double>>& waypoints, double step)
+{
+  long n = 0;
+  for (size_t w = 1; w < waypoints.size(); ++w)
+    n +=
+        std::max(1L, static_cast<long>(std::ceil(ap::actuationDistance(waypoints[w - 1], waypoints[w]) / step - 1e-9)));
+  return n;
+}
+
+/// Records the equilibrium solves when the request's deadline passed, or when `cancel_at` solves were reached
+/// (then cancels), from the progress reports (every poll).
+struct Watcher
+{
+  double time_limit = INFINITY;
+  long cancel_at = -1;
+  long solves_at_stop = -1;
+  double elapsed_at_stop = 0.0;
+  int reports = 0;
+  std::string last_phase;
+  ap::PlanControl control()
+  {
+    ap::PlanControl c;
+    c.progress_period = 0.0;
+    c.progress = [this](const ap::PlanProgress& p)
+    {
+      ++reports;
+      last_phase = p.phase;
+      if (solves_at_stop < 0 && (p.elapsed > time_limit || (cancel_at >= 0 && p.equilibrium_solves >= cancel_at)))
+      {
+        solves_at_stop = p.equilibrium_solves;
+        elapsed_at_stop = p.elapsed;
+      }
+    };
+    c.cancelled = [this] { return cancel_at >= 0 && solves_at_stop >= 0; };
+    return c;
+  }
+};
+}  // namespace
+
+TEST(FoldingPlanner, EveryPlannerStopsAtItsDeadline)
+{
+  // the tower to 0.95 m with 5 mm of clearance takes RRTConnect 1-4 s; with a 0.2 s deadline every planner
+  // must stop searching: after the deadline only the answer is made (the path found so far followed from
+  // the start), i.e. at most the increments of following the returned path (the wall time is printed, not
+  // asserted: the machine may be loaded)
+  const at::Model model = scene("tower.yaml");
+  const at::State start = startEquilibrium(model);
+  ap::PlanRequest req = towerRequest();
+  req.target_height = 0.95;
+  req.limits.min_clearance = 0.005;
+  req.time_limit = 0.2;
+  for (const std::string& name : ap::plannerNames())
+  {
+    req.planner = name;
+    Watcher w;
+    w.time_limit = req.time_limit;
+    const ap::PlanResult p = ap::planFolding(model, start, req, w.control());
+    std::printf("[ measured ] %-16s %-22s %.3f s (overrun %.3f s), %ld solves, %ld after the deadline\n", name.c_str(),
+                ap::toString(p.status), p.planning_time, p.planning_time - req.time_limit, p.equilibrium_solves,
+                w.solves_at_stop < 0 ? 0 : p.equilibrium_solves - w.solves_at_stop);
+    EXPECT_GT(w.reports, 0) << name;
+    if (!p.stopped_by_time_limit)
+    {
+      // done before the deadline: only with an answer
+      EXPECT_TRUE(p.status == ap::PlanStatus::kExactSolution || p.status == ap::PlanStatus::kApproximateSolution)
+          << name << ": " << p.message;
+      continue;
+    }
+    ASSERT_GE(w.solves_at_stop, 0) << name;
+    EXPECT_LE(p.equilibrium_solves - w.solves_at_stop, followCost(p.waypoints, req.continuation_step) + 4)
+        << name << ": " << p.message;
+    EXPECT_NE(p.status, ap::PlanStatus::kInvalidGoal) << name << ": " << p.message;  // out of time, not invalid
+    // the status agrees with the path as followed
+    if (p.status == ap::PlanStatus::kExactSolution)
+    {
+      EXPECT_LE(p.final_height, req.target_height) << name;
+    }
+    else if (p.status == ap::PlanStatus::kApproximateSolution)
+    {
+      EXPECT_GT(p.final_height, req.target_height) << name;
+    }
+  }
+}
+
+TEST(FoldingPlanner, ATargetMetAtTheStartIsAnsweredAtOnce)
+{
+  const at::Model model = scene("tower.yaml");
+  const at::State start = startEquilibrium(model);
+  const double h0 = at::structureHeight(model, start.q);
+  ap::PlanRequest req = towerRequest();
+  req.target_height = h0 + 0.01;
+  req.verify_dynamics = true;
+  const ap::PlanResult p = ap::planFolding(model, start, req);
+  EXPECT_EQ(p.status, ap::PlanStatus::kExactSolution) << p.message;
+  EXPECT_NE(p.message.find("the start meets the goal"), std::string::npos) << p.message;
+  EXPECT_EQ(p.equilibrium_solves, 0);
+  EXPECT_FALSE(p.stopped_by_time_limit);
+  ASSERT_EQ(p.times.size(), 1u);
+  EXPECT_EQ(p.duration, 0.0);
+  EXPECT_EQ(p.positions.front(), std::vector<double>(4, 0.0));
+  EXPECT_EQ(p.final_height, h0);
+  EXPECT_TRUE(p.dynamics_within_limits);
+
+  const at::Model masts = scene("masts.yaml");
+  const at::State masts_start = startEquilibrium(masts);
+  ap::PlanRequest values = mastsRequest();
+  values.target_values = { 0.0, 0.0 };
+  const ap::PlanResult q = ap::planFolding(masts, masts_start, values);
+  EXPECT_EQ(q.status, ap::PlanStatus::kExactSolution) << q.message;
+  EXPECT_EQ(q.equilibrium_solves, 0);
+  EXPECT_EQ(q.waypoints.size(), 1u);
+}
+
+TEST(FoldingPlanner, AHeightBelowTheFullPullIsAnsweredEarly)
+{
+  const at::Model model = scene("tower.yaml");
+  const at::State start = startEquilibrium(model);
+  ap::PlanRequest req = towerRequest();
+  req.target_height = 0.0;
+  req.limits.allow_contact = true;
+  req.limits.max_contact_force = 400.0;
+  const ap::PlanResult p = ap::planFolding(model, start, req);
+  EXPECT_EQ(p.status, ap::PlanStatus::kInvalidGoal) << p.message;
+  EXPECT_NE(p.message.find("below the lowest height met when every actuator is pulled to its upper bound"),
+            std::string::npos)
+      << p.message;
+  EXPECT_FALSE(p.stopped_by_time_limit);
+  // one continuation of the 1.8 m range in 0.02 m increments, nothing else
+  EXPECT_LE(p.equilibrium_solves, 90);
+  EXPECT_TRUE(p.waypoints.empty());
+
+  // without the check the search runs until its time limit, without an exact solution
+  req.reachability_check = false;
+  req.time_limit = 1.0;
+  const ap::PlanResult q = ap::planFolding(model, start, req);
+  EXPECT_TRUE(q.stopped_by_time_limit) << q.message;
+  EXPECT_NE(q.status, ap::PlanStatus::kExactSolution) << q.message;
+}
+
+TEST(FoldingPlanner, CancelAnswersWithTheBestPathSoFar)
+{
+  // the tower to 0.95 m with 5 mm of clearance (1-4 s of search), cancelled after 400 equilibrium solves:
+  // it answers with the path to the valid state nearest the goal that the search has reached (followed from
+  // the start), doing no more than following that path
+  const at::Model model = scene("tower.yaml");
+  const at::State start = startEquilibrium(model);
+  const double h0 = at::structureHeight(model, start.q);
+  ap::PlanRequest req = towerRequest();
+  req.target_height = 0.95;
+  req.limits.min_clearance = 0.005;
+  int approximate = 0;
+  for (const char* planner : { "RRTConnect", "RRT", "PRM", "KPIECE1" })
+  {
+    req.planner = planner;
+    Watcher w;
+    w.cancel_at = 400;
+    const ap::PlanResult p = ap::planFolding(model, start, req, w.control());
+    std::printf("[ measured ] %s cancelled at %ld solves, %.3f s: %s, %ld solves, %.3f s, %zu waypoints, final height "
+                "%.4f m (%s)\n",
+                planner, w.solves_at_stop, w.elapsed_at_stop, ap::toString(p.status), p.equilibrium_solves,
+                p.planning_time, p.waypoints.size(), p.final_height, p.message.c_str());
+    EXPECT_TRUE(p.cancelled) << planner;
+    EXPECT_FALSE(p.stopped_by_time_limit) << planner;
+    ASSERT_GE(w.solves_at_stop, 400) << planner;
+    EXPECT_LE(p.equilibrium_solves - w.solves_at_stop, followCost(p.waypoints, req.continuation_step) + 4) << planner;
+    if (p.status == ap::PlanStatus::kApproximateSolution)
+    {
+      // the best path so far, followed from the start: valid, lower than the start, a trajectory to drive
+      ++approximate;
+      EXPECT_GE(p.min_gap, req.limits.min_clearance) << planner;
+      EXPECT_GT(p.final_height, req.target_height) << planner;
+      EXPECT_LT(p.final_height, h0) << planner;
+      EXPECT_EQ(p.positions.back(), p.waypoints.back()) << planner;
+    }
+    else
+      EXPECT_TRUE(p.status == ap::PlanStatus::kExactSolution || p.status == ap::PlanStatus::kTimeout)
+          << planner << ": " << ap::toString(p.status);
+  }
+  EXPECT_GE(approximate, 2);  // the tree planners have a best path to give
+}
+
+TEST(FoldingPlanner, TheEquilibriumCacheIsBounded)
+{
+  const at::Model model = scene("masts.yaml");
+  const at::State start = startEquilibrium(model);
+  const std::vector<int> idx = { model.findActuator("tiltA"), model.findActuator("tiltB") };
+  const ap::EquilibriumOracle oracle(model, idx, start, {}, 0.02);
+  std::mt19937 gen(5);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  size_t largest = 0;
+  for (size_t k = 0; k < ap::kCacheCapacity + 1000; ++k)
+  {
+    ASSERT_TRUE(oracle.at({ u(gen), u(gen) }).converged);
+    largest = std::max(largest, oracle.cached());
+  }
+  EXPECT_LE(largest, ap::kCacheCapacity);
+  EXPECT_GE(largest, ap::kCacheCapacity - 10);  // it filled up, then dropped the least recently used
+  // the start stays: asking for it solves nothing
+  const long before = oracle.solves();
+  const ap::Equilibrium e = oracle.at({ 0.0, 0.0 });
+  EXPECT_EQ(oracle.solves(), before);
+  EXPECT_EQ(e.state.q, oracle.start().state.q);
 }

@@ -59,6 +59,8 @@ public:
 
   /// The equilibrium at actuation values u, by continuation from the nearest cached one (cached too).
   Equilibrium at(const std::vector<double>& u) const;
+  /// The cached equilibrium at exactly u, if there is one (no solve).
+  bool known(const std::vector<double>& u, Equilibrium& e) const;
   /// Follows the straight line from `from` (an equilibrium) to u in increments <= step; every
   /// intermediate equilibrium goes to visit (when given); stops at the first one that fails to converge
   /// or, when check is true, is not valid (returns false). `end` receives the last equilibrium reached.

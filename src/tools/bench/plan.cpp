@@ -1,11 +1,14 @@
 //   tensegrity_bench plan SCENE --actuators a,b,... (--height H | --values v,...) [options]
-// plans with several seeds from the scene's start equilibrium and prints status, planning time,
-// equilibrium solves, waypoints and figures per seed and the median planning time; with
+// plans with several seeds from the scene's start equilibrium (or, with --start, from the equilibrium
+// the chosen actuators reach at those values by continuation) and prints status, planning time,
+// equilibrium solves, waypoints and figures per seed, the median planning time and the process's peak
+// memory; with --planner all, every planner once (seed 1) with its overrun of the time limit; with
 // --speed-limit, the time scale (and the largest speed) that keeps the dynamic peaks under the limits.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <iostream>
+#include <sys/resource.h>
 #include <string>
 #include <vector>
 
@@ -19,9 +22,69 @@ namespace at = active_tensegrity::core;
 
 namespace active_tensegrity::tools::bench
 {
+namespace
+{
+namespace ap = active_tensegrity::planning;
+
+double peakMemoryMB()
+{
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return u.ru_maxrss / 1024.0;
+}
+
+/// The equilibrium where the named actuators are at `values`, by continuation (0.02 m increments) from start.
+std::string startAt(const at::Model& statics, const std::vector<std::string>& names, const std::vector<double>& values,
+                    at::State& start)
+{
+  if (values.size() != names.size())
+    return std::to_string(values.size()) + " values for " + std::to_string(names.size()) + " actuators";
+  at::ActuationValues u = start.u;
+  double distance = 0.0;
+  for (size_t i = 0; i < names.size(); ++i)
+  {
+    const int a = statics.findActuator(names[i]);
+    if (a < 0)
+      return "unknown actuator '" + names[i] + "'";
+    if (!std::isfinite(values[i]) || values[i] < statics.actuators[a].min_value ||
+        values[i] > statics.actuators[a].max_value)
+      return "value " + std::to_string(values[i]) + " of '" + names[i] + "' outside its range";
+    distance = std::max(distance, std::abs(values[i] - u[a].value));
+    u[a].value = values[i];
+  }
+  at::StaticSolver solver(statics, statics.solver);
+  const int steps = std::max(1, static_cast<int>(std::ceil(distance / 0.02)));
+  const at::Summary sum = solver.followPath(start, u, steps, {});
+  return sum.ok() ? std::string() : "no equilibrium on the way: " + sum.message;
+}
+
+/// Every planner by name, seed 1: status, planning time and its overrun of the time limit.
+int everyPlanner(const at::Model& model, const at::State& start, ap::PlanRequest req)
+{
+  std::printf("%-16s %-22s %9s %11s %7s %12s\n", "planner", "status", "time s", "overrun s", "solves", "final h (m)");
+  double worst = -INFINITY;
+  for (const std::string& name : ap::plannerNames())
+  {
+    req.planner = name;
+    req.seed = 1;
+    const ap::PlanResult p = ap::planFolding(model, start, req);
+    if (p.status == ap::PlanStatus::kInvalidRequest)
+    {
+      std::cerr << "tensegrity_bench: " << p.message << "\n";
+      return 2;
+    }
+    worst = std::max(worst, p.planning_time - req.time_limit);
+    std::printf("%-16s %-22s %9.3f %11.3f %7ld %12.4f\n", name.c_str(), ap::toString(p.status), p.planning_time,
+                p.planning_time - req.time_limit, p.equilibrium_solves, p.final_height);
+  }
+  std::printf("largest overrun of the %g s time limit: %.3f s; peak memory (max RSS) %.1f MB\n", req.time_limit, worst,
+              peakMemoryMB());
+  return 0;
+}
+}  // namespace
+
 int plan(const std::string& scene, const std::vector<std::string>& args)
 {
-  namespace ap = active_tensegrity::planning;
   std::vector<at::Override> overrides;
   ap::PlanRequest req;
   req.max_speeds = { 0.5 };
@@ -30,6 +93,7 @@ int plan(const std::string& scene, const std::vector<std::string>& args)
   req.limits.min_clearance = 0.005;
   int seeds = 5;
   bool speed_limit = false;
+  std::vector<double> start_values;
   Args in(args);
   while (in.more())
   {
@@ -65,6 +129,13 @@ int plan(const std::string& scene, const std::vector<std::string>& args)
       seeds = std::max(1, std::stoi(next()));
     else if (a == "--speed-limit")
       speed_limit = true;
+    else if (a == "--verify")
+      req.verify_dynamics = true;
+    else if (a == "--blend")
+      req.blend_tolerance = std::stod(next());
+    else if (a == "--start")
+      for (const std::string& v : splitList(next()))
+        start_values.push_back(std::stod(v));
     else
       throw std::invalid_argument("unknown argument '" + a + "'");
   }
@@ -79,6 +150,17 @@ int plan(const std::string& scene, const std::vector<std::string>& args)
     std::cerr << "tensegrity_bench: no start equilibrium: " << eq.message << "\n";
     return 3;
   }
+  if (!start_values.empty())
+  {
+    const std::string err = startAt(statics, req.actuators, start_values, start);
+    if (!err.empty())
+    {
+      std::cerr << "tensegrity_bench: --start: " << err << "\n";
+      return 2;
+    }
+  }
+  if (req.planner == "all")
+    return everyPlanner(model, start, req);
   std::printf("scene: %s, actuators:", scene.c_str());
   for (const std::string& n : req.actuators)
     std::printf(" %s", n.c_str());
@@ -103,9 +185,18 @@ int plan(const std::string& scene, const std::vector<std::string>& args)
     times.push_back(p.planning_time);
     std::printf("%5d %-16s %9.2f %7ld %9zu %12.4f %10.4f %12.1f\n", seed, ap::toString(p.status), p.planning_time,
                 p.equilibrium_solves, p.waypoints.size(), p.final_height, p.min_gap, p.peak_contact_force);
+    if (req.blend_tolerance > 0.0)
+      std::printf("      trajectory %.3f s (rest to rest %.3f s)\n", p.duration, p.rest_to_rest_duration);
+    if (req.verify_dynamics)
+      std::printf("      dynamics: verified %s, within limits %s; peak F_N %.1f N, bending %.1f MPa, min gap %.4f m, "
+                  "settled %.2f s after the end; %s\n",
+                  p.dynamics_verified ? "yes" : "no", p.dynamics_within_limits ? "yes" : "no",
+                  p.dynamic_peak_contact_force, 1e-6 * p.dynamic_peak_bending_stress, p.dynamic_min_gap,
+                  p.settle_duration, p.message.c_str());
   }
   std::sort(times.begin(), times.end());
-  std::printf("median planning time: %.2f s over %d seeds\n", times[times.size() / 2], seeds);
+  std::printf("median planning time: %.2f s over %d seeds; peak memory (max RSS) %.1f MB\n", times[times.size() / 2],
+              seeds, peakMemoryMB());
   if (speed_limit)
   {
     req.seed = 1;
