@@ -9,7 +9,9 @@
 #include <cmath>
 #include <random>
 
+#include "active_tensegrity/core/actuation_control.h"
 #include "active_tensegrity/core/analysis.h"
+#include "active_tensegrity/core/dynamics.h"
 #include "active_tensegrity/core/scene.h"
 #include "active_tensegrity/core/statics.h"
 #include "active_tensegrity/planning/folding_planner.h"
@@ -540,4 +542,73 @@ TEST(FoldingPlanner, TheEquilibriumCacheIsBounded)
   const ap::Equilibrium e = oracle.at({ 0.0, 0.0 });
   EXPECT_EQ(oracle.solves(), before);
   EXPECT_EQ(e.state.q, oracle.start().state.q);
+}
+
+namespace
+{
+/// The tower folded dynamically: all four cables pulled in by `pull` (0.5 m/s), the moving state when they
+/// arrive.
+at::State foldedTower(const at::Model& model, double pull)
+{
+  at::State s = at::initialState(model);
+  at::ActuationController control(model, s.u);
+  EXPECT_EQ(control.setTargets(0.0, { "pull1", "pull2", "pull3", "pull4" }, std::vector<double>(4, pull), { 0.5 },
+                               { 5.0 }, 0.5, 5.0),
+            "");
+  at::DynamicsSolver solver(model, model.solver);
+  const at::ActuationLaw law = [&control](double t) { return control.values(t); };
+  at::Summary sum = solver.initialize(s, law);
+  for (long k = 1; sum.ok() && control.moving(s.t); ++k)
+  {
+    sum = solver.step(s, k * model.solver.dt - s.t, law);
+    s.t = k * model.solver.dt;
+  }
+  EXPECT_TRUE(sum.ok()) << sum.message;
+  return s;
+}
+}  // namespace
+
+TEST(FoldingPlanner, PlansFromAFoldedMovingTower)
+{
+  // the tower folded by 0.3 m and by 0.6 m of every cable, still moving: the plan starts from its nearest
+  // equilibrium, and goes down to 0.5 m with contact forces up to 400 N, or back to the unfolded tower
+  const at::Model model = at::loadScene(std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) + "/config/scenes/tower.yaml",
+                                        { at::parseOverride("solver.dt=1e-3") });
+  std::vector<int> idx;
+  for (const std::string& n : towerRequest().actuators)
+    idx.push_back(model.findActuator(n));
+  for (const double pull : { 0.3, 0.6 })
+  {
+    const at::State moving = foldedTower(model, pull);
+    EXPECT_GT(moving.qd.norm(), 1e-3);
+    at::State start;
+    ASSERT_EQ(ap::startEquilibrium(model, moving, start), "");
+    EXPECT_EQ(start.qd.norm(), 0.0);
+    for (int a : idx)
+      EXPECT_EQ(start.u[a].value, pull);  // at the actuation where the structure is
+    for (const bool unfold : { false, true })
+    {
+      ap::PlanRequest req = towerRequest();
+      req.limits.allow_contact = true;
+      req.limits.max_contact_force = 400.0;
+      if (unfold)
+        req.target_values = std::vector<double>(4, 0.0);
+      else
+        req.target_height = 0.5;
+      const ap::PlanResult p = ap::planFolding(model, start, req);
+      std::printf("[ measured ] from the tower folded by %.1f m (start equilibrium at %.4f m): %s %s, %zu waypoints, "
+                  "final height %.4f m, peak contact %.1f N, %ld solves, %.2f s\n",
+                  pull, at::structureHeight(model, start.q), unfold ? "unfold" : "to 0.5 m", ap::toString(p.status),
+                  p.waypoints.size(), p.final_height, p.peak_contact_force, p.equilibrium_solves, p.planning_time);
+      ASSERT_EQ(p.status, ap::PlanStatus::kExactSolution) << p.message;
+      EXPECT_EQ(p.waypoints.front(), std::vector<double>(4, pull));
+      const Recheck again = recheck(model, start, idx, p.waypoints, 0.01);
+      EXPECT_TRUE(again.converged);
+      EXPECT_LE(again.max_contact, req.limits.max_contact_force * 1.02);
+      if (!unfold)
+      {
+        EXPECT_LE(at::structureHeight(model, again.end.q), req.target_height + 2e-3);
+      }
+    }
+  }
 }
