@@ -558,16 +558,17 @@ private:
 
 struct DynamicPeaks
 {
-  bool ran = false;      // the simulation ran to its end without failing
-  bool settled = false;  // ... and the structure came to rest (or settle_time was simulated)
+  bool ran = false;       // the simulation ran to its end without failing
+  bool settled = false;   // ... and the structure came to rest, or its motion decays (or settle_time was simulated)
+  bool decaying = false;  // settled by decay: still moving, every extreme already passed
   std::string message;
   double contact = 0.0, bending = 0.0;
   double min_gap = std::numeric_limits<double>::infinity();
   double settle = 0.0;  // s simulated after the trajectory's end
 };
 
-/// The window the structure must stay below the rest speed: 1.5 of its longest natural period at the
-/// end of the path (0.25 to 5 s; 1 s when the modal analysis fails or the end is a mechanism).
+/// The window of the settling check: 1.5 of the structure's longest natural period at the end of the path
+/// (0.25 to 5 s; 1 s when the modal analysis fails or the end is a mechanism).
 double restWindow(const core::Model& model, const core::State& end)
 {
   try
@@ -582,8 +583,8 @@ double restWindow(const core::Model& model, const core::State& end)
   return 1.0;
 }
 
-/// Simulates `plan` slowed by `scale` from `start` at rest, then until the structure is at rest (or for
-/// settle_time); polls `stop` every step.
+/// Simulates `plan` slowed by `scale` from `start` at rest, then until the structure is at rest or its
+/// motion decays (or for settle_time); polls `stop` every step.
 DynamicPeaks simulate(const core::Model& model, const core::State& start, const PlanRequest& r, const PlanResult& plan,
                       double scale, double rest_window, const std::function<bool()>& stop)
 {
@@ -620,7 +621,16 @@ DynamicPeaks simulate(const core::Model& model, const core::State& start, const 
   const double dt = dyn.solver.dt;
   const double t_end = times.back();
   const double settle_limit = r.settle_time > 0.0 ? r.settle_time : r.max_settle_time;
-  double quiet_since = t_end;
+  // after the end, windows of rest_window s: at rest when the RMS speed stayed under rest_speed through one;
+  // decaying when one set no new extreme (gap, contact force, bending stress) and its largest kinetic
+  // energy is below the window's before
+  struct Window
+  {
+    double kinetic = 0.0;
+    bool quiet = true, new_extreme = false;
+  } window, previous;
+  int windows = 0;
+  double window_start = t_end;
   for (long k = 1; sum.ok(); ++k)
   {
     if (stop())
@@ -634,13 +644,27 @@ DynamicPeaks simulate(const core::Model& model, const core::State& start, const 
     if (!sum.ok())
       break;
     s.t = k * dt;
+    const bool after = s.t > t_end;
     const std::vector<core::ContactPairState> contacts = core::activeContacts(dyn, s);
     for (const core::ContactPairState& c : contacts)
-      peaks.contact = std::max(peaks.contact, c.normal_force);
-    if (!contacts.empty())
-      peaks.bending = std::max(peaks.bending, core::maxStrutBendingStress(dyn, s.q, contacts));
-    peaks.min_gap = std::min(peaks.min_gap, core::minimumGap(dyn, s.q));
-    if (s.t < t_end)
+      if (c.normal_force > peaks.contact)
+      {
+        peaks.contact = c.normal_force;
+        window.new_extreme = window.new_extreme || after;
+      }
+    const double bending = contacts.empty() ? 0.0 : core::maxStrutBendingStress(dyn, s.q, contacts);
+    if (bending > peaks.bending)
+    {
+      peaks.bending = bending;
+      window.new_extreme = window.new_extreme || after;
+    }
+    const double gap = core::minimumGap(dyn, s.q);
+    if (gap < peaks.min_gap)
+    {
+      peaks.min_gap = gap;
+      window.new_extreme = window.new_extreme || after;
+    }
+    if (!after)
       continue;
     peaks.settle = s.t - t_end;
     if (r.settle_time > 0.0)
@@ -652,13 +676,25 @@ DynamicPeaks simulate(const core::Model& model, const core::State& start, const 
       }
       continue;
     }
-    const double speed = mass > 0.0 ? std::sqrt(2.0 * system.kineticEnergy(s.q, s.qd) / mass) : 0.0;
-    if (speed >= r.rest_speed)
-      quiet_since = s.t;
-    else if (s.t - quiet_since >= rest_window)
+    const double kinetic = system.kineticEnergy(s.q, s.qd);
+    window.kinetic = std::max(window.kinetic, kinetic);
+    window.quiet = window.quiet && (mass <= 0.0 || std::sqrt(2.0 * kinetic / mass) < r.rest_speed);
+    if (s.t - window_start >= rest_window - 0.5 * dt)
     {
-      peaks.settled = true;
-      break;
+      ++windows;
+      if (window.quiet)
+      {
+        peaks.settled = true;
+        break;
+      }
+      if (windows >= 2 && !window.new_extreme && window.kinetic < previous.kinetic)
+      {
+        peaks.settled = peaks.decaying = true;
+        break;
+      }
+      previous = window;
+      window = Window();
+      window_start = s.t;
     }
     if (peaks.settle >= settle_limit - 0.5 * dt)
       break;
@@ -669,8 +705,8 @@ DynamicPeaks simulate(const core::Model& model, const core::State& start, const 
   else if (!peaks.settled)
   {
     std::ostringstream msg;
-    msg << "still moving " << peaks.settle << " s after the trajectory's end (RMS speed above rest_speed "
-        << r.rest_speed << " m/s within the last " << rest_window << " s)";
+    msg << "still moving " << peaks.settle << " s after the trajectory's end, its extremes still growing (windows of "
+        << rest_window << " s)";
     peaks.message = msg.str();
   }
   return peaks;
@@ -910,6 +946,8 @@ void verify(const core::Model& model, const core::State& start, const PlanReques
   out.dynamic_peak_bending_stress = peaks.bending;
   out.dynamic_min_gap = peaks.min_gap;
   out.settle_duration = peaks.settle;
+  if (peaks.decaying)
+    out.message += "; verified until the motion decayed (still moving, every extreme passed)";
   out.time_scale = scale;
   if (!out.dynamics_verified)
     out.message += "; dynamic verification incomplete: " + peaks.message;
