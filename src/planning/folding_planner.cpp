@@ -218,6 +218,9 @@ private:
   size_t n_;
 };
 
+/// Goal states are sampled this far (m) below a target height.
+constexpr double kGoalMargin = 1e-3;
+
 /// height <= target at a valid equilibrium. Goal states are sampled (for bidirectional planners) on
 /// rays from the start towards the upper bounds in random proportions, where the height first drops
 /// to the target (bisection on the equilibria along the ray).
@@ -260,7 +263,8 @@ public:
           v[i] = lo[i] + f * (hi[i] - lo[i]);
         return v;
       };
-      const auto above = [this](const Equilibrium& e) { return !e.converged || e.height > target_; };
+      // aimed 1 mm below the target: the equilibrium reached along another path may lie a little higher
+      const auto above = [this](const Equilibrium& e) { return !e.converged || e.height > target_ - kGoalMargin; };
       if (above(oracle_.at(point(1.0))))
         continue;  // not even at the upper bounds (or stopped)
       double f0 = 0.0, f1 = 1.0;
