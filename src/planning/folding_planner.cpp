@@ -56,6 +56,7 @@
 #include "active_tensegrity/core/modal.h"
 #include "active_tensegrity/core/statics.h"
 #include "active_tensegrity/core/text.h"
+#include "active_tensegrity/planning/trajectory.h"
 
 namespace ob = ompl::base;
 namespace og = ompl::geometric;
@@ -404,63 +405,6 @@ std::string checkRequest(const core::Model& model, const PlanRequest& r, std::ve
   return "";
 }
 
-double perActuator(const std::vector<double>& v, size_t i)
-{
-  return v.size() == 1 ? v[0] : v[i];
-}
-
-/// Rest to rest along each straight segment, all actuators together: the path parameter follows the
-/// time-optimal trapezoid under the tightest of the actuators' limits.
-void timeParameterize(const std::vector<Values>& waypoints, const PlanRequest& r, PlanResult& out)
-{
-  const size_t n = waypoints.front().size();
-  out.times = { 0.0 };
-  out.positions = { waypoints.front() };
-  out.velocities = { Values(n, 0.0) };
-  out.accelerations = { Values(n, 0.0) };
-  double t0 = 0.0;
-  for (size_t w = 0; w + 1 < waypoints.size(); ++w)
-  {
-    const Values& a = waypoints[w];
-    const Values& b = waypoints[w + 1];
-    double vs = INFINITY, as = INFINITY;
-    for (size_t i = 0; i < n; ++i)
-    {
-      const double d = std::abs(b[i] - a[i]);
-      if (d > 0.0)
-      {
-        vs = std::min(vs, perActuator(r.max_speeds, i) / d);
-        as = std::min(as, perActuator(r.max_accelerations, i) / d);
-      }
-    }
-    if (!std::isfinite(vs))
-      continue;  // a repeated waypoint
-    core::ActuationValue rest;
-    const core::ActuatorMotion s = core::ActuatorMotion::ramp(0.0, rest, 1.0, vs, as);
-    const double T = s.endTime();
-    const int samples = std::max(2, static_cast<int>(std::ceil(T / r.sample_dt)));
-    for (int k = 1; k <= samples; ++k)
-    {
-      const double t = T * k / samples;
-      const core::ActuationValue p = s.evaluate(t);
-      Values pos(n), vel(n), acc(n);
-      for (size_t i = 0; i < n; ++i)
-      {
-        const double d = b[i] - a[i];
-        pos[i] = k == samples ? b[i] : a[i] + p.value * d;
-        vel[i] = k == samples ? 0.0 : p.rate * d;
-        acc[i] = p.accel * d;
-      }
-      out.times.push_back(t0 + t);
-      out.positions.push_back(pos);
-      out.velocities.push_back(vel);
-      out.accelerations.push_back(acc);
-    }
-    t0 += T;
-  }
-  out.duration = t0;
-}
-
 /// The request's one deadline, its cancel and its progress reports (PlanControl). Planners may poll from
 /// several threads: the flags are atomic, the reports serialized.
 class RequestClock
@@ -757,10 +701,21 @@ void stayAtStart(const EquilibriumOracle& oracle, const PlanRequest& r, PlanResu
   }
 }
 
-/// One continuation to every actuator's upper bound: a height target below the lowest height met on it
-/// is reported as unreachable (empty when that is not so, or nothing can be concluded).
+/// Cheap necessary conditions: for a height target, one continuation to every actuator's upper bound, and a
+/// target below the lowest height met on it is reported as unreachable; for target values, their
+/// equilibrium reached straight from the start must be valid. Empty when the goal may be reachable.
 std::string reachability(const EquilibriumOracle& oracle, const PlanRequest& r, const std::vector<double>& upper)
 {
+  if (!r.target_values.empty())
+  {
+    // the target's own equilibrium, by continuation straight from the start
+    const Equilibrium goal = oracle.at(r.target_values);
+    std::string why;
+    if (!goal.converged || oracle.valid(goal, &why))
+      return "";
+    return "the equilibrium at the target values (by continuation straight from the start) is not valid: " + why +
+           " (set reachability_check off to search anyway)";
+  }
   double lowest = oracle.start().height;
   Equilibrium end;
   const bool done = oracle.follow(oracle.start(), upper, end, false,
@@ -895,6 +850,65 @@ Equilibrium followFromStart(const EquilibriumOracle& oracle, const PlanRequest& 
     }
   }
   return e;
+}
+
+void setTrajectory(const Trajectory& t, PlanResult& out)
+{
+  out.times = t.times;
+  out.positions = t.positions;
+  out.velocities = t.velocities;
+  out.accelerations = t.accelerations;
+  out.duration = t.duration;
+}
+
+/// Corners blended within r.blend_tolerance: the blended curve followed from the start by continuation; a
+/// corner whose arc fails is tightened (halved three times, then passed at rest) and the curve checked
+/// again. On success the trajectory is the time-optimal one along the curve and the figures are the
+/// curve's; otherwise (out of time, a curve that ends elsewhere) the rest-to-rest one stays, with a note.
+void blend(const EquilibriumOracle& oracle, const PlanRequest& r, RequestClock& clock, PlanResult& out)
+{
+  std::vector<double> d = blendLengths(out.waypoints, r.blend_tolerance);
+  std::vector<int> tightened(d.size(), 0);
+  for (size_t attempt = 0; attempt <= 4 * d.size(); ++attempt)
+  {
+    std::vector<int> corner;
+    const std::vector<Values> curve = blendedCurve(out.waypoints, d, oracle.step(), &corner);
+    double min_gap = oracle.start().min_gap, peak = oracle.start().max_contact;
+    const auto visit = [&](const Equilibrium& q)
+    {
+      min_gap = std::min(min_gap, q.min_gap);
+      peak = std::max(peak, q.max_contact);
+    };
+    Equilibrium e = oracle.start();
+    size_t k = 1;
+    for (; k < curve.size(); ++k)
+    {
+      Equilibrium end;
+      if (!oracle.follow(e, curve[k], end, true, visit))
+        break;
+      e = end;
+    }
+    if (k == curve.size())
+    {
+      if (!meetsGoal(oracle, r, e) && out.status == PlanStatus::kExactSolution)
+        break;  // the blended curve ends on another branch
+      setTrajectory(timeOptimal(out.waypoints, d, r.max_speeds, r.max_accelerations, r.sample_dt), out);
+      out.min_gap = min_gap;
+      out.peak_contact_force = peak;
+      out.final_height = e.height;
+      const long tight = std::count_if(tightened.begin(), tightened.end(), [](int t) { return t > 0; });
+      if (tight > 0)
+        out.message += "; " + std::to_string(tight) + " of " + std::to_string(out.waypoints.size() - 2) +
+                       " corners blended tighter than blend_tolerance (" +
+                       std::to_string(std::count(d.begin(), d.end(), 0.0) - 2) + " passed at rest) to keep the limits";
+      return;
+    }
+    const int c = corner[k];
+    if (clock.stop() || c < 0)
+      break;
+    d[c] = ++tightened[c] <= 3 ? 0.5 * d[c] : 0.0;
+  }
+  out.message += "; corners not blended (the blended path could not be checked within the limits and the time)";
 }
 
 /// The dynamic verification (and the speed-limit search) of out's trajectory; scales it in place.
@@ -1075,7 +1089,7 @@ PlanResult planFolding(const core::Model& model, const core::State& start, const
     bounds.setHigh(i, upper[i] = a.max_value);
     extent = std::max(extent, a.max_value - a.min_value);
   }
-  if (r.target_values.empty() && r.reachability_check)
+  if (r.reachability_check)
   {
     clock.phase("reachability");
     out.message = reachability(oracle, r, upper);
@@ -1164,8 +1178,13 @@ PlanResult planFolding(const core::Model& model, const core::State& start, const
     out.message += " (cancelled: the best path found so far)";
   else if (clock.timedOut() && out.status != PlanStatus::kExactSolution)
     out.message += " (the time limit ended the search)";
-  timeParameterize(out.waypoints, r, out);
+  setTrajectory(restToRest(out.waypoints, r.max_speeds, r.max_accelerations, r.sample_dt), out);
   out.rest_to_rest_duration = out.duration;
+  if (r.blend_tolerance > 0.0 && out.waypoints.size() > 2)
+  {
+    clock.phase("blend");
+    blend(oracle, r, clock, out);
+  }
 
   if ((r.verify_dynamics || r.find_speed_limit) && out.waypoints.size() > 1)
   {

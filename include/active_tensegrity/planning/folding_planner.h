@@ -51,9 +51,11 @@ struct PlanRequest
   double continuation_step = 0.02;  // m: largest actuation increment between checked equilibria
   double range = 0.0;               // m: planner step (0: 0.2 of the largest actuator range)
   double sample_dt = 0.05;          // s between trajectory points
-  /// height goals: before searching, one continuation to every actuator's upper bound; a target below
-  /// the lowest height met on it is answered at once as unreachable (kInvalidGoal). Holds for structures
-  /// that fold as their cables are pulled in; turn off for others.
+  /// before searching, cheap necessary conditions answered at once as kInvalidGoal: for height goals, one
+  /// continuation to every actuator's upper bound, and a target below the lowest height met on it; for
+  /// target values, their equilibrium reached straight from the start outside the limits. Hold for
+  /// structures that fold as their cables are pulled in and whose equilibria do not depend on the path
+  /// taken to them; turn off for others.
   bool reachability_check = true;
   /// dynamic verification: simulate the trajectory (DynamicsSolver) from the start equilibrium at rest
   /// until the structure is at rest again; report peak contact force, strut bending stress and the

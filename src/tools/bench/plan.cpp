@@ -186,7 +186,8 @@ int plan(const std::string& scene, const std::vector<std::string>& args)
     std::printf("%5d %-16s %9.2f %7ld %9zu %12.4f %10.4f %12.1f\n", seed, ap::toString(p.status), p.planning_time,
                 p.equilibrium_solves, p.waypoints.size(), p.final_height, p.min_gap, p.peak_contact_force);
     if (req.blend_tolerance > 0.0)
-      std::printf("      trajectory %.3f s (rest to rest %.3f s)\n", p.duration, p.rest_to_rest_duration);
+      std::printf("      trajectory %.3f s (rest to rest %.3f s): %s\n", p.duration, p.rest_to_rest_duration,
+                  p.message.c_str());
     if (req.verify_dynamics)
       std::printf("      dynamics: verified %s, within limits %s; peak F_N %.1f N, bending %.1f MPa, min gap %.4f m, "
                   "settled %.2f s after the end; %s\n",
