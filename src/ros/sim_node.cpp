@@ -8,7 +8,6 @@
 #include <rosgraph_msgs/Clock.h>
 
 #include "active_tensegrity/core/scene.h"
-#include "active_tensegrity/core/statics.h"
 #include "active_tensegrity/core/text.h"
 #include "active_tensegrity/planning/folding_planner.h"
 
@@ -19,6 +18,86 @@ namespace
 double seconds(std::chrono::steady_clock::duration d)
 {
   return std::chrono::duration<double>(d).count();
+}
+
+/// A JointTrajectory's points as the controller takes them (velocities only when some point has them).
+void trajectoryArrays(const trajectory_msgs::JointTrajectory& msg, std::vector<double>& times,
+                      std::vector<std::vector<double>>& positions, std::vector<std::vector<double>>& velocities)
+{
+  bool any_velocity = false;
+  for (const trajectory_msgs::JointTrajectoryPoint& p : msg.points)
+  {
+    times.push_back(p.time_from_start.toSec());
+    positions.push_back(p.positions);
+    velocities.push_back(p.velocities);
+    any_velocity = any_velocity || !p.velocities.empty();
+  }
+  if (!any_velocity)
+    velocities.clear();
+}
+
+/// The service request or action goal as the planner's request: 0 means "no limit" or the default, every
+/// other value goes to the planner as given (which refuses negative and NaN limits, naming the field).
+template <typename Request>
+planning::PlanRequest planRequest(const Request& req, const SimParams& params)
+{
+  planning::PlanRequest r;
+  r.actuators = req.actuators;
+  r.target_height = req.target_values.empty() ? req.target_height : std::nan("");
+  r.target_values = req.target_values;
+  r.limits.min_clearance = req.min_clearance;
+  r.limits.allow_contact = req.allow_contact;
+  r.limits.max_contact_force = req.allow_contact ? req.max_contact_force : INFINITY;
+  r.limits.max_cable_stress = req.max_cable_stress == 0.0 ? INFINITY : req.max_cable_stress;
+  r.max_speeds = req.max_speeds.empty() ? std::vector<double>{ params.default_speed } : req.max_speeds;
+  r.max_accelerations =
+      req.max_accelerations.empty() ? std::vector<double>{ params.default_acceleration } : req.max_accelerations;
+  r.planner = req.planner.empty() ? "RRTConnect" : req.planner;
+  r.time_limit = req.time_limit == 0.0 ? 10.0 : req.time_limit;
+  r.seed = req.seed;
+  r.verify_dynamics = req.verify_dynamics;
+  r.find_speed_limit = req.find_speed_limit;
+  r.max_bending_stress = req.max_bending_stress == 0.0 ? INFINITY : req.max_bending_stress;
+  r.settle_time = req.settle_time;
+  r.blend_tolerance = req.blend_tolerance;
+  r.reachability_check = !req.skip_reachability_check;
+  return r;
+}
+
+/// The planner's result into the service response or action result (not `executed`).
+template <typename Answer>
+void fillAnswer(const planning::PlanResult& plan, Answer& res)
+{
+  res.status = static_cast<uint8_t>(plan.status);
+  res.message = plan.message;
+  res.trajectory.header.stamp = ros::Time(0);
+  res.trajectory.joint_names = plan.names;
+  res.trajectory.points.clear();
+  for (size_t k = 0; k < plan.times.size(); ++k)
+  {
+    trajectory_msgs::JointTrajectoryPoint p;
+    p.positions = plan.positions[k];
+    p.velocities = plan.velocities[k];
+    p.accelerations = plan.accelerations[k];
+    p.time_from_start = ros::Duration(plan.times[k]);
+    res.trajectory.points.push_back(p);
+  }
+  res.min_gap = std::isfinite(plan.min_gap) ? plan.min_gap : 0.0;
+  res.peak_contact_force = plan.peak_contact_force;
+  res.final_height = plan.final_height;
+  res.equilibrium_solves = static_cast<uint32_t>(plan.equilibrium_solves);
+  res.planning_time = plan.planning_time;
+  res.stopped_by_time_limit = plan.stopped_by_time_limit;
+  res.cancelled = plan.cancelled;
+  res.duration = plan.duration;
+  res.rest_to_rest_duration = plan.rest_to_rest_duration;
+  res.dynamics_verified = plan.dynamics_verified;
+  res.dynamics_within_limits = plan.dynamics_within_limits;
+  res.dynamic_peak_contact_force = plan.dynamic_peak_contact_force;
+  res.dynamic_peak_bending_stress = plan.dynamic_peak_bending_stress;
+  res.dynamic_min_gap = std::isfinite(plan.dynamic_min_gap) ? plan.dynamic_min_gap : 0.0;
+  res.settle_duration = plan.settle_duration;
+  res.time_scale = plan.time_scale;
 }
 
 bool finite(const core::State& s)
@@ -60,6 +139,13 @@ SimNode::SimNode(ros::NodeHandle& nh, ros::NodeHandle& pnh, SimParams params, co
   reset_srv_ = pnh.advertiseService("reset", &SimNode::onReset, this);
   pause_srv_ = pnh.advertiseService("pause", &SimNode::onPause, this);
   plan_srv_ = pnh.advertiseService("plan_folding", &SimNode::onPlan, this);
+  plan_action_ = std::make_unique<actionlib::SimpleActionServer<active_tensegrity::PlanFoldingAction>>(
+      pnh, "plan_folding", [this](const active_tensegrity::PlanFoldingGoalConstPtr& g) { onPlanGoal(g); }, false);
+  follow_action_ = std::make_unique<actionlib::SimpleActionServer<active_tensegrity::FollowTrajectoryAction>>(
+      pnh, "follow_trajectory", [this](const active_tensegrity::FollowTrajectoryGoalConstPtr& g) { onFollowGoal(g); },
+      false);
+  plan_action_->start();
+  follow_action_->start();
 }
 
 ros::Time SimNode::stamp(double t) const
@@ -103,16 +189,7 @@ void SimNode::onTrajectory(const trajectory_msgs::JointTrajectory::ConstPtr& msg
   const std::lock_guard<std::mutex> lock(mutex_);
   std::vector<double> times;
   std::vector<std::vector<double>> positions, velocities;
-  bool any_velocity = false;
-  for (const trajectory_msgs::JointTrajectoryPoint& p : msg->points)
-  {
-    times.push_back(p.time_from_start.toSec());
-    positions.push_back(p.positions);
-    velocities.push_back(p.velocities);
-    any_velocity = any_velocity || !p.velocities.empty();
-  }
-  if (!any_velocity)
-    velocities.clear();
+  trajectoryArrays(*msg, times, positions, velocities);
   const std::string err = controller_.setTrajectory(state_.t, msg->joint_names, times, positions, velocities);
   if (!err.empty())
   {
@@ -173,102 +250,227 @@ bool SimNode::onPause(std_srvs::SetBool::Request& req, std_srvs::SetBool::Respon
 
 bool SimNode::onPlan(active_tensegrity::PlanFolding::Request& req, active_tensegrity::PlanFolding::Response& res)
 {
+  plan(req, res, {});
+  return true;
+}
+
+template <typename Request, typename Answer>
+void SimNode::plan(const Request& req, Answer& res, const planning::PlanControl& control)
+{
   namespace ap = active_tensegrity::planning;
-  ap::PlanRequest r;
-  r.actuators = req.actuators;
-  r.target_height = req.target_values.empty() ? req.target_height : std::nan("");
-  r.target_values = req.target_values;
-  r.limits.min_clearance = req.min_clearance;
-  r.limits.allow_contact = req.allow_contact;
-  r.limits.max_contact_force = req.allow_contact ? req.max_contact_force : INFINITY;
-  r.limits.max_cable_stress = req.max_cable_stress > 0.0 ? req.max_cable_stress : INFINITY;
-  r.max_speeds = req.max_speeds.empty() ? std::vector<double>{ params_.default_speed } : req.max_speeds;
-  r.max_accelerations =
-      req.max_accelerations.empty() ? std::vector<double>{ params_.default_acceleration } : req.max_accelerations;
-  r.planner = req.planner.empty() ? "RRTConnect" : req.planner;
-  r.time_limit = req.time_limit == 0.0 ? 10.0 : req.time_limit;
-  r.seed = req.seed;
-  r.verify_dynamics = req.verify_dynamics;
-  r.find_speed_limit = req.find_speed_limit;
-  r.max_bending_stress = req.max_bending_stress > 0.0 ? req.max_bending_stress : INFINITY;
   res.executed = false;
   if (req.allow_contact && !(req.max_contact_force > 0.0))
   {
-    res.status = res.INVALID_REQUEST;
+    res.status = static_cast<uint8_t>(ap::PlanStatus::kInvalidRequest);
     res.message =
         "max_contact_force must be > 0 N when allow_contact is set, got " + core::shortestNumber(req.max_contact_force);
     ROS_WARN_STREAM("tensegrity_sim: ~plan_folding refused: " << res.message);
-    return true;
+    return;
   }
+  const ap::PlanRequest r = planRequest(req, params_);
 
-  // the start: the quasi-static equilibrium at the current actuation, from the current configuration
-  core::State start;
+  // the start: the quasi-static equilibrium nearest to the live state (folded, moving)
+  core::State live, start;
   {
     const std::lock_guard<std::mutex> lock(mutex_);
-    start = state_;
+    live = state_;
   }
-  core::Model statics = model_;
-  statics.analysis.type = core::AnalysisType::kStatic;
-  for (core::ActuationValue& u : start.u)
-    u.rate = u.accel = 0.0;
-  start.qd.setZero();
-  core::StaticSolver solver(statics, statics.solver);
-  // relaxed from wherever the structure is (Newton, then dynamic relaxation): a folded, moving structure is
-  // a valid start
-  const core::Summary eq = solver.relax(start, start.u);
-  ap::PlanResult plan;
-  if (!eq.ok())
+  ap::PlanResult result;
+  const std::string why = ap::startEquilibrium(model_, live, start);
+  if (!why.empty())
   {
-    plan.status = ap::PlanStatus::kInvalidStart;
-    plan.message = "no quasi-static equilibrium at the current actuation: " + eq.message;
+    result.status = ap::PlanStatus::kInvalidStart;
+    result.message = why;
   }
   else
-    plan = ap::planFolding(model_, start, r);
-
-  res.status = static_cast<uint8_t>(plan.status);
-  res.message = plan.message;
-  res.trajectory.header.stamp = ros::Time(0);
-  res.trajectory.joint_names = plan.names;
-  for (size_t k = 0; k < plan.times.size(); ++k)
+    result = ap::planFolding(model_, start, r, control);
+  fillAnswer(result, res);
+  ROS_INFO_STREAM("tensegrity_sim: ~plan_folding: " << planning::toString(result.status) << " ("
+                                                    << core::clipped(result.message, 4 * core::kMaxEchoLength) << "), "
+                                                    << result.waypoints.size() << " waypoints, "
+                                                    << result.equilibrium_solves << " equilibrium solves, "
+                                                    << result.planning_time << " s");
+  if (!req.execute)
+    return;
+  std::string not_run;
+  if (result.status != ap::PlanStatus::kExactSolution)
+    not_run = "not an exact solution";
+  else if ((r.verify_dynamics || r.find_speed_limit) && !result.dynamics_within_limits && !req.execute_unverified)
+    not_run = std::string("the dynamic verification ") +
+              (result.dynamics_verified ? "found the trajectory outside the limits" : "did not complete") +
+              " (execute_unverified runs it anyway)";
+  if (!not_run.empty())
   {
-    trajectory_msgs::JointTrajectoryPoint p;
-    p.positions = plan.positions[k];
-    p.velocities = plan.velocities[k];
-    p.accelerations = plan.accelerations[k];
-    p.time_from_start = ros::Duration(plan.times[k]);
-    res.trajectory.points.push_back(p);
+    res.message += "; not executed: " + not_run;
+    return;
   }
-  res.min_gap = std::isfinite(plan.min_gap) ? plan.min_gap : 0.0;
-  res.peak_contact_force = plan.peak_contact_force;
-  res.final_height = plan.final_height;
-  res.equilibrium_solves = static_cast<uint32_t>(plan.equilibrium_solves);
-  res.planning_time = plan.planning_time;
-  res.dynamics_verified = plan.dynamics_verified;
-  res.dynamics_within_limits = plan.dynamics_within_limits;
-  res.dynamic_peak_contact_force = plan.dynamic_peak_contact_force;
-  res.dynamic_peak_bending_stress = plan.dynamic_peak_bending_stress;
-  res.time_scale = plan.time_scale;
-  ROS_INFO_STREAM("tensegrity_sim: ~plan_folding: " << planning::toString(plan.status) << " (" << plan.message << "), "
-                                                    << plan.waypoints.size() << " waypoints, "
-                                                    << plan.equilibrium_solves << " equilibrium solves, "
-                                                    << plan.planning_time << " s");
-  if (req.execute && plan.status == ap::PlanStatus::kExactSolution)
+  const std::lock_guard<std::mutex> lock(mutex_);
+  const std::string err =
+      controller_.setTrajectory(state_.t, result.names, result.times, result.positions, result.velocities);
+  if (err.empty())
+  {
+    res.executed = true;
+    ++accepted_;
+  }
+  else
+  {
+    res.message += "; not executed: " + err;
+    reject("~plan_folding execution", err);
+  }
+}
+
+void SimNode::onPlanGoal(const active_tensegrity::PlanFoldingGoalConstPtr& goal)
+{
+  planning::PlanControl control;
+  control.cancelled = [this] { return plan_action_->isPreemptRequested() || !ros::ok(); };
+  control.progress = [this](const planning::PlanProgress& p)
+  {
+    active_tensegrity::PlanFoldingFeedback f;
+    f.elapsed = p.elapsed;
+    f.equilibrium_solves = static_cast<uint32_t>(p.equilibrium_solves);
+    f.best_height = p.best_height;
+    f.best_distance = p.best_distance;
+    f.phase = p.phase;
+    plan_action_->publishFeedback(f);
+  };
+  active_tensegrity::PlanFoldingResult res;
+  plan(*goal, res, control);
+  if (res.cancelled)
+    plan_action_->setPreempted(res, res.message);
+  else if (res.status == res.EXACT_SOLUTION)
+    plan_action_->setSucceeded(res, res.message);
+  else
+    plan_action_->setAborted(res, res.message);
+}
+
+void SimNode::onFollowGoal(const active_tensegrity::FollowTrajectoryGoalConstPtr& goal)
+{
+  using Result = active_tensegrity::FollowTrajectoryResult;
+  Result result;
+  std::vector<double> times;
+  std::vector<std::vector<double>> positions, velocities;
+  trajectoryArrays(goal->trajectory, times, positions, velocities);
+  const std::vector<std::string>& names = goal->trajectory.joint_names;
+  std::string err;
+  double t0 = 0.0;
+  std::unique_ptr<core::ActuationController> reference;  // the trajectory alone: the desired values
   {
     const std::lock_guard<std::mutex> lock(mutex_);
-    std::vector<std::vector<double>> vel = plan.velocities;
-    const std::string err = controller_.setTrajectory(state_.t, plan.names, plan.times, plan.positions, vel);
+    if (!(goal->path_tolerance >= 0.0) || !(goal->goal_tolerance >= 0.0) || !(goal->goal_time_tolerance >= 0.0) ||
+        !std::isfinite(goal->goal_time_tolerance))
+      err = "path_tolerance, goal_tolerance and goal_time_tolerance must be >= 0 (0 = the default), got " +
+            core::shortestNumber(goal->path_tolerance) + ", " + core::shortestNumber(goal->goal_tolerance) + ", " +
+            core::shortestNumber(goal->goal_time_tolerance);
+    else
+      err = controller_.setTrajectory(state_.t, names, times, positions, velocities);
     if (err.empty())
     {
-      res.executed = true;
+      reference = std::make_unique<core::ActuationController>(controller_);
+      t0 = state_.t;
       ++accepted_;
+      publishStatus();
     }
     else
-    {
-      res.message += "; not executed: " + err;
-      reject("~plan_folding execution", err);
-    }
+      reject("~follow_trajectory goal", err);
   }
-  return true;
+  if (!err.empty())
+  {
+    result.error_code = Result::INVALID_GOAL;
+    result.error_string = err;
+    follow_action_->setAborted(result, err);
+    return;
+  }
+  std::vector<int> idx;
+  for (const std::string& n : names)
+    idx.push_back(reference->index(n));
+  const double t_end = t0 + times.back();
+  const double goal_tolerance = goal->goal_tolerance > 0.0 ? goal->goal_tolerance : 1e-3;
+  const double goal_time = goal->goal_time_tolerance > 0.0 ? goal->goal_time_tolerance : 1.0;
+  const auto finish = [&](int code, const std::string& why)
+  {
+    result.error_code = code;
+    result.error_string = why;
+    if (code == Result::SUCCESSFUL)
+      follow_action_->setSucceeded(result, why);
+    else
+      follow_action_->setAborted(result, why);
+  };
+  ros::WallRate rate(std::min(20.0, params_.publish_rate));
+  active_tensegrity::FollowTrajectoryFeedback f;
+  f.joint_names = names;
+  while (true)
+  {
+    if (!ros::ok() || follow_action_->isPreemptRequested())
+    {
+      // hold every named actuator where it is (a ramp to its current value)
+      const std::lock_guard<std::mutex> lock(mutex_);
+      const core::ActuationValues now = controller_.values(state_.t);
+      std::vector<double> here;
+      for (int a : idx)
+        here.push_back(now[a].value);
+      controller_.setTargets(state_.t, names, here, {}, {}, params_.default_speed, params_.default_acceleration);
+      result.error_code = Result::SUCCESSFUL;
+      result.error_string = "preempted: the actuators hold where they were";
+      follow_action_->setPreempted(result, result.error_string);
+      return;
+    }
+    double t = 0.0;
+    bool failed = false;
+    f.actual.clear();
+    {
+      const std::lock_guard<std::mutex> lock(mutex_);
+      t = state_.t;
+      failed = failed_;
+      for (int a : idx)
+        f.actual.push_back(state_.u[a].value);
+    }
+    const core::ActuationValues want = reference->values(t);
+    f.sim_time = t;
+    f.desired.clear();
+    f.error.clear();
+    double worst = 0.0;
+    size_t worst_i = 0;
+    for (size_t i = 0; i < idx.size(); ++i)
+    {
+      f.desired.push_back(want[idx[i]].value);
+      f.error.push_back(f.desired[i] - f.actual[i]);
+      if (std::abs(f.error[i]) > worst)
+      {
+        worst = std::abs(f.error[i]);
+        worst_i = i;
+      }
+    }
+    follow_action_->publishFeedback(f);
+    if (failed)
+      return finish(Result::PATH_TOLERANCE_VIOLATED, "the simulation failed (see ~status); call ~reset");
+    if (goal->path_tolerance > 0.0 && t <= t_end && worst > goal->path_tolerance)
+      return finish(Result::PATH_TOLERANCE_VIOLATED,
+                    "at t = " + core::shortestNumber(t) + " s actuator " + core::quoted(names[worst_i]) + " is " +
+                        core::shortestNumber(f.actual[worst_i]) + " m, the trajectory " +
+                        core::shortestNumber(f.desired[worst_i]) + " m (path_tolerance " +
+                        core::shortestNumber(goal->path_tolerance) + " m)");
+    if (t >= t_end)
+    {
+      double off = 0.0;
+      size_t off_i = 0;
+      for (size_t i = 0; i < idx.size(); ++i)
+        if (std::abs(f.actual[i] - positions.back()[i]) > off)
+        {
+          off = std::abs(f.actual[i] - positions.back()[i]);
+          off_i = i;
+        }
+      if (off <= goal_tolerance)
+        return finish(Result::SUCCESSFUL, "");
+      if (t >= t_end + goal_time)
+        return finish(Result::GOAL_TOLERANCE_VIOLATED,
+                      "actuator " + core::quoted(names[off_i]) + " is " + core::shortestNumber(f.actual[off_i]) +
+                          " m, " + core::shortestNumber(off) + " m from its goal " +
+                          core::shortestNumber(positions.back()[off_i]) + " m, " + core::shortestNumber(t - t_end) +
+                          " s after the trajectory's end (goal_tolerance " + core::shortestNumber(goal_tolerance) +
+                          " m)");
+    }
+    rate.sleep();
+  }
 }
 
 void SimNode::publishStatus()

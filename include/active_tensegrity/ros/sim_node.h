@@ -1,7 +1,8 @@
 /// The tensegrity_sim node: steps the core's DynamicsSolver on a scene in simulated time, paced to a
 /// real-time factor, drives the actuators from ~actuation and ~trajectory through the core's
 /// ActuationController, and publishes tf, ~contacts, ~cables, ~actuators, ~markers, ~status and
-/// (optionally) /clock. No physics here: only conversion, pacing and delegation (docs/ros.md).
+/// (optionally) /clock; plans foldings (the ~plan_folding service and action) and follows trajectories
+/// (the ~follow_trajectory action). No physics here: only conversion, pacing and delegation (docs/ros.md).
 #pragma once
 
 #include <atomic>
@@ -10,6 +11,7 @@
 #include <mutex>
 #include <string>
 
+#include <actionlib/server/simple_action_server.h>
 #include <ros/ros.h>
 #include <std_srvs/SetBool.h>
 #include <std_srvs/Trigger.h>
@@ -17,10 +19,13 @@
 #include <trajectory_msgs/JointTrajectory.h>
 
 #include "active_tensegrity/ActuationCommand.h"
+#include "active_tensegrity/FollowTrajectoryAction.h"
+#include "active_tensegrity/PlanFoldingAction.h"
 #include "active_tensegrity/PlanFolding.h"
 #include "active_tensegrity/SimStatus.h"
 #include "active_tensegrity/core/actuation_control.h"
 #include "active_tensegrity/core/dynamics.h"
+#include "active_tensegrity/planning/folding_planner.h"
 #include "active_tensegrity/ros/messages.h"
 #include "active_tensegrity/ros/sim_params.h"
 
@@ -43,9 +48,18 @@ private:
   void onTrajectory(const trajectory_msgs::JointTrajectory::ConstPtr& msg);
   bool onReset(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
   bool onPause(std_srvs::SetBool::Request& req, std_srvs::SetBool::Response& res);
-  /// Plans from the quasi-static equilibrium at the current actuation (the simulation keeps running);
+  /// Plans from the quasi-static equilibrium nearest to the live state (the simulation keeps running);
   /// executes the trajectory when asked.
   bool onPlan(active_tensegrity::PlanFolding::Request& req, active_tensegrity::PlanFolding::Response& res);
+  /// The ~plan_folding action: as the service, with progress as feedback and cancel (its own thread).
+  void onPlanGoal(const active_tensegrity::PlanFoldingGoalConstPtr& goal);
+  /// The ~follow_trajectory action: the trajectory through the controller, feedback per actuator, path and
+  /// goal tolerances in simulated time; a new goal preempts, a cancel holds the actuators (its own thread).
+  void onFollowGoal(const active_tensegrity::FollowTrajectoryGoalConstPtr& goal);
+  /// What the service and the action share: request (service request or action goal) to answer (service
+  /// response or action result), planning with `control`, and the execution.
+  template <typename Request, typename Answer>
+  void plan(const Request& req, Answer& res, const planning::PlanControl& control);
 
   /// Logs and counts a rejected command (mutex held).
   void reject(const std::string& what, const std::string& reason);
@@ -84,6 +98,9 @@ private:
   ros::Subscriber actuation_sub_, trajectory_sub_;
   ros::ServiceServer reset_srv_, pause_srv_, plan_srv_;
   tf2_ros::TransformBroadcaster tf_;
+  // the action servers last: their threads run callbacks that use everything above
+  std::unique_ptr<actionlib::SimpleActionServer<active_tensegrity::PlanFoldingAction>> plan_action_;
+  std::unique_ptr<actionlib::SimpleActionServer<active_tensegrity::FollowTrajectoryAction>> follow_action_;
 };
 
 /// The whole node for main(): parameters, scene, SimNode, spinner. Returns the exit code (1 when the
