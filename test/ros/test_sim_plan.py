@@ -20,7 +20,7 @@ from active_tensegrity.srv import PlanFolding, PlanFoldingRequest, PlanFoldingRe
 NS = "/tensegrity_sim"
 PULLS = ["pull1", "pull2", "pull3", "pull4"]
 LIMIT = 1000.0  # N
-SETTLE = 5.0  # s of simulated time watched after the actuators arrive (the planner's check simulates 0.5 s)
+SETTLE = 5.0  # s of simulated time watched after the actuators arrive
 
 
 class TestSimPlan(unittest.TestCase):
@@ -57,12 +57,37 @@ class TestSimPlan(unittest.TestCase):
              "max_contact_force must be > 0"),
             (PlanFoldingRequest(actuators=PULLS, target_values=[0.1, 0.1]), "2 target_values for 4"),
             (PlanFoldingRequest(actuators=PULLS, target_height=0.7, planner="Magic"), "unknown planner"),
+            # negative limits are refused (0 is "no limit"), naming the field
+            (PlanFoldingRequest(actuators=PULLS, target_height=0.7, max_cable_stress=-1.0),
+             "max_cable_stress must be >= 0, got -1"),
+            (PlanFoldingRequest(actuators=PULLS, target_height=0.7, max_bending_stress=-1.0),
+             "max_bending_stress must be >= 0, got -1"),
+            (PlanFoldingRequest(actuators=PULLS, target_height=0.7, time_limit=-1.0), "time_limit must be"),
+            (PlanFoldingRequest(actuators=PULLS, target_height=0.7, settle_time=-1.0), "settle_time must be"),
+            (PlanFoldingRequest(actuators=PULLS, target_height=0.7, blend_tolerance=float("nan")),
+             "blend_tolerance must be"),
         ]:
             res = self.plan(req)
             self.assertEqual(res.status, PlanFoldingResponse.INVALID_REQUEST, res.message)
             self.assertIn(reason, res.message)
             self.assertEqual(len(res.trajectory.points), 0)
             self.assertFalse(res.executed)
+
+    def test_1b_a_plan_outside_its_verified_limits_is_not_executed_unless_asked(self):
+        # a bending limit of 1 Pa: every contact breaks it, so the verification fails
+        req = PlanFoldingRequest(actuators=PULLS, target_height=0.7, allow_contact=True, max_contact_force=LIMIT,
+                                 max_speeds=[0.2], max_accelerations=[1.0], time_limit=300.0, seed=1,
+                                 verify_dynamics=True, max_bending_stress=1.0, settle_time=0.5, execute=True)
+        res = self.plan(req)
+        self.assertEqual(res.status, PlanFoldingResponse.EXACT_SOLUTION, res.message)
+        self.assertTrue(res.dynamics_verified, res.message)
+        self.assertFalse(res.dynamics_within_limits)
+        self.assertFalse(res.executed)
+        self.assertIn("not executed: the dynamic verification found the trajectory outside the limits", res.message)
+        req.execute_unverified = True
+        res = self.plan(req)
+        self.assertTrue(res.executed, res.message)
+        # the next test plans and executes again from the same (paused) state: the trajectory is replaced
 
     def test_2_planned_fold_keeps_published_contact_forces_under_the_limit(self):
         req = PlanFoldingRequest(actuators=PULLS, target_height=0.7, allow_contact=True, max_contact_force=LIMIT,
@@ -105,6 +130,21 @@ class TestSimPlan(unittest.TestCase):
             self.assertTrue(math.isfinite(self.peak))
             # what the node published agrees with the planner's dynamic check to within sampling
             self.assertLessEqual(self.peak, 1.2 * res.dynamic_peak_contact_force + 1.0)
+
+    def test_3_plans_from_the_folded_tower(self):
+        # the tower as test 2 left it (folded to 0.7 m, in contact): back to the unfolded tower
+        with self.lock:
+            here = list(self.actuators.position)
+        req = PlanFoldingRequest(actuators=PULLS, target_values=[0.0] * 4, allow_contact=True,
+                                 max_contact_force=LIMIT, time_limit=300.0, seed=1)
+        res = self.plan(req)
+        self.assertEqual(res.status, PlanFoldingResponse.EXACT_SOLUTION, res.message)
+        first = res.trajectory.points[0].positions
+        for a, b in zip(first, here):
+            self.assertAlmostEqual(a, b, places=9)  # from where the structure is
+        self.assertGreater(res.final_height, 1.9)
+        print("[ measured ] unfold from the folded tower: %d points, %.2f s planning" % (len(res.trajectory.points),
+                                                                                        res.planning_time))
 
 
 if __name__ == "__main__":
