@@ -160,7 +160,7 @@ Summary StaticSolver::solve(State& s, const ActuationValues& u)
   return damped;
 }
 
-Summary StaticSolver::relax(State& s, const ActuationValues& u_in, long max_steps)
+Summary StaticSolver::relax(State& s, const ActuationValues& u_in, long max_steps, const std::function<bool()>& stop)
 {
   ActuationValues u = u_in;
   for (ActuationValue& v : u)
@@ -192,8 +192,16 @@ Summary StaticSolver::relax(State& s, const ActuationValues& u_in, long max_step
   double kinetic_before = 0.0;
   long resets = 0;
   int step_cuts = 0;
+  long steps = 0;
   for (long k = 1; k <= max_steps && total.ok(); ++k)
   {
+    if (stop && stop())
+    {
+      total.status = SolveStatus::kMaxIterations;
+      total.message = "stopped after " + std::to_string(k - 1) + " steps";
+      break;
+    }
+    steps = k;
     const Summary step = dyn.step(d, options_.dt, law);
     total.iterations += step.iterations;
     step_cuts += step.step_cuts;
@@ -239,7 +247,7 @@ Summary StaticSolver::relax(State& s, const ActuationValues& u_in, long max_step
     total.status = SolveStatus::kMaxIterations;
   std::ostringstream msg;
   msg << "no equilibrium at this actuation: Newton from the given state failed (" << first.message << "), and so did "
-      << max_steps << " steps of dynamic relaxation (" << resets << " velocity resets"
+      << steps << " steps of dynamic relaxation (" << resets << " velocity resets"
       << (total.message.empty() ? std::string() : "; " + total.message) << ")";
   total.message = msg.str();
   return total;

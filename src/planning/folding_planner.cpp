@@ -1022,7 +1022,8 @@ std::vector<std::string> plannerNames()
   return names;
 }
 
-std::string startEquilibrium(const core::Model& model, const core::State& state, core::State& start)
+std::string startEquilibrium(const core::Model& model, const core::State& state, core::State& start,
+                             const std::function<bool()>& stop)
 {
   start = state;
   for (core::ActuationValue& u : start.u)
@@ -1031,11 +1032,11 @@ std::string startEquilibrium(const core::Model& model, const core::State& state,
   core::Model statics = model;
   statics.analysis.type = core::AnalysisType::kStatic;
   core::StaticSolver solver(statics, statics.solver);
-  const core::Summary eq = solver.relax(start, start.u);
+  const core::Summary eq = solver.relax(start, start.u, 20000, stop);
   return eq.ok() ? std::string() : "no quasi-static equilibrium at the current actuation: " + eq.message;
 }
 
-PlanResult planFolding(const core::Model& model, const core::State& start, const PlanRequest& r,
+PlanResult planFolding(const core::Model& model, const core::State& given, const PlanRequest& r,
                        const PlanControl& control)
 {
   PlanResult out;
@@ -1049,6 +1050,21 @@ PlanResult planFolding(const core::Model& model, const core::State& start, const
   out.names = r.actuators;
   const size_t n = idx.size();
   RequestClock clock(r.time_limit, control);
+  core::State start = given;
+  if (r.relax_start)
+  {
+    clock.phase("start");
+    const std::string why = startEquilibrium(model, given, start, [&clock] { return clock.stop(); });
+    if (!why.empty())
+    {
+      out.status = PlanStatus::kInvalidStart;
+      out.message = why;
+      out.stopped_by_time_limit = clock.timedOut();
+      out.cancelled = clock.cancelled();
+      out.planning_time = clock.elapsed();
+      return out;
+    }
+  }
   // OMPL's own console output off: what it would say (no valid goal sampled, skipped states) is in the
   // status and the message
   ompl::msg::setLogLevel(ompl::msg::LOG_NONE);

@@ -267,23 +267,16 @@ void SimNode::plan(const Request& req, Answer& res, const planning::PlanControl&
     ROS_WARN_STREAM("tensegrity_sim: ~plan_folding refused: " << res.message);
     return;
   }
-  const ap::PlanRequest r = planRequest(req, params_);
-
-  // the start: the quasi-static equilibrium nearest to the live state (folded, moving)
-  core::State live, start;
+  ap::PlanRequest r = planRequest(req, params_);
+  // the start: the quasi-static equilibrium nearest to the live state (folded, moving), found within the
+  // request's deadline
+  r.relax_start = true;
+  core::State live;
   {
     const std::lock_guard<std::mutex> lock(mutex_);
     live = state_;
   }
-  ap::PlanResult result;
-  const std::string why = ap::startEquilibrium(model_, live, start);
-  if (!why.empty())
-  {
-    result.status = ap::PlanStatus::kInvalidStart;
-    result.message = why;
-  }
-  else
-    result = ap::planFolding(model_, start, r, control);
+  const ap::PlanResult result = ap::planFolding(model_, live, r, control);
   fillAnswer(result, res);
   ROS_INFO_STREAM("tensegrity_sim: ~plan_folding: " << planning::toString(result.status) << " ("
                                                     << core::clipped(result.message, 4 * core::kMaxEchoLength) << "), "

@@ -325,8 +325,8 @@ TEST(Statics, RelaxationFindsTheEquilibriumWhereNewtonFails)
 
 TEST(Statics, RelaxationThatFindsNothingSaysSo)
 {
-  // thrown 20 cm off, the tower does not settle within 300 relaxation steps: a status and a message, and
-  // the state left as it was
+  // thrown 20 cm off, the tower does not settle within 300 relaxation steps, nor within 50 when its caller
+  // stops it: a status and a message, and the state left as it was
   const std::string path = std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) + "/config/scenes/tower.yaml";
   const Model model = loadScene(path, { { "analysis.max_actuation", "0.8" }, { "analysis.steps", "160" } });
   const RunResult fold = runAnalysis(model, [](const State&) {});
@@ -342,6 +342,14 @@ TEST(Statics, RelaxationThatFindsNothingSaysSo)
   const Summary eq = solver.relax(s, s.u, 300);
   EXPECT_FALSE(eq.ok());
   EXPECT_NE(eq.message.find("300 steps of dynamic relaxation"), std::string::npos) << eq.message;
+  EXPECT_EQ(s.q, before.q);
+  // stopped by its caller after 50 steps (a planner's deadline): the same, sooner
+  int polls = 0;
+  const Summary stopped = solver.relax(s, s.u, 300, [&polls] { return ++polls > 50; });
+  EXPECT_FALSE(stopped.ok());
+  EXPECT_EQ(polls, 51);
+  EXPECT_NE(stopped.message.find("50 steps of dynamic relaxation ("), std::string::npos) << stopped.message;
+  EXPECT_NE(stopped.message.find("stopped after 50 steps"), std::string::npos) << stopped.message;
   EXPECT_EQ(s.q, before.q);
 }
 

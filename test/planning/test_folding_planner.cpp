@@ -602,6 +602,13 @@ TEST(FoldingPlanner, PlansFromAFoldedMovingTower)
     EXPECT_GT(moving.qd.norm(), 1e-3);
     at::State start;
     ASSERT_EQ(ap::startEquilibrium(model, moving, start), "");
+    // the request can relax the moving state itself (as the node does), to the same equilibrium
+    ap::PlanRequest same = towerRequest();
+    same.target_values = std::vector<double>(4, pull);  // met at its start
+    same.relax_start = true;
+    const ap::PlanResult at_start = ap::planFolding(model, moving, same);
+    EXPECT_EQ(at_start.status, ap::PlanStatus::kExactSolution) << at_start.message;
+    EXPECT_EQ(at_start.final_height, at::structureHeight(model, start.q));
     EXPECT_EQ(start.qd.norm(), 0.0);
     for (int a : idx)
       EXPECT_EQ(start.u[a].value, pull);  // at the actuation where the structure is

@@ -66,7 +66,9 @@ public:
   /// velocities zeroed at every peak of the kinetic energy; contact without friction, as in statics), trying
   /// Newton from the relaxing state every 500 steps, for at most `max_steps` steps of solver.dt. On success state holds
   /// the equilibrium (u set, velocities zero); on failure it is left unchanged and the status and message say why.
-  Summary relax(State& state, const ActuationValues& u, long max_steps = 20000);
+  /// `stop` (when given) is polled every relaxation step: true ends the search (status kMaxIterations, the
+  /// message says it was stopped).
+  Summary relax(State& state, const ActuationValues& u, long max_steps = 20000, const std::function<bool()>& stop = {});
 
   /// Follows the path of equilibria from state's actuation to u_end, the path parameter w running from 0 to
   /// 1 (u = (1 - w) u_start + w u_end) in `steps` equal load steps; calls `on_step` after every one

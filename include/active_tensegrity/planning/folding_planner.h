@@ -71,6 +71,9 @@ struct PlanRequest
   double rest_speed = 1e-3;             // m/s
   double max_settle_time = 30.0;        // s
   double speed_limit_tolerance = 0.05;  // relative width of the final time-scale bracket (> 0)
+  /// `start` is any state (folded, moving): its nearest equilibrium (startEquilibrium) is found first,
+  /// within the request's deadline; false: `start` is a converged equilibrium already
+  bool relax_start = false;
   /// corners blended within this tube (m, max norm in actuation space) around the validated path,
   /// the blended curve checked by continuation; 0: rest to rest at every waypoint
   double blend_tolerance = 0.0;
@@ -85,7 +88,7 @@ struct PlanProgress
   /// above the target, or the max-norm distance to the target values); +inf before the first
   double best_height = std::numeric_limits<double>::infinity();
   double best_distance = std::numeric_limits<double>::infinity();
-  std::string phase;  // "search", "shortcut", "follow", "verify"
+  std::string phase;  // "start", "reachability", "search", "shortcut", "follow", "blend", "verify"
 };
 
 /// Hooks of a running request (all optional). Both are called from the planning thread.
@@ -129,14 +132,17 @@ struct PlanResult
   int dynamic_runs = 0;
 };
 
-/// Plans from `start` (a converged quasi-static equilibrium of `model`: startEquilibrium below). Never
+/// Plans from `start` (a converged quasi-static equilibrium of `model`: startEquilibrium below, or any state
+/// with request.relax_start). Never
 /// throws on a bad request: status kInvalidRequest and a message naming the field and the value.
 PlanResult planFolding(const core::Model& model, const core::State& start, const PlanRequest& request,
                        const PlanControl& control = {});
 
 /// The quasi-static equilibrium to plan from, nearest to `state` (folded, moving: velocities and rates
-/// are dropped, then StaticSolver::relax at its actuation). Empty message on success, else why not.
-std::string startEquilibrium(const core::Model& model, const core::State& state, core::State& start);
+/// are dropped, then StaticSolver::relax at its actuation, polling `stop`). Empty message on success, else
+/// why not.
+std::string startEquilibrium(const core::Model& model, const core::State& state, core::State& start,
+                             const std::function<bool()>& stop = {});
 
 /// Names of the OMPL geometric planners planFolding accepts.
 std::vector<std::string> plannerNames();
