@@ -266,17 +266,28 @@ public:
       };
       // aimed 1 mm below the target: the equilibrium reached along another path may lie a little higher
       const auto above = [this](const Equilibrium& e) { return !e.converged || e.height > target_ - kGoalMargin; };
-      if (above(oracle_.at(point(1.0))))
-        continue;  // not even at the upper bounds (or stopped)
-      double f0 = 0.0, f1 = 1.0;
-      if (above(oracle_.at(point(0.0))))
-        for (int k = 0; k < 8; ++k)
+      // the first tenth of the ray where the height is below the target (continuation along the ray, which
+      // may fail further out), then bisection inside it
+      double f0 = 0.0, f1 = -1.0;
+      for (int j = 1; j <= 10; ++j)
+      {
+        const Equilibrium e = oracle_.at(point(0.1 * j));
+        if (!e.converged)
+          break;  // no equilibrium further along (or stopped)
+        if (!above(e))
         {
-          const double f = 0.5 * (f0 + f1);
-          (above(oracle_.at(point(f))) ? f0 : f1) = f;
+          f1 = 0.1 * j;
+          break;
         }
-      else
-        f1 = 0.0;
+        f0 = 0.1 * j;
+      }
+      if (f1 < 0.0)
+        continue;  // not below the target on this ray
+      for (int k = 0; k < 6; ++k)
+      {
+        const double f = 0.5 * (f0 + f1);
+        (above(oracle_.at(point(f))) ? f0 : f1) = f;
+      }
       const Values v = point(f1);
       if (oracle_.valid(oracle_.at(v)))
       {

@@ -131,6 +131,8 @@ int plan(const std::string& scene, const std::vector<std::string>& args)
       speed_limit = true;
     else if (a == "--verify")
       req.verify_dynamics = true;
+    else if (a == "--step")
+      req.continuation_step = std::stod(next());
     else if (a == "--settle-time")
       req.settle_time = std::stod(next());
     else if (a == "--blend")
