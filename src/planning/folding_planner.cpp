@@ -12,13 +12,11 @@
 #include <set>
 #include <sstream>
 
-#include <ompl/base/MotionValidator.h>
 #include <ompl/base/PlannerData.h>
 #include <ompl/base/PlannerTerminationCondition.h>
 #include <ompl/base/ProblemDefinition.h>
 #include <ompl/base/SpaceInformation.h>
 #include <ompl/base/StateSampler.h>
-#include <ompl/base/StateValidityChecker.h>
 #include <ompl/base/goals/GoalSampleableRegion.h>
 #include <ompl/base/goals/GoalState.h>
 #include <ompl/base/objectives/MaximizeMinClearanceObjective.h>
@@ -57,6 +55,7 @@
 #include "active_tensegrity/core/statics.h"
 #include "active_tensegrity/core/text.h"
 #include "active_tensegrity/planning/trajectory.h"
+#include "active_tensegrity/planning/validity.h"
 
 namespace ob = ompl::base;
 namespace og = ompl::geometric;
@@ -103,14 +102,12 @@ const std::map<std::string, Allocator>& planners()
 
 Values valuesOf(const ob::State* s, size_t n)
 {
-  const auto* r = s->as<ob::RealVectorStateSpace::StateType>();
-  return Values(r->values, r->values + n);
+  return stateValues(s, n);
 }
 
 void setValues(ob::State* s, const Values& v)
 {
-  auto* r = s->as<ob::RealVectorStateSpace::StateType>();
-  std::copy(v.begin(), v.end(), r->values);
+  setStateValues(s, v);
 }
 
 /// Uniform sampling from the request's seed (OMPL's own RNG seeds come from one process-wide
@@ -146,77 +143,6 @@ public:
 
 private:
   std::mt19937 gen_;
-};
-
-class EquilibriumChecker : public ob::StateValidityChecker
-{
-public:
-  EquilibriumChecker(const ob::SpaceInformationPtr& si, const EquilibriumOracle& oracle, size_t n)
-    : ob::StateValidityChecker(si), oracle_(oracle), n_(n)
-  {
-  }
-  bool isValid(const ob::State* s) const override
-  {
-    return oracle_.valid(oracle_.at(valuesOf(s, n_)));
-  }
-  /// the margin to the binding limit (m of gap, or N of contact force over 1e4: a common order)
-  double clearance(const ob::State* s) const override
-  {
-    const Equilibrium e = oracle_.at(valuesOf(s, n_));
-    if (!e.converged)
-      return 0.0;
-    const ValidityLimits& l = oracle_.limits();
-    return l.allow_contact ? std::max(0.0, (l.max_contact_force - e.max_contact) * 1e-4) :
-                             std::max(0.0, e.min_gap - l.min_clearance);
-  }
-
-private:
-  const EquilibriumOracle& oracle_;
-  size_t n_;
-};
-
-/// An edge is valid when continuation from the equilibrium at its start reaches its end through
-/// valid equilibria only (increments <= the oracle's step).
-class ContinuationValidator : public ob::MotionValidator
-{
-public:
-  ContinuationValidator(const ob::SpaceInformationPtr& si, const EquilibriumOracle& oracle, size_t n)
-    : ob::MotionValidator(si), oracle_(oracle), n_(n)
-  {
-  }
-  bool checkMotion(const ob::State* s1, const ob::State* s2) const override
-  {
-    const Equilibrium from = oracle_.at(valuesOf(s1, n_));
-    if (!oracle_.valid(from))
-      return false;
-    Equilibrium end;
-    return oracle_.follow(from, valuesOf(s2, n_), end, true);
-  }
-  bool checkMotion(const ob::State* s1, const ob::State* s2, std::pair<ob::State*, double>& last) const override
-  {
-    const Values a = valuesOf(s1, n_), b = valuesOf(s2, n_);
-    const Equilibrium from = oracle_.at(a);
-    Equilibrium end;
-    const bool ok = oracle_.valid(from) && oracle_.follow(from, b, end, true);
-    if (!ok && last.first)
-    {
-      // the last valid point: the equilibrium before the failed increment, as a fraction of the edge
-      const double total = actuationDistance(a, b);
-      const double reached = actuationDistance(a, oracle_.values(end.state));
-      const double frac =
-          total > 0.0 ? std::max(0.0, (oracle_.valid(end) ? reached : reached - oracle_.step()) / total) : 0.0;
-      Values v(a.size());
-      for (size_t i = 0; i < a.size(); ++i)
-        v[i] = a[i] + frac * (b[i] - a[i]);
-      setValues(last.first, v);
-      last.second = frac;
-    }
-    return ok;
-  }
-
-private:
-  const EquilibriumOracle& oracle_;
-  size_t n_;
 };
 
 /// Goal states are sampled this far (m) below a target height.

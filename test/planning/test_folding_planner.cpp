@@ -15,6 +15,10 @@
 #include "active_tensegrity/core/scene.h"
 #include "active_tensegrity/core/statics.h"
 #include "active_tensegrity/planning/folding_planner.h"
+#include "active_tensegrity/planning/validity.h"
+
+#include <ompl/base/ScopedState.h>
+#include <ompl/base/spaces/RealVectorStateSpace.h>
 
 namespace at = active_tensegrity::core;
 namespace ap = active_tensegrity::planning;
@@ -758,4 +762,31 @@ TEST(FoldingPlanner, QuadruplexGoalsAreFoundWhereStaticsEndsFurtherOut)
   EXPECT_LE(at::structureHeight(model, again.end.q), 0.3 + 1e-3);
   std::printf("[ measured ] quadruplex to 0.3 m: %ld solves, %.2f s, final height %.4f m, peak contact %.0f N\n",
               p.equilibrium_solves, p.planning_time, p.final_height, p.peak_contact_force);
+}
+
+TEST(FoldingPlanner, AnEdgeFromAStateWithoutEquilibriumReportsItsStartAsTheLastValidPoint)
+{
+  // PRM's bounce motions ask for the last valid point of an edge; when the edge's start has no valid
+  // equilibrium (none found, or the request stopped the oracle) that point is the start itself, at 0
+  const at::Model model = scene("masts.yaml");
+  const at::State start = startEquilibrium(model);
+  const std::vector<int> idx = { model.findActuator("tiltA"), model.findActuator("tiltB") };
+  ap::EquilibriumOracle oracle(model, idx, start, {}, 0.02);
+  auto space = std::make_shared<ompl::base::RealVectorStateSpace>(2);
+  space->setBounds(0.0, 1.0);
+  auto si = std::make_shared<ompl::base::SpaceInformation>(space);
+  const ap::ContinuationValidator validator(si, oracle, 2);
+  ompl::base::ScopedState<> a(space), b(space), last(space);
+  ap::setStateValues(a.get(), { 0.3, 0.2 });
+  ap::setStateValues(b.get(), { 0.5, 0.6 });
+  std::pair<ompl::base::State*, double> reached(last.get(), -1.0);
+  // with the oracle working, the edge is valid (no clearance asked)
+  EXPECT_TRUE(validator.checkMotion(a.get(), b.get(), reached));
+  // stopped: an uncached start has no equilibrium
+  oracle.setStop([] { return true; });
+  ap::setStateValues(a.get(), { 0.7, 0.1 });
+  EXPECT_FALSE(validator.checkMotion(a.get(), b.get(), reached));
+  EXPECT_EQ(reached.second, 0.0);
+  EXPECT_EQ(ap::stateValues(last.get(), 2), std::vector<double>({ 0.7, 0.1 }));
+  EXPECT_FALSE(validator.checkMotion(a.get(), b.get()));
 }
