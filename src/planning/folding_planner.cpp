@@ -100,16 +100,6 @@ const std::map<std::string, Allocator>& planners()
   return m;
 }
 
-Values valuesOf(const ob::State* s, size_t n)
-{
-  return stateValues(s, n);
-}
-
-void setValues(ob::State* s, const Values& v)
-{
-  setStateValues(s, v);
-}
-
 /// Uniform sampling from the request's seed (OMPL's own RNG seeds come from one process-wide
 /// generator, so two requests with one seed would differ).
 class SeededSampler : public ob::StateSampler
@@ -161,12 +151,12 @@ public:
   }
   double distanceGoal(const ob::State* s) const override
   {
-    const Equilibrium e = oracle_.at(valuesOf(s, n_));
+    const Equilibrium e = oracle_.at(stateValues(s, n_));
     return e.converged ? std::max(0.0, e.height - target_) : std::numeric_limits<double>::infinity();
   }
   bool isSatisfied(const ob::State* s) const override
   {
-    const Equilibrium e = oracle_.at(valuesOf(s, n_));
+    const Equilibrium e = oracle_.at(stateValues(s, n_));
     return e.converged && e.height <= target_ && oracle_.valid(e);
   }
   void sampleGoal(ob::State* st) const override
@@ -217,11 +207,11 @@ public:
       const Values v = point(f1);
       if (oracle_.valid(oracle_.at(v)))
       {
-        setValues(st, v);
+        setStateValues(st, v);
         return;
       }
     }
-    setValues(st, Values(b.high.begin(), b.high.end()));
+    setStateValues(st, Values(b.high.begin(), b.high.end()));
   }
   unsigned int maxSampleCount() const override
   {
@@ -680,8 +670,8 @@ std::vector<Values> shortcut(const ob::SpaceInformationPtr& si, const std::vecto
     for (; j > i + 1 && !clock.stop(); --j)
     {
       ob::ScopedState<> a(space), b(space);
-      setValues(a.get(), raw[i]);
-      setValues(b.get(), raw[j]);
+      setStateValues(a.get(), raw[i]);
+      setStateValues(b.get(), raw[j]);
       if (si->checkMotion(a.get(), b.get()))
         break;
     }
@@ -716,7 +706,7 @@ std::vector<Values> bestPartialPath(const ob::SpaceInformationPtr& si, const ob:
     const unsigned v = queue.front();
     queue.pop_front();
     Equilibrium e;
-    if (oracle.known(valuesOf(data.getVertex(v).getState(), n), e) && oracle.valid(e) && distance(e) < best)
+    if (oracle.known(stateValues(data.getVertex(v).getState(), n), e) && oracle.valid(e) && distance(e) < best)
     {
       best = distance(e);
       best_vertex = v;
@@ -731,7 +721,7 @@ std::vector<Values> bestPartialPath(const ob::SpaceInformationPtr& si, const ob:
   }
   std::vector<Values> path;
   for (long v = best_vertex; v >= 0; v = parent[v])
-    path.push_back(valuesOf(data.getVertex(static_cast<unsigned>(v)).getState(), n));
+    path.push_back(stateValues(data.getVertex(static_cast<unsigned>(v)).getState(), n));
   std::reverse(path.begin(), path.end());
   return path;
 }
@@ -1063,7 +1053,7 @@ PlanResult planFolding(const core::Model& model, const core::State& given, const
 
   auto pdef = std::make_shared<ob::ProblemDefinition>(si);
   ob::ScopedState<> s0(space);
-  setValues(s0.get(), oracle.values(start));
+  setStateValues(s0.get(), oracle.values(start));
   pdef->addStartState(s0);
   if (r.target_values.empty())
     pdef->setGoal(std::make_shared<HeightGoal>(si, oracle, n, r.target_height, r.seed));
@@ -1071,7 +1061,7 @@ PlanResult planFolding(const core::Model& model, const core::State& given, const
   {
     auto goal = std::make_shared<ob::GoalState>(si);
     ob::ScopedState<> g(space);
-    setValues(g.get(), r.target_values);
+    setStateValues(g.get(), r.target_values);
     goal->setState(g);
     pdef->setGoal(goal);
   }
@@ -1100,7 +1090,7 @@ PlanResult planFolding(const core::Model& model, const core::State& given, const
   {
     auto path = pdef->getSolutionPath()->as<og::PathGeometric>();
     for (size_t k = 0; k < path->getStateCount(); ++k)
-      raw.push_back(valuesOf(path->getState(k), n));
+      raw.push_back(stateValues(path->getState(k), n));
   }
   else if (clock.out())
     raw = bestPartialPath(si, *planner, oracle, r, n);  // stopped: the best the search has, as an approximation
