@@ -1133,7 +1133,8 @@ PlanResult planFolding(const core::Model& model, const core::State& given, const
   {
     clock.phase("verify");
     if (clock.out())
-      out.message += "; no dynamic verification: the time limit was reached";
+      out.message += clock.cancelled() ? "; no dynamic verification: cancelled" :
+                                         "; no dynamic verification: the time limit was reached";
     else
       verify(model, start, r, end.state, clock, out);
   }
