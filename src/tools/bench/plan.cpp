@@ -189,6 +189,8 @@ int plan(const std::string& scene, const std::vector<std::string>& args)
     times.push_back(p.planning_time);
     std::printf("%5d %-16s %9.2f %7ld %9zu %12.4f %10.4f %12.1f\n", seed, ap::toString(p.status), p.planning_time,
                 p.equilibrium_solves, p.waypoints.size(), p.final_height, p.min_gap, p.peak_contact_force);
+    if (p.status != ap::PlanStatus::kExactSolution)
+      std::printf("      %s\n", p.message.c_str());
     if (req.blend_tolerance > 0.0)
       std::printf("      trajectory %.3f s (rest to rest %.3f s): %s\n", p.duration, p.rest_to_rest_duration,
                   p.message.c_str());
