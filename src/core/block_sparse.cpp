@@ -33,7 +33,11 @@ void BlockSparseMatrix::build(std::vector<std::pair<int, int>> all)
   matrix_.setFromTriplets(triplets.begin(), triplets.end());
   matrix_.makeCompressed();
 
-  block_index_.clear();
+  row_begin_.assign(sizes_.size() + 1, 0);
+  for (const auto& [gr, gc] : blocks_)
+    ++row_begin_[gr + 1];
+  for (size_t g = 0; g < sizes_.size(); ++g)
+    row_begin_[g + 1] += row_begin_[g];
   block_starts_.clear();
   for (const auto& [gr, gc] : blocks_)
   {
@@ -47,7 +51,6 @@ void BlockSparseMatrix::build(std::vector<std::pair<int, int>> all)
       const int* it = std::lower_bound(inner + begin, inner + end, offsets_[gr]);
       starts[j] = static_cast<int>(it - inner);
     }
-    block_index_[key(gr, gc)] = static_cast<int>(block_starts_.size());
     block_starts_.push_back(std::move(starts));
   }
 }
@@ -81,21 +84,24 @@ void BlockSparseMatrix::setZero()
 
 int BlockSparseMatrix::blockIndex(int gr, int gc) const
 {
-  const auto it = block_index_.find(key(gr, gc));
-  return it == block_index_.end() ? -1 : it->second;
+  if (gr < 0 || gr >= static_cast<int>(sizes_.size()))
+    return -1;
+  const auto begin = blocks_.begin() + row_begin_[gr], end = blocks_.begin() + row_begin_[gr + 1];
+  const auto it = std::lower_bound(begin, end, std::make_pair(gr, gc));
+  return it != end && it->second == gc ? static_cast<int>(it - blocks_.begin()) : -1;
 }
 
 bool BlockSparseMatrix::hasBlock(int gr, int gc) const
 {
-  return block_index_.count(key(gr, gc)) > 0;
+  return blockIndex(gr, gc) >= 0;
 }
 
 void BlockSparseMatrix::add(int gr, int gc, const Eigen::Ref<const Eigen::MatrixXd>& block, double weight)
 {
-  const auto it = block_index_.find(key(gr, gc));
-  if (it == block_index_.end())
+  const int index = blockIndex(gr, gc);
+  if (index < 0)
     throw std::logic_error("BlockSparseMatrix::add: block outside the pattern");
-  const std::vector<int>& starts = block_starts_[it->second];
+  const std::vector<int>& starts = block_starts_[index];
   double* values = matrix_.valuePtr();
   for (int j = 0; j < block.cols(); ++j)
     for (int i = 0; i < block.rows(); ++i)
@@ -104,10 +110,10 @@ void BlockSparseMatrix::add(int gr, int gc, const Eigen::Ref<const Eigen::Matrix
 
 void BlockSparseMatrix::addTransposed(int gr, int gc, const Eigen::Ref<const Eigen::MatrixXd>& block, double weight)
 {
-  const auto it = block_index_.find(key(gc, gr));
-  if (it == block_index_.end())
+  const int index = blockIndex(gc, gr);
+  if (index < 0)
     throw std::logic_error("BlockSparseMatrix::addTransposed: block outside the pattern");
-  const std::vector<int>& starts = block_starts_[it->second];
+  const std::vector<int>& starts = block_starts_[index];
   double* values = matrix_.valuePtr();
   for (int j = 0; j < block.rows(); ++j)
     for (int i = 0; i < block.cols(); ++i)

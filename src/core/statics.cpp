@@ -336,10 +336,17 @@ Summary StaticSolver::newton(State& s, const ActuationValues& u)
 Summary StaticSolver::dampedNewton(State& s, const ActuationValues& u)
 {
   // Levenberg-Marquardt with the mass matrix: (K + mu M) dq. A step is kept only when it lowers the
-  // residual (forces plus stiffness-scaled constraint violation); mu shrinks after a kept step and
-  // grows after a rejected one. Convergence is judged on plain Newton steps (mu = 0) only, so the
-  // equilibrium found is that of the exact equations. This finds equilibria that plain Newton misses:
-  // an unstressed structure that is a mechanism until its cables take load, a cable about to go taut.
+  // residual (forces plus stiffness-scaled constraint violation). Convergence is judged on plain Newton
+  // steps (mu = 0) only, so the equilibrium found is that of the exact equations. This finds equilibria that
+  // plain Newton misses: an unstressed structure that is a mechanism until its cables take load, a cable
+  // about to go taut, a soft mode along which Newton overshoots.
+  // Every trial costs a factorization, so mu moves fast: it starts at a tenth of the damping at which the
+  // last damped solve of this solver first kept a step (solves near one another, as the planner's, need
+  // about the same damping; measured on the tower's plans, starting from the smallest damping every time
+  // spent nine rejected trials per solve climbing to it); it grows by 10, 20, 40 ... after rejected steps,
+  // falls by 10 after a kept step, by 100 after one that cut the residual tenfold, and drops to plain
+  // Newton (0) after one that cut it a hundredfold (Newton's own region); a rejected plain step goes back
+  // to the last damping that was kept.
   Summary sum;
   const int nq = system_.nq();
   const int nl = system_.nLambda();
@@ -357,7 +364,9 @@ Summary StaticSolver::dampedNewton(State& s, const ActuationValues& u)
   assemble(q, lambda, u, true);
   k_scale = std::max(k_scale, jac_.matrix().diagonal().head(nq).cwiseAbs().maxCoeff());
   const double mu_min = 1e-10 * k_scale / m_scale, mu_max = 1e6 * k_scale / m_scale;
-  double mu = mu_min, current = merit();
+  double mu = std::clamp(damped_mu_hint_ / 10.0, mu_min, mu_max), current = merit();
+  double kept_mu = mu, growth = 10.0;
+  bool first_kept = true;
   // a residual no larger than the force that the position tolerance makes through the stiffest element
   const double merit_tolerance = options_.newton_tolerance * k_scale;
   const int max_iterations = 4 * options_.max_iterations;
@@ -381,19 +390,18 @@ Summary StaticSolver::dampedNewton(State& s, const ActuationValues& u)
       linear_.solve(-r_, dx_);
     }
     bool kept = false;
-    double step = 0.0;
+    double step = 0.0, trial = std::numeric_limits<double>::infinity();
     if (factorized && dx_.allFinite())
     {
       const Eigen::VectorXd q_try = q + dx_.head(nq), lambda_try = lambda + dx_.tail(nl);
       step = dx_.head(nq).lpNorm<Eigen::Infinity>();
       assemble(q_try, lambda_try, u, false);
-      const double trial = r_.allFinite() ? merit() : std::numeric_limits<double>::infinity();
+      trial = r_.allFinite() ? merit() : std::numeric_limits<double>::infinity();
       if (trial < current || (mu == 0.0 && step <= options_.newton_tolerance))
       {
         kept = true;
         q = q_try;
         lambda = lambda_try;
-        current = trial;
       }
     }
     if (kept && mu == 0.0 && step <= options_.newton_tolerance)
@@ -403,10 +411,27 @@ Summary StaticSolver::dampedNewton(State& s, const ActuationValues& u)
       return sum;
     }
     if (kept)
-      mu = mu > mu_min ? mu / 10.0 : 0.0;
+    {
+      if (mu > 0.0)
+      {
+        kept_mu = mu;
+        if (first_kept)
+          damped_mu_hint_ = mu;
+        first_kept = false;
+      }
+      const double gain = trial > 0.0 ? current / trial : std::numeric_limits<double>::infinity();
+      current = trial;
+      growth = 10.0;
+      mu = gain >= 100.0 ? 0.0 : mu / (gain >= 10.0 ? 100.0 : 10.0);
+      if (mu < mu_min)
+        mu = 0.0;
+    }
+    else if (mu == 0.0)
+      mu = std::max(kept_mu, mu_min);
     else
     {
-      mu = mu == 0.0 ? mu_min : 10.0 * mu;
+      mu *= growth;
+      growth *= 2.0;
       if (mu > mu_max)
         break;
     }
@@ -608,6 +633,20 @@ Summary StaticSolver::correct(Eigen::VectorXd& q, Eigen::VectorXd& lambda, const
     // Newton's own increments (fresh matrices) that grew twice: the iterate is not in Newton's region of
     // convergence; the full solver's damped Newton is what finds the equilibrium from here (left to run,
     // this loop wanders through all its iterations, a factorization every other one)
+    // A fresh matrix whose increment is larger than the whole predicted step: the prediction landed outside
+    // Newton's region (a soft mode it overshoots along). Measured on the tower's plans: the corrector never
+    // converged after such an increment (where it did, the first fresh increment was at most 0.66 of the
+    // predicted step); it wandered through several more factorizations before giving up. The damped Newton
+    // of followPath takes over at once.
+    if (build && predicted_step > 0.0 && step > predicted_step + 100.0 * tol)
+    {
+      sum.status = SolveStatus::kMaxIterations;
+      std::ostringstream msg;
+      msg << "static Newton overshoots (an increment of " << step << " from a predicted step of " << predicted_step
+          << ")";
+      sum.message = msg.str();
+      return sum;
+    }
     if (build)
     {
       if (fresh_step > 0.0 && step >= fresh_step && ++growths >= 2)
@@ -724,12 +763,14 @@ Summary StaticSolver::followPath(State& s, const ActuationValues& u_end, int ste
       total.iterations += attempt.iterations;
       if (!attempt.ok())
       {
-        // the full solver (plain, then damped Newton) from the prediction, then from the last equilibrium
-        // (what a barely stressed mechanism, whose matrix is singular or nearly, needs; measured on the
-        // planner: cutting the increment instead is cheaper but loses paths the damped Newton finds)
+        // the damped Newton from the prediction (the corrector was plain Newton from there), then the full
+        // solver (plain, then damped Newton) from the last equilibrium: what a barely stressed mechanism,
+        // whose matrix is singular or nearly, needs (measured on the planner: cutting the increment instead
+        // is cheaper but loses paths the damped Newton finds)
         trial = s;
         trial.q = predicted;
-        attempt = solve(trial, u);
+        unspin(system_.model(), trial.q);
+        attempt = dampedNewton(trial, u);
         total.iterations += attempt.iterations;
         if (!attempt.ok())
         {

@@ -80,6 +80,15 @@ size_t EquilibriumOracle::cached() const
   return cache_.size();
 }
 
+core::StepTimings EquilibriumOracle::timings() const
+{
+  const std::lock_guard<std::mutex> lock(mutex_);
+  core::StepTimings t;
+  for (const std::unique_ptr<core::StaticSolver>& s : pool_)
+    t += s->timings();
+  return t;
+}
+
 double EquilibriumOracle::bestDistance() const
 {
   const std::lock_guard<std::mutex> lock(mutex_);

@@ -1005,6 +1005,7 @@ PlanResult planFolding(const core::Model& model, const core::State& given, const
     out.stopped_by_time_limit = clock.timedOut();
     out.cancelled = clock.cancelled();
     out.equilibrium_solves = oracle.solves();
+    out.solver_timings = oracle.timings();
     out.planning_time = clock.elapsed();
     return out;
   };

@@ -251,6 +251,11 @@ void checkTowerPlan(const at::Model& model, const at::State& start, const ap::Pl
   else
     EXPECT_GE(again.min_gap, req.limits.min_clearance - 1e-3);
   EXPECT_LE(at::structureHeight(model, again.end.q), req.target_height + 2e-3);
+  // the solver's work is reported for every solve: at least one Newton iteration each, and a
+  // factorization at least for the first (the start's matrix is not kept between requests)
+  EXPECT_GE(plan.solver_timings.newton_iterations, plan.equilibrium_solves);
+  EXPECT_GE(plan.solver_timings.factorizations, 1);
+  EXPECT_GT(plan.solver_timings.total, 0.0);
   std::printf("[ measured ] tower to %.2f m (%s): %zu waypoints, final height %.4f m, min gap %.4f m, peak "
               "contact %.1f N, %ld equilibrium solves, %.2f s planning, trajectory %.2f s\n",
               req.target_height, req.limits.allow_contact ? "contact allowed" : "no contact", plan.waypoints.size(),

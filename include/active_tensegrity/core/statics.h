@@ -170,7 +170,8 @@ private:
   double sign_parameter_ = 0.0;  // the path parameter of the factorization that showed it
   State sign_state_;             // ... and the state it was made at (q, lambda, u)
   std::vector<CriticalPoint> critical_points_;
-  double wander_bound_ = 2.0;  // the diagonal of the nodes' bounding box at the start, at least 2
+  double damped_mu_hint_ = 0.0;  // the damping at which the last damped Newton first kept a step
+  double wander_bound_ = 2.0;    // the diagonal of the nodes' bounding box at the start, at least 2
   StepTimings timings_;
   Eigen::VectorXd force_rows_;  // 1 on the multipliers of kPoints constraints (forces), else 0
   Eigen::VectorXd zero_q_, F_, cforce_, phi_, r_, dx_, fplus_, fminus_;

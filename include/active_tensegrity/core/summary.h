@@ -52,6 +52,21 @@ struct StepTimings
   long factorizations = 0;
   long analyses = 0;  // symbolic analyses of the Newton matrix (its pattern grows when a new pair touches)
   long static_pivot_factorizations = 0;  // of them, the approximate static-pivot LU (SparseLinearSolver)
+
+  StepTimings& operator+=(const StepTimings& o)
+  {
+    forces += o.forces;
+    contact += o.contact;
+    constraints += o.constraints;
+    factorization += o.factorization;
+    solve += o.solve;
+    total += o.total;
+    newton_iterations += o.newton_iterations;
+    factorizations += o.factorizations;
+    analyses += o.analyses;
+    static_pivot_factorizations += o.static_pivot_factorizations;
+    return *this;
+  }
 };
 
 /// Adds the wall time of its scope to `sum` (s).

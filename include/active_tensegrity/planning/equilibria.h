@@ -87,6 +87,9 @@ public:
   long solves() const;
   /// Equilibria in the cache.
   size_t cached() const;
+  /// The work of every static solve so far (summed over the solvers of the pool; a solver in use by
+  /// another thread is counted once it is back).
+  core::StepTimings timings() const;
 
   /// Polled before every continuation increment: when it returns true, follow() stops (returns false,
   /// `end` not converged, message "stopped") and at() answers with a non-converged equilibrium.

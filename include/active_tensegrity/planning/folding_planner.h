@@ -118,6 +118,7 @@ struct PlanResult
   double peak_contact_force = 0.0;
   double final_height = 0.0;
   long equilibrium_solves = 0;
+  core::StepTimings solver_timings;    // the static solver's work in those solves
   double planning_time = 0.0;          // s wall, the whole request
   bool stopped_by_time_limit = false;  // the request's deadline ended the search (or a later phase)
   bool cancelled = false;              // PlanControl::cancelled ended it

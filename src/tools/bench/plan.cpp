@@ -191,6 +191,15 @@ int plan(const std::string& scene, const std::vector<std::string>& args)
                 p.equilibrium_solves, p.waypoints.size(), p.final_height, p.min_gap, p.peak_contact_force);
     if (p.status != ap::PlanStatus::kExactSolution)
       std::printf("      %s\n", p.message.c_str());
+    if (p.equilibrium_solves > 0)
+    {
+      const at::StepTimings& t = p.solver_timings;
+      const double n = static_cast<double>(p.equilibrium_solves), ms = 1e3 / n;
+      std::printf("      per solve: %.3f ms (factorization %.3f, forces %.3f, contact %.3f, constraints %.3f, "
+                  "triangular solves %.3f), %.2f factorizations, %.2f Newton iterations\n",
+                  t.total * ms, t.factorization * ms, t.forces * ms, t.contact * ms, t.constraints * ms, t.solve * ms,
+                  t.factorizations / n, t.newton_iterations / n);
+    }
     if (req.blend_tolerance > 0.0)
       std::printf("      trajectory %.3f s (rest to rest %.3f s): %s\n", p.duration, p.rest_to_rest_duration,
                   p.message.c_str());
