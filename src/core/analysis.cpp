@@ -11,6 +11,7 @@
 #include "active_tensegrity/core/contact.h"
 #include "active_tensegrity/core/statics.h"
 #include "active_tensegrity/core/structure_check.h"
+#include "active_tensegrity/core/text.h"
 
 namespace active_tensegrity::core
 {
@@ -318,9 +319,50 @@ RunResult runAnalysis(const Model& model, const std::function<void(const State&)
   State state = initialState(model);
   const AnalysisSettings& an = model.analysis;
   // what the start is: in equilibrium, slack elements, prestress stable (structure_check.h)
-  const std::vector<std::string> start_warnings = startWarnings(model, state);
+  std::vector<std::string> start_warnings = startWarnings(model, state);
+  if (an.type == AnalysisType::kDynamic && !model.actuators.empty() &&
+      an.duration < an.schedule.endTime() - 1e-9 * std::max(1.0, an.duration))
+    start_warnings.push_back("analysis.duration " + shortestNumber(an.duration) +
+                             " s ends before the actuators reach analysis.max_actuation " +
+                             shortestNumber(an.max_actuation) + " m (the ramp ends at " +
+                             roundedNumber(an.schedule.endTime()) + " s): the run stops at actuation " +
+                             roundedNumber(an.schedule.evaluate(an.duration).value) + " m");
   const auto with_start_warnings = [&](Summary& s)
   { s.warnings.insert(s.warnings.begin(), start_warnings.begin(), start_warnings.end()); };
+  // members above their material's yield strength: the first time each one is, over every step
+  std::vector<char> yielded(model.cables.size(), 0);
+  std::vector<std::string> yield_warnings;
+  const bool watch_yield = std::any_of(model.cables.begin(), model.cables.end(),
+                                       [](const Cable& c) { return c.yield_strength > 0.0 && c.area > 0.0; });
+  const auto watch = [&](const State& s)
+  {
+    if (!watch_yield)
+      return;
+    const std::vector<CableState> cables = cableStates(model, s);
+    for (size_t i = 0; i < cables.size(); ++i)
+    {
+      const Cable& c = model.cables[i];
+      if (yielded[i] || !(c.yield_strength > 0.0 && c.area > 0.0))
+        continue;
+      const double stress = cables[i].tension / c.area;
+      if (!(stress > c.yield_strength))
+        continue;
+      yielded[i] = 1;
+      yield_warnings.push_back("cable " + quoted(c.name) + " is above its material's yield_strength " +
+                               shortestNumber(c.yield_strength) + " Pa: " + roundedNumber(stress, 6) + " Pa (tension " +
+                               roundedNumber(cables[i].tension, 6) + " N) first at " +
+                               (an.type == AnalysisType::kStatic ? "path parameter " + roundedNumber(s.t) :
+                                                                   "t = " + roundedNumber(s.t) + " s"));
+    }
+  };
+  const std::function<void(const State&)> step_hook = [&](const State& s)
+  {
+    watch(s);
+    if (on_step)
+      on_step(s);
+  };
+  const auto with_yield_warnings = [&](Summary& s)
+  { s.warnings.insert(s.warnings.end(), yield_warnings.begin(), yield_warnings.end()); };
 
   if (an.type == AnalysisType::kStatic)
   {
@@ -338,6 +380,7 @@ RunResult runAnalysis(const Model& model, const std::function<void(const State&)
       result.final_state = state;
       return result;
     }
+    watch(state);
     on_output(state);
     ++result.steps;
     ActuationValues u_end = state.u;
@@ -348,8 +391,7 @@ RunResult runAnalysis(const Model& model, const std::function<void(const State&)
                           [&](const State& s, const Summary&)
                           {
                             const auto callbacks = std::chrono::steady_clock::now();
-                            if (on_step)
-                              on_step(s);
+                            step_hook(s);
                             on_output(s);
                             result.callback_time +=
                                 std::chrono::duration<double>(std::chrono::steady_clock::now() - callbacks).count();
@@ -360,6 +402,7 @@ RunResult runAnalysis(const Model& model, const std::function<void(const State&)
     path.iterations += first.iterations;
     result.summary = path;
     with_start_warnings(result.summary);
+    with_yield_warnings(result.summary);
     result.solver_steps = an.arc_length ? result.steps - 1 : an.steps + path.step_cuts;
     result.timings = solver.timings();
   }
@@ -376,10 +419,11 @@ RunResult runAnalysis(const Model& model, const std::function<void(const State&)
       result.final_state = state;
       return result;
     }
+    watch(state);
     on_output(state);
     ++result.steps;
     if (model.solver.adaptive)
-      runAdaptive(model, solver, law, state, result, on_output, on_progress, on_step);
+      runAdaptive(model, solver, law, state, result, on_output, on_progress, step_hook);
     else
     {
       const double dt = model.solver.dt;
@@ -406,8 +450,7 @@ RunResult runAnalysis(const Model& model, const std::function<void(const State&)
         }
         state.t = t_target;  // no drift from summing steps
         const auto callbacks = std::chrono::steady_clock::now();
-        if (on_step)
-          on_step(state);
+        step_hook(state);
         if (state.t >= next_output - 1e-9 * dt || k == n_steps)
         {
           on_output(state);
@@ -420,6 +463,7 @@ RunResult runAnalysis(const Model& model, const std::function<void(const State&)
       }
     }
     result.timings = solver.timings();
+    with_yield_warnings(result.summary);
   }
   result.final_state = state;
   result.wall_time = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

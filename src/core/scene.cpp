@@ -319,6 +319,7 @@ struct Material
   double youngs_modulus = 0.0;
   double poisson_ratio = 0.0;
   double density = 0.0;
+  double yield_strength = 0.0;  // Pa, 0 = not given
 };
 
 struct NodeInfo
@@ -393,6 +394,7 @@ private:
       if (mat.poisson_ratio < 0.0 || mat.poisson_ratio >= 0.5)
         m.fail(m.key("poisson_ratio"), "must lie in [0, 0.5), got " + shortestNumber(mat.poisson_ratio));
       mat.density = m.nonNegative("density", 0.0);
+      mat.yield_strength = m.has("yield_strength") ? m.positive("yield_strength") : 0.0;
       m.finish();
       materials_[name] = mat;
     }
@@ -639,7 +641,7 @@ private:
 
   void readTensionFamily(Reader& f, bool springs)
   {
-    double ea = 0.0, k_spring = 0.0, area = 0.0;
+    double ea = 0.0, k_spring = 0.0, area = 0.0, yield_strength = 0.0;
     if (springs)
       k_spring = f.positive("stiffness");
     else
@@ -651,6 +653,7 @@ private:
       const double radius = f.positive("radius");
       area = M_PI * radius * radius;
       ea = it->second.youngs_modulus * area;
+      yield_strength = it->second.yield_strength;
       if (!(area >= std::numeric_limits<double>::min()) || !(ea >= std::numeric_limits<double>::min()) ||
           !std::isfinite(ea))
         f.fail(f.key("radius"), "a radius of " + shortestNumber(radius) + " m gives a section of " +
@@ -696,6 +699,7 @@ private:
       c.damping = damping;
       c.tension_only = tension_only;
       c.area = area;
+      c.yield_strength = yield_strength;
       if (springs)
       {
         c.rest_length = has_rest ? rest : l - prestress / k_spring;  // T = k (l - l0)
@@ -1011,7 +1015,6 @@ private:
         actuated && an.type != AnalysisType::kModal ? a.positive("max_actuation") : a.nonNegative("max_actuation", 0.0);
     an.steps = a.integer("steps", an.steps, 1, kMaxLoadSteps);
     an.modes = a.integer("modes", an.modes, 1, kMaxModes);
-    an.duration = a.positive("duration", 1.0);
     an.output_interval = a.nonNegative("output_interval", 0.0);
     an.schedule.final_value = an.max_actuation;
     if (root_.has("actuation"))
@@ -1027,6 +1030,28 @@ private:
       root_.optional("actuation");
       if (an.type == AnalysisType::kDynamic && actuated)
         root_.fail("actuation", "a dynamic analysis needs actuation.speed (m/s)");
+    }
+    // a dynamic run without a duration runs the actuation ramp to its end and settle_time after it
+    if (a.has("settle_time") && an.type != AnalysisType::kDynamic)
+      a.fail(a.key("settle_time"), "sets the duration of a dynamic analysis; this analysis is not dynamic");
+    if (a.has("settle_time") && a.has("duration"))
+      a.fail(a.key("settle_time"), "sets the derived duration; this analysis gives analysis.duration itself");
+    an.settle_time = a.positive("settle_time", 1.0);
+    if (a.has("duration"))
+      an.duration = a.positive("duration");
+    else
+    {
+      const double ramp_end = actuated && an.type == AnalysisType::kDynamic ? an.schedule.endTime() : 0.0;
+      an.duration = ramp_end + an.settle_time;
+      if (!std::isfinite(an.duration))
+        a.fail(a.key("settle_time"), "the derived duration (the ramp's end " + shortestNumber(ramp_end) + " s plus " +
+                                         shortestNumber(an.settle_time) + " s) is not finite");
+      if (an.type == AnalysisType::kDynamic)
+        an.duration_note = actuated ?
+                               "analysis.duration not given: the actuation ramp ends at " + roundedNumber(ramp_end) +
+                                   " s, plus analysis.settle_time " + shortestNumber(an.settle_time) + " s" :
+                               "analysis.duration not given: analysis.settle_time " + shortestNumber(an.settle_time) +
+                                   " s (no actuation)";
     }
     if (an.type == AnalysisType::kStatic && ground_count_ == 0)
       a.fail(a.key("type"), "a static analysis needs at least one fixed node (this structure floats freely)");

@@ -1,6 +1,9 @@
 #include "active_tensegrity/core/text.h"
 
+#include <algorithm>
 #include <charconv>
+#include <cstdio>
+#include <cstdlib>
 #include <cmath>
 
 namespace active_tensegrity::core
@@ -14,6 +17,16 @@ std::string shortestNumber(double v)
   char buffer[32];
   const std::to_chars_result r = std::to_chars(buffer, buffer + sizeof(buffer), v);
   return std::string(buffer, r.ptr);
+}
+
+std::string roundedNumber(double v, int digits)
+{
+  if (!std::isfinite(v))
+    return shortestNumber(v);
+  // the shortest text that reads back as v rounded to `digits` significant digits
+  char buffer[64];
+  std::snprintf(buffer, sizeof(buffer), "%.*g", std::clamp(digits, 1, 17), v);
+  return shortestNumber(std::strtod(buffer, nullptr));
 }
 
 std::string clipped(const std::string& text, std::size_t max_length)

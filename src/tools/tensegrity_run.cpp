@@ -429,6 +429,12 @@ int main(int argc, char** argv)
           << "newton_iterations: " << result.summary.iterations << "\n"
           << "step_cuts: " << result.summary.step_cuts << "\n"
           << "wall_time: " << result.wall_time << "\n";
+  if (model.analysis.type == at::AnalysisType::kDynamic)
+  {
+    summary << "duration: " << csvNumber(model.analysis.duration) << "\n";
+    if (!model.analysis.duration_note.empty())
+      summary << "duration_note: " << yamlString(model.analysis.duration_note) << "\n";
+  }
   if (model.analysis.type == at::AnalysisType::kDynamic && result.wall_time > 0.0)
     summary << "real_time_factor: " << fin.t / result.wall_time << "\n";
   if (model.analysis.type == at::AnalysisType::kDynamic && model.solver.adaptive)

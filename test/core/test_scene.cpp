@@ -19,6 +19,7 @@
 #include "active_tensegrity/core/mechanics.h"
 #include "active_tensegrity/core/scene.h"
 #include "active_tensegrity/core/state.h"
+#include "active_tensegrity/core/text.h"
 
 using namespace active_tensegrity::core;
 
@@ -1064,4 +1065,17 @@ TEST(SceneBounds, LoadPathKeysAreCheckedAgainstTheAnalysis)
   EXPECT_TRUE(
       refused([] { loadSceneFromString(dynamicMini(), "mini.yaml", { parseOverride("analysis.arc_length=true") }); },
               "analysis.arc_length", { "static paths only" }));
+}
+
+TEST(MessageNumbers, ComputedValuesAreRoundedUserValuesExact)
+{
+  using active_tensegrity::core::roundedNumber;
+  using active_tensegrity::core::shortestNumber;
+  const double ramp_end = 0.09999999999999999;  // a ramp of 0.02 m at 0.4 m/s with 0.05 s blends, as computed
+  EXPECT_EQ(shortestNumber(ramp_end), "0.09999999999999999");
+  EXPECT_EQ(roundedNumber(ramp_end), "0.1");
+  EXPECT_EQ(roundedNumber(41245957.1234, 6), "41246000");
+  EXPECT_EQ(roundedNumber(-2.5e-300), "-2.5e-300");
+  EXPECT_EQ(roundedNumber(std::nan("")), "nan");
+  EXPECT_EQ(roundedNumber(-HUGE_VAL), "-inf");
 }

@@ -279,3 +279,87 @@ TEST(TensegrityRun, ModalOptionsOnlyWhereTheyApply)
   EXPECT_EQ(huge.code, 1) << huge.output;
   EXPECT_NE(huge.output.find("analysis.modes: must be at most 1000, got '1e9'"), std::string::npos) << huge.output;
 }
+
+TEST(TensegrityRun, ADurationThatEndsBeforeTheRampWarns)
+{
+  // the prism's ramp: 0.02 m at 0.4 m/s with 0.05 s blends ends at 0.1 s
+  const std::string summary = tmp("short.yaml");
+  const Result r = run(scene("prism.yaml") + " --set analysis.duration=0.05 --out /dev/null --summary " + summary);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("analysis.duration 0.05 s ends before the actuators reach analysis.max_actuation 0.02 m "
+                          "(the ramp ends at 0.1 s)"),
+            std::string::npos)
+      << r.output;
+  std::ostringstream all;
+  for (const std::string& l : lines(summary))
+    all << l << "\n";
+  EXPECT_NE(all.str().find("ends before the actuators reach"), std::string::npos) << all.str();
+  EXPECT_NE(all.str().find("duration: 0.05\n"), std::string::npos) << all.str();
+  EXPECT_EQ(all.str().find("duration_note"), std::string::npos) << all.str();
+  // long enough: no such warning
+  const Result full = run(scene("prism.yaml") + " --set analysis.duration=0.1 --out /dev/null");
+  ASSERT_EQ(full.code, 0) << full.output;
+  EXPECT_EQ(full.output.find("ends before the actuators reach"), std::string::npos) << full.output;
+}
+
+TEST(TensegrityRun, AMissingDurationIsTheRampPlusTheSettleTimeAndSaysSo)
+{
+  std::ifstream in(scene("prism.yaml"));
+  const std::string file = tmp("no_duration.yaml");
+  {
+    std::ofstream out(file);
+    for (std::string l; std::getline(in, l);)
+      if (l.find("duration:") == std::string::npos)
+        out << l << "\n";
+  }
+  const std::string csv = tmp("no_duration.csv"), summary = tmp("no_duration_summary.yaml");
+  const Result r = run(file + " --set analysis.settle_time=0.02 --out " + csv + " --summary " + summary);
+  ASSERT_EQ(r.code, 0) << r.output;
+  std::ostringstream all;
+  for (const std::string& l : lines(summary))
+    all << l << "\n";
+  EXPECT_NE(all.str().find("duration: 0.12\n"), std::string::npos) << all.str();
+  EXPECT_NE(all.str().find("duration_note: \"analysis.duration not given: the actuation ramp ends at 0.1 s, plus "
+                           "analysis.settle_time 0.02 s\""),
+            std::string::npos)
+      << all.str();
+  const std::vector<std::string> rows = lines(csv);
+  ASSERT_GE(rows.size(), 2u);
+  EXPECT_EQ(rows.back().rfind("0.12,", 0), 0u) << rows.back();
+  // settle_time where it has no meaning is refused
+  const Result both = run(scene("prism.yaml") + " --set analysis.settle_time=0.5 --out /dev/null");
+  EXPECT_EQ(both.code, 1) << both.output;
+  EXPECT_NE(both.output.find("analysis.settle_time"), std::string::npos) << both.output;
+  const Result statics = run(scene("quadruplex.yaml") + " --set analysis.settle_time=0.5 --out /dev/null");
+  EXPECT_EQ(statics.code, 1) << statics.output;
+  EXPECT_NE(statics.output.find("is not dynamic"), std::string::npos) << statics.output;
+}
+
+TEST(TensegrityRun, CablesAboveTheirYieldStrengthAreNamedOnce)
+{
+  // verticals 291 N on 7.07 mm^2: 41.2 MPa; rings 173 N: 24.5 MPa; a yield strength of 40 MPa between them
+  const std::string summary = tmp("yield.yaml");
+  const Result r = run(scene("prism.yaml") +
+                       " --set materials.fibreglass.yield_strength=4e7 --out /dev/null "
+                       "--summary " +
+                       summary);
+  ASSERT_EQ(r.code, 0) << r.output;
+  std::ostringstream all;
+  for (const std::string& l : lines(summary))
+    all << l << "\n";
+  const std::string text = all.str();
+  for (const char* name : { "V1", "V2", "V3" })
+  {
+    const std::string needle = std::string("cable '") + name + "' is above its material's yield_strength 4e+07 Pa";
+    const size_t at = text.find(needle);
+    EXPECT_NE(at, std::string::npos) << name << "\n" << text;
+    EXPECT_EQ(text.find(needle, at + 1), std::string::npos) << name << " named twice\n" << text;
+  }
+  for (const char* name : { "R1", "R4" })
+    EXPECT_EQ(text.find(std::string("cable '") + name + "' is above"), std::string::npos) << text;
+  EXPECT_NE(text.find("first at t = 0 s"), std::string::npos) << text;
+  // a bad value is refused with the key
+  const Result bad = run(scene("prism.yaml") + " --set materials.fibreglass.yield_strength=-1 --out /dev/null");
+  EXPECT_EQ(bad.code, 1) << bad.output;
+  EXPECT_NE(bad.output.find("yield_strength"), std::string::npos) << bad.output;
+}

@@ -80,8 +80,9 @@ struct Cable
   double rest_length = 0.0;  // l0 without actuation, m
   double damping = 0.0;      // c, N s/m
   bool tension_only = true;
-  double area = 0.0;  // m^2, for stresses (0 when not a material cable)
-  int actuator = -1;  // index into Model::actuators that pulls this cable in, or -1
+  double area = 0.0;            // m^2, for stresses (0 when not a material cable)
+  double yield_strength = 0.0;  // Pa, the material's (0: none given); runs warn about stresses above it
+  int actuator = -1;            // index into Model::actuators that pulls this cable in, or -1
 
   bool sliding() const
   {
@@ -199,9 +200,13 @@ enum class AnalysisType
 struct AnalysisSettings
 {
   AnalysisType type = AnalysisType::kStatic;
-  double max_actuation = 0.0;    // m (static path end)
-  int steps = 100;               // static load steps
-  double duration = 0.0;         // s (dynamic)
+  double max_actuation = 0.0;  // m (static path end)
+  int steps = 100;             // static load steps
+  double duration = 0.0;       // s (dynamic)
+  /// dynamic, when analysis.duration is not given: how it was derived (the actuation ramp's end plus
+  /// settle_time); empty when given
+  std::string duration_note;
+  double settle_time = 1.0;      // s after the ramp's end, for the derived duration
   double output_interval = 0.0;  // s (dynamic, 0 = every step)
   int modes = 10;                // modal: how many of the lowest modes
   RampSchedule schedule;         // dynamic actuation law for every actuator

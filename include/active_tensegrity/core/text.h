@@ -13,6 +13,10 @@ constexpr std::size_t kMaxEchoLength = 200;
 /// The shortest decimal text that reads back as exactly `v` ("0.5", "-0", "1e-300", "inf", "nan").
 std::string shortestNumber(double v);
 
+/// A computed value for a message: `v` rounded to `digits` significant digits, in its shortest form
+/// ("0.1" for 0.09999999999999999, the end of a ramp of 0.02 m at 0.4 m/s plus 0.05 s).
+std::string roundedNumber(double v, int digits = 12);
+
 /// `text` itself when it has at most `max_length` bytes; else its first `max_length` bytes (never
 /// splitting a UTF-8 character), "..." and the full length, e.g. "abc... (1048576 bytes)".
 std::string clipped(const std::string& text, std::size_t max_length = kMaxEchoLength);
