@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "active_tensegrity/core/analysis.h"
+#include "active_tensegrity/core/kinematics.h"
 #include "active_tensegrity/core/modal.h"
 #include "active_tensegrity/core/scene.h"
 #include "active_tensegrity/core/structure_check.h"
@@ -23,12 +24,15 @@ namespace
 {
 const char* kUsage =
     "usage: tensegrity_run SCENE.yaml [--set key=value]... [--out FILE.csv] [--summary FILE.yaml]\n"
-    "                     [--contacts FILE.csv] [--bag FILE.bag] [--bag-ns /NAME] [--modes FILE.csv]\n"
+    "                     [--contacts FILE.csv] [--nodes FILE.csv] [--bag FILE.bag] [--bag-ns /NAME]\n"
+    "                     [--modes FILE.csv]\n"
     "       tensegrity_run SCENE.yaml [--set key=value]... --check\n"
     "  Runs the scene's analysis (static path or dynamic run) and writes one CSV row per output step\n"
     "  (stdout when --out is not given) and a YAML summary. Any scene key can be overridden with\n"
     "  --set, e.g. --set struts.radius=0.06 --set analysis.max_actuation=1.0\n"
     "  --contacts writes one row per strut pair in contact per output step (points, normal, forces).\n"
+    "  --nodes writes one row per output step: t and the x, y, z (m) of every node, in the scene's order\n"
+    "  (columns NAME_x, NAME_y, NAME_z).\n"
     "  --bag writes, per output step, what the tensegrity_sim node publishes (/tf, NS/contacts, NS/cables,\n"
     "  NS/actuators, NS/markers with NS = --bag-ns, default /tensegrity_sim), stamped in simulated time\n"
     "  from the wall time of the start; no master needed. Watch it with\n"
@@ -227,7 +231,7 @@ int runModalScene(const std::string& scene, const at::Model& model, std::ostream
 
 int main(int argc, char** argv)
 {
-  std::string scene, out_path, summary_path, contacts_path, bag_path, modes_path, bag_ns = kDefaultBagNs;
+  std::string scene, out_path, summary_path, contacts_path, nodes_path, bag_path, modes_path, bag_ns = kDefaultBagNs;
   bool check = false;
   std::vector<at::Override> overrides;
   try
@@ -254,6 +258,8 @@ int main(int argc, char** argv)
         summary_path = value("--summary");
       else if (arg == "--contacts")
         contacts_path = value("--contacts");
+      else if (arg == "--nodes")
+        nodes_path = value("--nodes");
       else if (arg == "--bag")
         bag_path = value("--bag");
       else if (arg == "--bag-ns")
@@ -275,10 +281,10 @@ int main(int argc, char** argv)
       active_tensegrity::ros_layer::BagWriter::checkNamespace(bag_ns);
     else if (bag_ns != kDefaultBagNs)
       throw std::invalid_argument("--bag-ns needs --bag");
-    if (check &&
-        !(out_path.empty() && summary_path.empty() && contacts_path.empty() && bag_path.empty() && modes_path.empty()))
+    if (check && !(out_path.empty() && summary_path.empty() && contacts_path.empty() && nodes_path.empty() &&
+                   bag_path.empty() && modes_path.empty()))
       throw std::invalid_argument("--check prints its report on stdout and runs no analysis: it takes no --out, "
-                                  "--summary, --contacts, --bag or --modes");
+                                  "--summary, --contacts, --nodes, --bag or --modes");
   }
   catch (const std::exception& e)
   {
@@ -301,8 +307,8 @@ int main(int argc, char** argv)
     return runCheck(scene, model);
   const bool modal = model.analysis.type == at::AnalysisType::kModal;
   const char* misfit = nullptr;
-  if (modal && !(contacts_path.empty() && bag_path.empty()))
-    misfit = "a modal analysis writes no --contacts or --bag";
+  if (modal && !(contacts_path.empty() && nodes_path.empty() && bag_path.empty()))
+    misfit = "a modal analysis writes no --contacts, --nodes or --bag (its mode shapes: --modes)";
   else if (!modal && !modes_path.empty())
     misfit = "--modes writes the mode shapes of a modal analysis (analysis.type: modal)";
   if (misfit)
@@ -321,9 +327,9 @@ int main(int argc, char** argv)
       std::cerr << "tensegrity_run: cannot write '" << path << "'\n";
     return static_cast<bool>(f);
   };
-  std::ofstream file, contacts, summary_file, shapes;
-  if (!open(out_path, file) || !open(contacts_path, contacts) || !open(summary_path, summary_file) ||
-      !open(modes_path, shapes))
+  std::ofstream file, contacts, nodes, summary_file, shapes;
+  if (!open(out_path, file) || !open(contacts_path, contacts) || !open(nodes_path, nodes) ||
+      !open(summary_path, summary_file) || !open(modes_path, shapes))
     return 1;
   if (modal)
     return runModalScene(scene, model, out_path.empty() ? std::cout : file, shapes, summary_file, summary_path);
@@ -343,6 +349,13 @@ int main(int argc, char** argv)
   std::ostream& csv = out_path.empty() ? std::cout : file;
   if (contacts.is_open())
     contacts << kContactColumns;
+  if (nodes.is_open())
+  {
+    nodes << "t";
+    for (const at::Node& n : model.nodes)
+      nodes << "," << n.name << "_x," << n.name << "_y," << n.name << "_z";
+    nodes << "\n";
+  }
   const std::vector<std::string> cols = at::csvColumns(model);
   for (size_t i = 0; i < cols.size(); ++i)
     csv << (i ? "," : "") << cols[i];
@@ -380,6 +393,16 @@ int main(int argc, char** argv)
         csv << "\n";
         if (bag)
           bag->write(s);
+        if (nodes.is_open())
+        {
+          nodes << csvNumber(s.t);
+          for (const at::Node& n : model.nodes)
+          {
+            const at::Vec3 p = at::pointPosition(model, n.point, s.q);
+            nodes << "," << csvNumber(p.x()) << "," << csvNumber(p.y()) << "," << csvNumber(p.z());
+          }
+          nodes << "\n";
+        }
         if (!contacts.is_open())
           return;
         for (const at::ContactPairState& c : at::activeContacts(model, s))
