@@ -630,9 +630,6 @@ Summary StaticSolver::correct(Eigen::VectorXd& q, Eigen::VectorXd& lambda, const
       rebuild = true;
       continue;
     }
-    // Newton's own increments (fresh matrices) that grew twice: the iterate is not in Newton's region of
-    // convergence; the full solver's damped Newton is what finds the equilibrium from here (left to run,
-    // this loop wanders through all its iterations, a factorization every other one)
     // A fresh matrix whose increment is larger than the whole predicted step: the prediction landed outside
     // Newton's region (a soft mode it overshoots along). Measured on the tower's plans: the corrector never
     // converged after such an increment (where it did, the first fresh increment was at most 0.66 of the
@@ -647,6 +644,9 @@ Summary StaticSolver::correct(Eigen::VectorXd& q, Eigen::VectorXd& lambda, const
       sum.message = msg.str();
       return sum;
     }
+    // Newton's own increments (fresh matrices) that grew twice: the iterate is not in Newton's region of
+    // convergence; the full solver's damped Newton is what finds the equilibrium from here (left to run,
+    // this loop wanders through all its iterations, a factorization every other one)
     if (build)
     {
       if (fresh_step > 0.0 && step >= fresh_step && ++growths >= 2)
