@@ -34,6 +34,15 @@ std::vector<std::string> lines(const std::string& path)
   return out;
 }
 
+/// The file's lines, each ended by a newline.
+std::string text(const std::string& path)
+{
+  std::string all;
+  for (const std::string& l : lines(path))
+    all += l + "\n";
+  return all;
+}
+
 std::string tmp(const std::string& name)
 {
   return ::testing::TempDir() + "tensegrity_run_" + name;
@@ -54,12 +63,9 @@ TEST(TensegrityRun, QuadruplexWritesCsvAndSummary)
             0u)
       << rows[0];
   EXPECT_EQ(rows.back().rfind("1,0.4,", 0), 0u) << rows.back();
-  const std::vector<std::string> s = lines(summary);
-  std::ostringstream all;
-  for (const auto& l : s)
-    all << l << "\n";
-  EXPECT_NE(all.str().find("status: converged"), std::string::npos) << all.str();
-  EXPECT_NE(all.str().find("output_steps: 21"), std::string::npos) << all.str();
+  const std::string all = text(summary);
+  EXPECT_NE(all.find("status: converged"), std::string::npos) << all;
+  EXPECT_NE(all.find("output_steps: 21"), std::string::npos) << all;
 }
 
 TEST(TensegrityRun, RefusesABadOverrideNamingTheKey)
@@ -257,14 +263,12 @@ TEST(TensegrityRun, ModalSceneWritesFrequenciesShapesAndSummary)
   }
   for (int k = 1; k <= 6; ++k)
     EXPECT_NEAR(largest[k], 1.0, 1e-8) << "mode " << k;
-  std::ostringstream all;
-  for (const auto& l : lines(summary))
-    all << l << "\n";
-  EXPECT_NE(all.str().find("analysis: modal\nstatus: converged\n"), std::string::npos) << all.str();
-  EXPECT_NE(all.str().find("frequencies_hz: [" + rows[1].substr(2, rows[1].find(',', 2) - 2) + ", "), std::string::npos)
-      << all.str();
-  EXPECT_NE(all.str().find("asks for 10 modes"), std::string::npos) << all.str();
-  EXPECT_NE(all.str().find("  mechanisms: 1\n"), std::string::npos) << all.str();
+  const std::string all = text(summary);
+  EXPECT_NE(all.find("analysis: modal\nstatus: converged\n"), std::string::npos) << all;
+  EXPECT_NE(all.find("frequencies_hz: [" + rows[1].substr(2, rows[1].find(',', 2) - 2) + ", "), std::string::npos)
+      << all;
+  EXPECT_NE(all.find("asks for 10 modes"), std::string::npos) << all;
+  EXPECT_NE(all.find("  mechanisms: 1\n"), std::string::npos) << all;
 }
 
 TEST(TensegrityRun, ModalOptionsOnlyWhereTheyApply)
@@ -290,12 +294,10 @@ TEST(TensegrityRun, ADurationThatEndsBeforeTheRampWarns)
                           "(the ramp ends at 0.1 s)"),
             std::string::npos)
       << r.output;
-  std::ostringstream all;
-  for (const std::string& l : lines(summary))
-    all << l << "\n";
-  EXPECT_NE(all.str().find("ends before the actuators reach"), std::string::npos) << all.str();
-  EXPECT_NE(all.str().find("duration: 0.05\n"), std::string::npos) << all.str();
-  EXPECT_EQ(all.str().find("duration_note"), std::string::npos) << all.str();
+  const std::string all = text(summary);
+  EXPECT_NE(all.find("ends before the actuators reach"), std::string::npos) << all;
+  EXPECT_NE(all.find("duration: 0.05\n"), std::string::npos) << all;
+  EXPECT_EQ(all.find("duration_note"), std::string::npos) << all;
   // long enough: no such warning
   const Result full = run(scene("prism.yaml") + " --set analysis.duration=0.1 --out /dev/null");
   ASSERT_EQ(full.code, 0) << full.output;
@@ -315,14 +317,12 @@ TEST(TensegrityRun, AMissingDurationIsTheRampPlusTheSettleTimeAndSaysSo)
   const std::string csv = tmp("no_duration.csv"), summary = tmp("no_duration_summary.yaml");
   const Result r = run(file + " --set analysis.settle_time=0.02 --out " + csv + " --summary " + summary);
   ASSERT_EQ(r.code, 0) << r.output;
-  std::ostringstream all;
-  for (const std::string& l : lines(summary))
-    all << l << "\n";
-  EXPECT_NE(all.str().find("duration: 0.12\n"), std::string::npos) << all.str();
-  EXPECT_NE(all.str().find("duration_note: \"analysis.duration not given: the actuation ramp ends at 0.1 s, plus "
-                           "analysis.settle_time 0.02 s\""),
+  const std::string all = text(summary);
+  EXPECT_NE(all.find("duration: 0.12\n"), std::string::npos) << all;
+  EXPECT_NE(all.find("duration_note: \"analysis.duration not given: the actuation ramp ends at 0.1 s, plus "
+                     "analysis.settle_time 0.02 s\""),
             std::string::npos)
-      << all.str();
+      << all;
   const std::vector<std::string> rows = lines(csv);
   ASSERT_GE(rows.size(), 2u);
   EXPECT_EQ(rows.back().rfind("0.12,", 0), 0u) << rows.back();
@@ -344,20 +344,17 @@ TEST(TensegrityRun, CablesAboveTheirYieldStrengthAreNamedOnce)
                        "--summary " +
                        summary);
   ASSERT_EQ(r.code, 0) << r.output;
-  std::ostringstream all;
-  for (const std::string& l : lines(summary))
-    all << l << "\n";
-  const std::string text = all.str();
+  const std::string all = text(summary);
   for (const char* name : { "V1", "V2", "V3" })
   {
     const std::string needle = std::string("cable '") + name + "' is above its material's yield_strength 4e+07 Pa";
-    const size_t at = text.find(needle);
-    EXPECT_NE(at, std::string::npos) << name << "\n" << text;
-    EXPECT_EQ(text.find(needle, at + 1), std::string::npos) << name << " named twice\n" << text;
+    const size_t at = all.find(needle);
+    EXPECT_NE(at, std::string::npos) << name << "\n" << all;
+    EXPECT_EQ(all.find(needle, at + 1), std::string::npos) << name << " named twice\n" << all;
   }
   for (const char* name : { "R1", "R4" })
-    EXPECT_EQ(text.find(std::string("cable '") + name + "' is above"), std::string::npos) << text;
-  EXPECT_NE(text.find("first at t = 0 s"), std::string::npos) << text;
+    EXPECT_EQ(all.find(std::string("cable '") + name + "' is above"), std::string::npos) << all;
+  EXPECT_NE(all.find("first at t = 0 s"), std::string::npos) << all;
   // a bad value is refused with the key
   const Result bad = run(scene("prism.yaml") + " --set materials.fibreglass.yield_strength=-1 --out /dev/null");
   EXPECT_EQ(bad.code, 1) << bad.output;
