@@ -330,24 +330,27 @@ RunResult runAnalysis(const Model& model, const std::function<void(const State&)
   const auto with_start_warnings = [&](Summary& s)
   { s.warnings.insert(s.warnings.begin(), start_warnings.begin(), start_warnings.end()); };
   // members above their material's yield strength: the first time each one is, over every step
-  std::vector<char> yielded(model.cables.size(), 0);
+  std::vector<size_t> watched;  // material cables with a yield strength not yet passed
+  for (size_t i = 0; i < model.cables.size(); ++i)
+    if (model.cables[i].yield_strength > 0.0 && model.cables[i].area > 0.0)
+      watched.push_back(i);
   std::vector<std::string> yield_warnings;
-  const bool watch_yield = std::any_of(model.cables.begin(), model.cables.end(),
-                                       [](const Cable& c) { return c.yield_strength > 0.0 && c.area > 0.0; });
   const auto watch = [&](const State& s)
   {
-    if (!watch_yield)
+    if (watched.empty())
       return;
     const std::vector<CableState> cables = cableStates(model, s);
-    for (size_t i = 0; i < cables.size(); ++i)
+    for (auto it = watched.begin(); it != watched.end();)
     {
+      const size_t i = *it;
       const Cable& c = model.cables[i];
-      if (yielded[i] || !(c.yield_strength > 0.0 && c.area > 0.0))
-        continue;
       const double stress = cables[i].tension / c.area;
       if (!(stress > c.yield_strength))
+      {
+        ++it;
         continue;
-      yielded[i] = 1;
+      }
+      it = watched.erase(it);
       yield_warnings.push_back("cable " + quoted(c.name) + " is above its material's yield_strength " +
                                shortestNumber(c.yield_strength) + " Pa: " + roundedNumber(stress, 6) + " Pa (tension " +
                                roundedNumber(cables[i].tension, 6) + " N) first at " +
