@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <sstream>
 #include <string>
+#include <typeinfo>
 #include <vector>
 
 #include "active_tensegrity/core/analysis.h"
@@ -48,6 +49,12 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size)
       std::abort();
     }
     return 0;
+  }
+  catch (const std::exception& e)
+  {
+    // anything else the loader lets out is a defect: say what it was before libFuzzer reports the abort
+    std::fprintf(stderr, "the loader threw %s: %s\n", typeid(e).name(), e.what());
+    std::abort();
   }
   const at::State s = at::initialState(model);
   if (!s.q.allFinite())
