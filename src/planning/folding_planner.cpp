@@ -733,12 +733,24 @@ Equilibrium followFromStart(const EquilibriumOracle& oracle, const PlanRequest& 
 {
   Equilibrium e = oracle.start();
   out.waypoints = { simple.front() };
-  const auto visit = [&out](const Equilibrium& q)
+  // the figures of a segment count once it is followed to its end: a trajectory cut at the last valid
+  // waypoint reports the gap and force along what it drives, not along the segment that failed
+  double segment_gap = INFINITY;
+  double segment_force = 0.0;
+  const auto visit = [&segment_gap, &segment_force](const Equilibrium& q)
   {
-    out.min_gap = std::min(out.min_gap, q.min_gap);
-    out.peak_contact_force = std::max(out.peak_contact_force, q.max_contact);
+    segment_gap = std::min(segment_gap, q.min_gap);
+    segment_force = std::max(segment_force, q.max_contact);
+  };
+  const auto keep = [&]()
+  {
+    out.min_gap = std::min(out.min_gap, segment_gap);
+    out.peak_contact_force = std::max(out.peak_contact_force, segment_force);
+    segment_gap = INFINITY;
+    segment_force = 0.0;
   };
   visit(e);
+  keep();
   std::string why;
   for (size_t k = 1; k < simple.size(); ++k)
   {
@@ -751,6 +763,7 @@ Equilibrium followFromStart(const EquilibriumOracle& oracle, const PlanRequest& 
                     std::to_string(k) + " (" + why + "); the trajectory ends at the last valid waypoint";
       break;
     }
+    keep();
     e = end;
     out.waypoints.push_back(simple[k]);
   }
