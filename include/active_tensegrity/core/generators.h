@@ -1,0 +1,43 @@
+/// Scenes of standard tensegrity structures, generated as YAML text a person can read (docs/generators.md).
+#pragma once
+
+#include <limits>
+#include <string>
+
+namespace active_tensegrity::core
+{
+/// The class-1 n-strut prism: bottom nodes B1..Bn on a circle at z = 0 (B1 on the +y axis, counter-clockwise),
+/// top nodes T1..Tn on the same circle at z = height, turned by `twist` about z; struts Si from Bi to Ti,
+/// ring cables (one family) around the bottom and the top, verticals Vi from Bi to T(i+1). At the twist
+/// -(90 deg + 180 deg / n) the prism has a self-stress with force densities
+///   rings : verticals : struts = 1 : 2 sin(pi/n) : -2 sin(pi/n),
+/// which the generated prestress follows (rings at `ring_prestress`); at another twist the same prestress
+/// is written, and the start is not in equilibrium (a starting point for form-finding).
+struct PrismSpec
+{
+  int struts = 3;                                           // 3 ... 64
+  double radius = 0.5;                                      // m
+  double height = 0.8;                                      // m
+  double twist = std::numeric_limits<double>::quiet_NaN();  // rad; NaN: the form's -(pi/2 + pi/n)
+  double ring_prestress = 100.0;                            // N
+  bool pinned = false;                                      // the bottom nodes fixed (a static analysis)
+};
+
+/// The twist of the n-strut prism's form, rad: -(pi/2 + pi/n).
+double prismTwist(int struts);
+
+std::string prismScene(const PrismSpec& spec);
+
+/// The expanded octahedron: six struts of length L in three mutually orthogonal parallel pairs L/2 apart,
+/// 24 cables (one family) of length L sqrt(6)/4, nodes at the cyclic permutations of (0, +-L/4, +-L/2).
+/// In its form the cables' force density is q and the struts' -1.5 q.
+struct OctahedronSpec
+{
+  double strut_length = 1.0;  // m
+  double prestress = 100.0;   // N, every cable
+  bool pinned = false;        // three nodes of one face fixed (a static analysis)
+};
+
+std::string octahedronScene(const OctahedronSpec& spec);
+
+}  // namespace active_tensegrity::core

@@ -1,0 +1,396 @@
+// Form-finding (core/form_finding.h, docs/form_finding.md): the equations' Jacobian against finite
+// differences, closed forms (the n-strut prism's twist and force densities, the expanded octahedron's
+// proportions, the quadruplex's prestress of paper Table 1), the written scene's own check, and refusals.
+#include <cmath>
+#include <fstream>
+#include <random>
+#include <sstream>
+
+#include <gtest/gtest.h>
+
+#include "active_tensegrity/core/form_finding.h"
+#include "active_tensegrity/core/generators.h"
+#include "active_tensegrity/core/scene.h"
+
+namespace at = active_tensegrity::core;
+
+namespace
+{
+std::string readFile(const std::string& path)
+{
+  std::ifstream f(path);
+  std::stringstream s;
+  s << f.rdbuf();
+  return s.str();
+}
+
+std::string sceneFile(const std::string& name)
+{
+  return readFile(std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) + "/config/scenes/" + name);
+}
+
+/// The twist of strut i of a prism form: the angle of Ti about z minus that of Bi, in (-pi, pi].
+double strutTwist(const at::FormFindingResult& r, int n, int i)
+{
+  const at::Vec3& b = r.positions[i];
+  const at::Vec3& t = r.positions[n + i];
+  return std::remainder(std::atan2(t.y(), t.x()) - std::atan2(b.y(), b.x()), 2.0 * M_PI);
+}
+
+const at::FormMember& member(const at::FormFindingResult& r, const std::string& name)
+{
+  for (const at::FormMember& m : r.members)
+    if (m.name == name)
+      return m;
+  throw std::runtime_error("no member " + name);
+}
+
+/// A prism a few degrees off its form, its nodes moved by up to `jitter` m at random.
+std::string perturbedPrism(int n, double twist_error, double jitter, unsigned seed, bool pinned = false)
+{
+  at::PrismSpec spec;
+  spec.struts = n;
+  spec.twist = at::prismTwist(n) + twist_error;
+  spec.pinned = pinned;
+  std::string yaml = at::prismScene(spec);
+  if (jitter == 0.0)
+    return yaml;
+  // move the top nodes: replace each "Ti: {position: [x, y, z]}" line
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> d(-jitter, jitter);
+  std::istringstream in(yaml);
+  std::string out;
+  for (std::string line; std::getline(in, line);)
+  {
+    if (line.rfind("  T", 0) == 0 && line.find("position: [") != std::string::npos)
+    {
+      const size_t open = line.find('['), close = line.find(']');
+      std::istringstream nums(line.substr(open + 1, close - open - 1));
+      double x, y, z;
+      char c;
+      nums >> x >> c >> y >> c >> z;
+      std::ostringstream p;
+      p.precision(17);
+      p << "[" << x + d(rng) << ", " << y + d(rng) << ", " << z + d(rng) << "]";
+      line = line.substr(0, open) + p.str() + line.substr(close + 1);
+    }
+    out += line + "\n";
+  }
+  return out;
+}
+}  // namespace
+
+// The analytic Jacobian of the equilibrium equations against central differences: tension and force-density
+// members, a sliding cable through an inner node, fixed nodes (with and without reactions).
+TEST(FormEquations, JacobianMatchesFiniteDifferences)
+{
+  const at::FormTopology t = at::readFormTopology(sceneFile("prism_pinned_sliding.yaml"), "sliding");
+  bool sliding = false;
+  for (const at::FormTopology::Member& m : t.members)
+    sliding = sliding || m.nodes.size() > 2;
+  ASSERT_TRUE(sliding) << "the scene should have a sliding cable";
+  ASSERT_GE(t.families.size(), 2u);
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> d(-0.05, 0.05);
+  for (const bool react : { false, true })
+    for (const auto kind : { at::FormEquations::Kind::kTension, at::FormEquations::Kind::kDensity })
+    {
+      // with reactions: one force density per strut and every strut's length kept (one row each)
+      const at::FormEquations eq(t, { { 0, { kind, 150.0 } } }, react, !react, react ? 300.0 : 0.0);
+      EXPECT_EQ(eq.equations() - eq.forceRows(), react ? 3 : 0);
+      std::vector<at::Vec3> x = t.positions;
+      for (at::Vec3& p : x)
+        p += at::Vec3(d(rng), d(rng), d(rng));
+      Eigen::VectorXd params(eq.parameterNames().size());
+      for (Eigen::Index k = 0; k < params.size(); ++k)
+        params[k] = 50.0 + 100.0 * std::abs(d(rng)) * (eq.parameterNames()[k].rfind("strut", 0) == 0 ? -1 : 1);
+      const Eigen::VectorXd z = eq.pack(x, params);
+      const Eigen::MatrixXd j = eq.jacobian(z);
+      ASSERT_EQ(j.rows(), eq.equations());
+      ASSERT_EQ(j.cols(), eq.unknowns());
+      Eigen::MatrixXd fd(j.rows(), j.cols());
+      for (Eigen::Index c = 0; c < z.size(); ++c)
+      {
+        const double h = 1e-6 * std::max(1.0, std::abs(z[c]));
+        Eigen::VectorXd zp = z, zm = z;
+        zp[c] += h;
+        zm[c] -= h;
+        fd.col(c) = (eq.residual(zp) - eq.residual(zm)) / (2.0 * h);
+      }
+      EXPECT_LT((j - fd).cwiseAbs().maxCoeff(), 1e-6 * std::max(1.0, j.cwiseAbs().maxCoeff()))
+          << "reactions " << react << ", kind " << static_cast<int>(kind);
+      EXPECT_GT(j.cwiseAbs().maxCoeff(), 1.0);
+    }
+}
+
+// The n-strut class-1 prism, free-standing, from a start 12 degrees off its twist with its top nodes moved at
+// random by up to 2 cm: the form's twist is -(90 + 180/n) degrees at every strut and its force densities
+// are rings : verticals : struts = 1 : 2 sin(pi/n) : -2 sin(pi/n).
+TEST(FormFinding, PrismTwistAndForceDensitiesMatchTheClosedForm)
+{
+  for (int n = 3; n <= 8; ++n)
+  {
+    SCOPED_TRACE("n = " + std::to_string(n));
+    at::FormFindingOptions o;
+    o.tension["rings"] = 100.0;
+    const std::string yaml = perturbedPrism(n, 12.0 * M_PI / 180.0, 0.0, 1);
+    const at::FormFindingResult r = at::findForm(yaml, "prism", o);
+    EXPECT_GT(r.max_move, 0.01);
+    for (int i = 0; i < n; ++i)
+      EXPECT_NEAR(strutTwist(r, n, i), at::prismTwist(n), 1e-6);
+    const at::FormMember& ring = member(r, "R1");
+    const at::FormMember& vertical = member(r, "V1");
+    const at::FormMember& strut = member(r, "S1");
+    const double q_ring = ring.tension / ring.length;
+    EXPECT_NEAR(ring.tension, 100.0, 1e-9);
+    EXPECT_NEAR(vertical.tension / vertical.length / q_ring, 2.0 * std::sin(M_PI / n), 1e-8);
+    EXPECT_NEAR(strut.tension / strut.length / q_ring, -2.0 * std::sin(M_PI / n), 1e-8);
+    EXPECT_LT(r.residual, 1e-9);
+    // the written scene: in equilibrium at its start, prestress stable, no slack cable
+    EXPECT_TRUE(r.check.checked);
+    EXPECT_LT(r.check.equilibrium_residual, 1e-6);
+    EXPECT_TRUE(r.check.prestress_stable);
+    EXPECT_TRUE(r.check.slack_cables.empty());
+  }
+}
+
+// Random moves of the top nodes break the symmetry of the start; a 4-strut prism then has forms that are not
+// regular (its rings are four-bar linkages), and the one found must still be a form: in equilibrium, the held
+// and free families uniform, prestress stable, its own check clean.
+TEST(FormFinding, AsymmetricStartGivesAValidForm)
+{
+  for (unsigned seed = 1; seed <= 3; ++seed)
+  {
+    SCOPED_TRACE("seed " + std::to_string(seed));
+    at::FormFindingOptions o;
+    o.tension["rings"] = 100.0;
+    const at::FormFindingResult r = at::findForm(perturbedPrism(4, 0.1, 0.02, seed), "prism", o);
+    EXPECT_LT(r.residual, 1e-9);
+    double q_strut = 0.0;
+    for (const at::FormMember& m : r.members)
+    {
+      if (m.family == "rings")
+        EXPECT_NEAR(m.tension, 100.0, 1e-9);
+      if (m.family == "verticals")
+        EXPECT_NEAR(m.tension, member(r, "V1").tension, 1e-9);
+      if (m.strut && q_strut == 0.0)
+        q_strut = m.tension / m.length;
+      if (m.strut)
+        EXPECT_NEAR(m.tension / m.length, q_strut, 1e-9 * std::abs(q_strut));
+    }
+    EXPECT_LT(q_strut, 0.0);
+    EXPECT_LT(r.check.equilibrium_residual, 1e-6);
+    EXPECT_TRUE(r.check.slack_cables.empty());
+  }
+}
+
+// The expanded octahedron from a start whose nodes are moved by up to 5 cm (of a 1 m strut), every cable held
+// at 100 N: the form's parallel struts are half a strut length apart, every cable is sqrt(6)/4 of a strut
+// long, and the force densities are cables : struts = 1 : -1.5.
+TEST(FormFinding, ExpandedOctahedronProportions)
+{
+  at::OctahedronSpec spec;
+  const std::string exact = at::octahedronScene(spec);
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> d(-0.05, 0.05);
+  std::istringstream in(exact);
+  std::string yaml;
+  for (std::string line; std::getline(in, line);)
+  {
+    if (line.rfind("  N", 0) == 0)
+    {
+      const size_t open = line.find('['), close = line.find(']');
+      std::istringstream nums(line.substr(open + 1, close - open - 1));
+      double x, y, z;
+      char c;
+      nums >> x >> c >> y >> c >> z;
+      std::ostringstream p;
+      p.precision(17);
+      p << "[" << x + d(rng) << ", " << y + d(rng) << ", " << z + d(rng) << "]";
+      line = line.substr(0, open) + p.str() + line.substr(close + 1);
+    }
+    yaml += line + "\n";
+  }
+  at::FormFindingOptions o;
+  o.tension["cables"] = 100.0;
+  const at::FormFindingResult r = at::findForm(yaml, "octahedron", o);
+  EXPECT_GT(r.max_move, 0.02);
+  double strut_length = 0.0;
+  for (const at::FormMember& m : r.members)
+    if (m.strut)
+      strut_length += m.length / 6.0;
+  const at::FormTopology given = at::readFormTopology(yaml, "octahedron");
+  double given_length = 0.0;
+  for (int k = 0; k < 6; ++k)
+    given_length += (given.positions[2 * k + 1] - given.positions[2 * k]).norm() / 6.0;
+  EXPECT_NEAR(strut_length, given_length, 1e-12) << "the mean strut length is kept";
+  double q_cable = 0.0;
+  for (const at::FormMember& m : r.members)
+  {
+    if (m.strut)
+    {
+      EXPECT_NEAR(m.length, strut_length, 1e-7);
+      continue;
+    }
+    EXPECT_NEAR(m.tension, 100.0, 1e-9);
+    // the octahedron has an infinitesimal mechanism: along it the force residual grows with the square of the
+    // distance from the form, so a residual of 1e-15 of the forces leaves the geometry to a few 1e-6
+    EXPECT_NEAR(m.length / strut_length, std::sqrt(6.0) / 4.0, 2e-5) << m.name;
+    q_cable = m.tension / m.length;
+  }
+  for (const at::FormMember& m : r.members)
+    if (m.strut)
+      EXPECT_NEAR(m.tension / m.length / q_cable, -1.5, 3e-5) << m.name;
+  // parallel struts (S1 | S2 ...) half a strut length apart: the distance between their midpoints
+  for (int k = 0; k < 3; ++k)
+  {
+    const at::Vec3 mid1 = 0.5 * (r.positions[4 * k] + r.positions[4 * k + 1]);
+    const at::Vec3 mid2 = 0.5 * (r.positions[4 * k + 2] + r.positions[4 * k + 3]);
+    EXPECT_NEAR((mid1 - mid2).norm() / strut_length, 0.5, 2e-5);
+  }
+  EXPECT_TRUE(r.check.prestress_stable);
+  EXPECT_TRUE(r.check.slack_cables.empty());
+}
+
+// Prestress design at the quadruplex's geometry (paper Sec. 6.1, Table 1): with the lower ring at 200 N, the
+// self-stress of the free-standing unit gives the upper ring and the bracing 200 sqrt(2) = 282.84 N and the
+// struts 200 sqrt(6) = 489.90 N of compression; the written scene is that of config/scenes/quadruplex.yaml.
+TEST(FormFinding, QuadruplexPrestressMatchesTable1)
+{
+  at::FormFindingOptions o;
+  o.mode = at::FormFindingMode::kPrestress;
+  o.tension["lower"] = 200.0;
+  const at::FormFindingResult r = at::findForm(sceneFile("quadruplex.yaml"), "quadruplex", o);
+  EXPECT_EQ(r.self_stress_states, 1);
+  EXPECT_EQ(r.max_move, 0.0);
+  for (const at::FormMember& m : r.members)
+  {
+    if (m.family == "lower")
+      EXPECT_NEAR(m.tension, 200.0, 1e-9);
+    else if (m.strut)
+      EXPECT_NEAR(m.tension, -200.0 * std::sqrt(6.0), 1e-8) << m.name;
+    else
+      EXPECT_NEAR(m.tension, 200.0 * std::sqrt(2.0), 1e-8) << m.name;
+  }
+  EXPECT_LT(r.residual, 1e-9);
+  EXPECT_NE(r.scene.find("prestress: 282.84271247461"), std::string::npos) << r.scene;
+  // with reactions allowed the lower ring (between pinned nodes) is a self-stress of its own: it cannot set
+  // the others, and the upper ring must be given too
+  o.supports_react = true;
+  EXPECT_THROW(at::findForm(sceneFile("quadruplex.yaml"), "quadruplex", o), at::FormFindingError);
+  o.tension["upper"] = 100.0;
+  const at::FormFindingResult react = at::findForm(sceneFile("quadruplex.yaml"), "quadruplex", o);
+  EXPECT_GT(react.self_stress_states, 1);
+  EXPECT_NEAR(member(react, "C9").tension, 100.0, 1e-9);
+  EXPECT_NEAR(member(react, "C1").tension, 200.0, 1e-9);
+}
+
+// The pinned prism from a start 0.2 rad off its twist: with the strut lengths free the nearest form the
+// iterations find is flat (the top falls into the base's plane, where any twist is a form), which is refused;
+// with the strut lengths kept the pins stay where they are, the top turns to the prism's twist and the form
+// is self-equilibrated (the pins carry nothing).
+TEST(FormFinding, PinnedPrismKeepsItsSupportsAndStrutLengths)
+{
+  at::FormFindingOptions o;
+  o.tension["rings"] = 50.0;
+  const std::string yaml = perturbedPrism(5, -0.2, 0.0, 1, true);
+  try
+  {
+    at::findForm(yaml, "pinned", o);
+    ADD_FAILURE() << "a flat form was accepted";
+  }
+  catch (const at::FormFindingError& e)
+  {
+    EXPECT_NE(std::string(e.what()).find("flat"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("--strut-lengths keep"), std::string::npos) << e.what();
+  }
+  o.keep_strut_lengths = true;
+  const at::FormFindingResult r = at::findForm(yaml, "pinned", o);
+  const at::FormTopology given = at::readFormTopology(yaml, "pinned");
+  for (int i = 0; i < 5; ++i)
+  {
+    EXPECT_EQ(r.positions[i], given.positions[i]) << "a pinned node moved";
+    EXPECT_NEAR(strutTwist(r, 5, i), at::prismTwist(5), 1e-6);
+    EXPECT_NEAR(r.members[i].length, (given.positions[5 + i] - given.positions[i]).norm(), 1e-9);
+  }
+  EXPECT_DOUBLE_EQ(r.scale, 1.0);
+  EXPECT_TRUE(r.check.newton_converged);
+  EXPECT_LT(r.check.newton_move, 1e-9);
+  EXPECT_TRUE(r.check.prestress_stable);
+}
+
+// The written scene is a form already: finding its form again moves nothing and keeps every force.
+TEST(FormFinding, WrittenSceneIsAFixedPoint)
+{
+  at::FormFindingOptions o;
+  o.tension["rings"] = 100.0;
+  const at::FormFindingResult first = at::findForm(perturbedPrism(6, 0.05, 0.0, 1), "prism", o);
+  const at::FormFindingResult again = at::findForm(first.scene, "again", o);
+  EXPECT_LT(again.max_move, 1e-9);
+  EXPECT_LE(again.iterations, 1);
+  for (size_t e = 0; e < first.members.size(); ++e)
+    EXPECT_NEAR(again.members[e].tension, first.members[e].tension, 1e-8);
+}
+
+// Without a held family the scene's first prestress is held; with force densities held, every member of a
+// family has the same force density and a family whose members differ in tension is split.
+TEST(FormFinding, ForceDensitiesAndSplitFamilies)
+{
+  at::FormFindingOptions o;
+  const at::FormFindingResult held = at::findForm(perturbedPrism(3, 0.1, 0.0, 1), "prism", o);
+  EXPECT_NEAR(member(held, "R1").tension, 100.0, 1e-9);
+  ASSERT_FALSE(held.notes.empty());
+  o.force_density["rings"] = 200.0;
+  o.force_density["verticals"] = 200.0 * std::sqrt(3.0);
+  const at::FormFindingResult fdm = at::findForm(perturbedPrism(3, 0.1, 0.03, 2), "prism", o);
+  for (const at::FormMember& m : fdm.members)
+    if (m.family == "rings")
+      EXPECT_NEAR(m.tension / m.length, 200.0, 1e-9);
+  EXPECT_TRUE(fdm.check.slack_cables.empty());
+  EXPECT_LT(fdm.check.equilibrium_residual, 1e-6);
+}
+
+TEST(FormFinding, RefusesWhatItCannotDo)
+{
+  const std::string prism = perturbedPrism(3, 0.0, 0.0, 1);
+  const auto message = [&](const std::string& yaml, const at::FormFindingOptions& o)
+  {
+    try
+    {
+      at::findForm(yaml, "x.yaml", o);
+    }
+    catch (const at::FormFindingError& e)
+    {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  at::FormFindingOptions o;
+  o.tension["ringz"] = 1.0;
+  EXPECT_NE(message(prism, o).find("no cable or spring family 'ringz'"), std::string::npos) << message(prism, o);
+  EXPECT_NE(message(prism, o).find("'rings'"), std::string::npos);
+  o = {};
+  o.tension["rings"] = -1.0;
+  EXPECT_NE(message(prism, o).find("must be positive"), std::string::npos);
+  o = {};
+  o.tension["rings"] = 1.0;
+  o.force_density["rings"] = 1.0;
+  EXPECT_NE(message(prism, o).find("held already"), std::string::npos);
+  o = {};
+  o.mode = at::FormFindingMode::kPrestress;
+  EXPECT_NE(message(prism, o).find("needs a target"), std::string::npos);
+  o.force_density["rings"] = 1.0;
+  EXPECT_NE(message(prism, o).find("not force densities"), std::string::npos);
+  // a geometry that is no form: the prism 30 degrees off its twist has no self-stress
+  o = {};
+  o.mode = at::FormFindingMode::kPrestress;
+  o.tension["rings"] = 100.0;
+  EXPECT_NE(message(perturbedPrism(3, 0.5, 0.0, 1), o).find("no state of self-stress"), std::string::npos);
+  // iterations run out
+  o = {};
+  o.tension["rings"] = 100.0;
+  o.max_iterations = 1;
+  EXPECT_NE(message(perturbedPrism(3, 0.3, 0.0, 1), o).find("did not converge in 1 iterations"), std::string::npos);
+  // the scene itself is refused by the loader, with its message
+  EXPECT_THROW(at::findForm("name: x\nnodes: {}\n", "x.yaml", {}), at::SceneError);
+}
