@@ -157,4 +157,115 @@ std::string octahedronScene(const OctahedronSpec& s)
   return y.str();
 }
 
+std::string towerScene(const TowerSpec& s)
+{
+  if (s.stages < 1 || s.stages > 40)
+    throw std::invalid_argument("stages: a tower has 1 to 40 stages, got " + std::to_string(s.stages));
+  requirePositive("width", s.width);
+  const int top = s.stages;
+  const double h = s.width / 2.0;
+  const auto name = [](int level, int k)
+  { return level == 0 ? "G" + std::to_string(k) : "L" + std::to_string(level) + "_" + std::to_string(k); };
+  // corner k (1..4) of a level: big levels at 45 + 90 (k - 1) degrees, small levels at 90 (k - 1)
+  const auto position = [&](int level, int k)
+  {
+    const bool big = level % 2 == 0;
+    const double a = (big ? M_PI / 4.0 : 0.0) + M_PI / 2.0 * (k - 1);
+    const double r = big ? s.width / std::sqrt(2.0) : s.width / 2.0;
+    return Vec3(r * std::cos(a), r * std::sin(a), level * h);
+  };
+  const auto level_list = [&](int level)
+  {
+    std::string out = "[";
+    for (int k = 1; k <= 4; ++k)
+      out += name(level, k) + (k < 4 ? ", " : "]");
+    return out;
+  };
+  std::ostringstream y;
+  y << "# Clustered quadruplex tower of " << top << " stage" << (top > 1 ? "s" : "")
+    << " (tensegrity_generate tower): width " << shortestNumber(s.width) << " m, height " << shortestNumber(top * h)
+    << " m.\n"
+    << "# Levels 0.." << top << " at z = level * " << shortestNumber(h)
+    << " m; even levels are big squares (corners at 45, 135, 225, 315 deg), odd levels small\n"
+    << "# squares (0, 90, 180, 270 deg). In each stage the small node at azimuth phi carries a strut to the big node\n"
+    << "# at phi + 135 deg and a bracing to the big node at phi + 45 deg; the bracings at one corner form the\n"
+    << "# sliding cable P<k>, which runs over its ground node to the driven body D<k>.\n";
+  y << "name: tower" << top << "\n";
+  y << "description: " << top << " quadruplex stages joined by strut-to-strut ball joints, bottom nodes pinned, "
+    << "no gravity, every member at its free length at the start; pulling the driven bodies down folds the "
+       "tower\n";
+  y << "materials:\n"
+       "  fibreglass: {youngs_modulus: 73.0e9, density: 2450.0}\n"
+       "  rubber: {youngs_modulus: 7.84e6, poisson_ratio: 0.47, density: 930.0}\n"
+       "  steel: {youngs_modulus: 210.0e9, poisson_ratio: 0.3, density: 7800.0}\n";
+  y << "nodes:\n";
+  for (int level = 0; level <= top; ++level)
+    for (int k = 1; k <= 4; ++k)
+      y << "  " << name(level, k) << ": {position: " << vec(position(level, k)) << (level == 0 ? ", fixed: true" : "")
+        << "}\n";
+  y << "  # driven bodies: point masses " << shortestNumber(0.2 * s.width)
+    << " m below their ground node, moved straight down\n";
+  for (int k = 1; k <= 4; ++k)
+    y << "  D" << k << ": {position: " << vec(position(0, k) - Vec3(0.0, 0.0, 0.2 * s.width)) << ", mass: 1.0}\n";
+  y << "struts:\n  radius: " << shortestNumber(0.04 * s.width)
+    << "\n  material: rubber\n  core: {radius: " << shortestNumber(0.0125 * s.width)
+    << ", material: steel}\n  members:\n";
+  // stage st spans levels st - 1 and st; the strut joins the small node k to the big node k + 1, listed from
+  // the lower level
+  for (int st = 1; st <= top; ++st)
+    for (int k = 1; k <= 4; ++k)
+    {
+      const int small = st % 2 == 1 ? st : st - 1, big = st % 2 == 1 ? st - 1 : st;
+      const std::string a = name(big, k % 4 + 1), b = name(small, k);
+      y << "    S" << st << "_" << k << ": [" << (big < small ? a : b) << ", " << (big < small ? b : a) << "]\n";
+    }
+  const auto square = [&](int level, const char* prefix)
+  {
+    std::string out;
+    for (int k = 1; k <= 4; ++k)
+      out += "      " + std::string(prefix) + std::to_string(level) + "_" + std::to_string(k) + ": [" + name(level, k) +
+             ", " + name(level, k % 4 + 1) + "]\n";
+    return out;
+  };
+  const std::string cable_section = "    material: fibreglass\n    radius: " + shortestNumber(0.003 * s.width) + "\n";
+  y << "cables:\n";
+  if (top >= 2)
+  {
+    y << "  squares:\n" << cable_section << "    members:\n";
+    for (int level = 2; level <= top; level += 2)
+      y << square(level, "Q");
+  }
+  y << "  sliding:\n    # from the top node down through every level, over the ground node (a pulley) to the driven "
+       "body\n"
+    << cable_section << "    members:\n";
+  for (int k = 1; k <= 4; ++k)
+  {
+    y << "      P" << k << ": [";
+    for (int level = top; level >= 0; --level)
+      y << name(level, k) << ", ";
+    y << "D" << k << "]\n";
+  }
+  y << "springs:\n  middle:\n    stiffness: 2000.0\n    members:\n";
+  for (int level = 1; level <= top; level += 2)
+    y << square(level, "M");
+  y << "actuators:\n  # the travel of a driven body: the sliding cable inside the tower shortens by as much\n";
+  for (int k = 1; k <= 4; ++k)
+    y << "  pull" << k << ": {nodes: [D" << k << "], direction: [0.0, 0.0, -1.0], guided: true, range: [0.0, "
+      << shortestNumber(0.45 * top * s.width) << "]}\n";
+  y << "contact:\n  enabled: true\n  # adjacent struts of the same stage\n  pairs:\n";
+  for (int st = 1; st <= top; ++st)
+    for (int k = 1; k <= 4; ++k)
+      y << "    - [S" << st << "_" << k << ", S" << st << "_" << k % 4 + 1 << "]\n";
+  y << "  restitution: 0.5\n  friction: 0.1\n";
+  y << "solver: {dt: 2.0e-4, integrator: newmark, newmark: {gamma: 0.6, beta: 0.3025}, newton_tolerance: 1.0e-6, "
+       "max_iterations: 30, max_step_cuts: 12}\n";
+  y << "actuation: {speed: 0.5}\n";
+  y << "analysis: {type: static, max_actuation: " << shortestNumber(0.375 * top * s.width) << ", steps: " << 75 * top
+    << "}\n";
+  y << "outputs:\n  height_nodes: " << level_list(top) << "\n  layers:\n";
+  for (int level = 1; level <= top; ++level)
+    y << "    level" << level << ": " << level_list(level) << "\n";
+  return y.str();
+}
+
 }  // namespace active_tensegrity::core

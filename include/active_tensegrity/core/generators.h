@@ -40,4 +40,22 @@ struct OctahedronSpec
 
 std::string octahedronScene(const OctahedronSpec& spec);
 
+/// The clustered quadruplex tower: `stages` quadruplex stages of height width/2 stacked with alternating
+/// handedness, joined by strut-to-strut ball joints. Levels 0..stages at z = l width / 2: even levels are
+/// "big" squares (half-diagonal width/sqrt(2), corners at 45, 135, 225, 315 degrees), odd levels "small"
+/// squares (half-diagonal width/2, at 0, 90, 180, 270 degrees). Ground nodes G1..G4 are pinned; level l's
+/// nodes are L<l>_1..L<l>_4. In each stage the small node at azimuth phi carries strut S<s>_<k> to the big
+/// node at phi + 135 degrees; the four bracing chains at one corner form one sliding cable P<k> from the top,
+/// down through the tower, over its ground node to a driven body D<k> pulled down by actuator pull<k>. Big
+/// squares above the ground are cables (family squares), small squares springs (family middle). Every
+/// member starts at its free length (no prestress); materials and sections are those of the four-stage
+/// tower of the package (tower.yaml).
+struct TowerSpec
+{
+  int stages = 4;      // 1 ... 40
+  double width = 1.0;  // m: the big squares' side
+};
+
+std::string towerScene(const TowerSpec& spec);
+
 }  // namespace active_tensegrity::core

@@ -1,0 +1,221 @@
+// tensegrity_generate: writes the scene of a standard structure (core/generators.h, lattice.h), ready to run.
+#include <cmath>
+#include <fstream>
+#include <iostream>
+#include <string>
+#include <vector>
+
+#include "active_tensegrity/core/generators.h"
+#include "active_tensegrity/core/scene.h"
+#include "cli.h"
+#include "lattice.h"
+
+namespace at = active_tensegrity::core;
+namespace tools = active_tensegrity::tools;
+
+namespace
+{
+const char* kUsage =
+    "usage: tensegrity_generate STRUCTURE [options] [--out FILE.yaml]\n"
+    "  Writes the scene of a standard structure (stdout without --out); every scene loads as it is.\n"
+    "  prism --struts N [--radius R] [--height H] [--twist DEG] [--prestress T] [--pinned]\n"
+    "      class-1 prism of N (3..64) struts, rings of radius R (0.5 m) H (0.8 m) apart; at the form's twist\n"
+    "      -(90 + 180/N) deg unless --twist is given (then a start for tensegrity_formfind); ring cables at\n"
+    "      T N (100), verticals and struts at the form's prestress; --pinned fixes the bottom nodes\n"
+    "  octahedron [--strut-length L] [--prestress T] [--pinned]\n"
+    "      expanded octahedron of six struts of L (1 m), its 24 cables at T N (100); --pinned fixes three\n"
+    "      nodes of its lowest cable triangle\n"
+    "  quadruplex-lattice --cells AxB [--pitch P] [--height H] [--top-radius R] [--strut-radius r]\n"
+    "      A x B quadruplex cells (4 struts each) on the ground, P (1 m) apart, top nodes on circles of R\n"
+    "      (0.3 m) at H (0.5 m); bracing cables pulled in (a dynamic fold with contact)\n"
+    "  tower --stages K [--width W]\n"
+    "      clustered quadruplex tower of K (1..40) stages of W/2 (W = 1 m), four sliding cables folding it\n"
+    "  Exit status: 0 written, 1 cannot write, 2 bad arguments.\n";
+
+double number(tools::Args& args, const std::string& option)
+{
+  return tools::parsePositive<double>(option, args.value(option));
+}
+
+std::string generate(const std::string& structure, tools::Args& args, std::string& out_path)
+{
+  const auto unknown = [&](const std::string& arg)
+  { return tools::BadArgument(structure + ": unknown option '" + arg + "' (tensegrity_generate --help)"); };
+  if (structure == "prism")
+  {
+    at::PrismSpec s;
+    bool struts = false;
+    while (args.more())
+    {
+      const std::string arg = args.option();
+      if (arg == "--struts")
+      {
+        s.struts = tools::parsePositive<int>(arg, args.value(arg));
+        struts = true;
+      }
+      else if (arg == "--radius")
+        s.radius = number(args, arg);
+      else if (arg == "--height")
+        s.height = number(args, arg);
+      else if (arg == "--twist")
+      {
+        const std::string v = args.value(arg);
+        size_t used = 0;
+        try
+        {
+          s.twist = std::stod(v, &used) * M_PI / 180.0;
+        }
+        catch (const std::exception&)
+        {
+          used = 0;
+        }
+        if (used != v.size() || v.empty() || !std::isfinite(s.twist))
+          throw tools::BadArgument("--twist: expected an angle in degrees, got '" + v + "'");
+      }
+      else if (arg == "--prestress")
+        s.ring_prestress = number(args, arg);
+      else if (arg == "--pinned")
+        s.pinned = true;
+      else if (arg == "--out")
+        out_path = args.value(arg);
+      else
+        throw unknown(arg);
+    }
+    if (!struts)
+      throw tools::BadArgument("prism: --struts N is required");
+    if (s.struts < 3 || s.struts > 64)
+      throw tools::BadArgument("--struts: a prism has 3 to 64 struts, got '" + std::to_string(s.struts) + "'");
+    return at::prismScene(s);
+  }
+  if (structure == "octahedron")
+  {
+    at::OctahedronSpec s;
+    while (args.more())
+    {
+      const std::string arg = args.option();
+      if (arg == "--strut-length")
+        s.strut_length = number(args, arg);
+      else if (arg == "--prestress")
+        s.prestress = number(args, arg);
+      else if (arg == "--pinned")
+        s.pinned = true;
+      else if (arg == "--out")
+        out_path = args.value(arg);
+      else
+        throw unknown(arg);
+    }
+    return at::octahedronScene(s);
+  }
+  if (structure == "quadruplex-lattice")
+  {
+    tools::LatticeOptions o;
+    bool cells = false;
+    while (args.more())
+    {
+      const std::string arg = args.option();
+      if (arg == "--cells")
+      {
+        const std::string v = args.value(arg);
+        const size_t x = v.find('x');
+        if (x == std::string::npos)
+          throw tools::BadArgument("--cells: expected AxB (e.g. 2x3), got '" + v + "'");
+        o.nx = tools::parsePositive<int>(arg, v.substr(0, x));
+        o.ny = tools::parsePositive<int>(arg, v.substr(x + 1));
+        if (o.nx > 100 || o.ny > 100)
+          throw tools::BadArgument("--cells: at most 100x100 cells, got '" + v + "'");
+        cells = true;
+      }
+      else if (arg == "--pitch")
+        o.pitch = number(args, arg);
+      else if (arg == "--height")
+        o.height = number(args, arg);
+      else if (arg == "--top-radius")
+        o.top_radius = number(args, arg);
+      else if (arg == "--strut-radius")
+        o.strut_radius = number(args, arg);
+      else if (arg == "--out")
+        out_path = args.value(arg);
+      else
+        throw unknown(arg);
+    }
+    if (!cells)
+      throw tools::BadArgument("quadruplex-lattice: --cells AxB is required");
+    if (!(o.top_radius < o.pitch / 2.0))
+      throw tools::BadArgument("--top-radius: must be below half the pitch (" + std::to_string(o.pitch / 2.0) +
+                               " m), got '" + std::to_string(o.top_radius) + "'");
+    return tools::quadruplexLatticeYaml(o);
+  }
+  if (structure == "tower")
+  {
+    at::TowerSpec s;
+    bool stages = false;
+    while (args.more())
+    {
+      const std::string arg = args.option();
+      if (arg == "--stages")
+      {
+        s.stages = tools::parsePositive<int>(arg, args.value(arg));
+        stages = true;
+      }
+      else if (arg == "--width")
+        s.width = number(args, arg);
+      else if (arg == "--out")
+        out_path = args.value(arg);
+      else
+        throw unknown(arg);
+    }
+    if (!stages)
+      throw tools::BadArgument("tower: --stages K is required");
+    if (s.stages > 40)
+      throw tools::BadArgument("--stages: a tower has 1 to 40 stages, got '" + std::to_string(s.stages) + "'");
+    return at::towerScene(s);
+  }
+  throw tools::BadArgument("unknown structure '" + structure + "' (prism, octahedron, quadruplex-lattice, tower)");
+}
+
+}  // namespace
+
+int main(int argc, char** argv)
+{
+  std::string out_path, yaml;
+  try
+  {
+    tools::Args args(std::vector<std::string>(argv + 1, argv + argc));
+    if (!args.more())
+      throw tools::BadArgument("no structure given");
+    const std::string structure = args.option();
+    if (structure == "-h" || structure == "--help")
+    {
+      std::cout << kUsage;
+      return 0;
+    }
+    yaml = generate(structure, args, out_path);
+  }
+  catch (const std::exception& e)  // BadArgument, a missing value, a generator's refusal
+  {
+    std::cerr << "tensegrity_generate: " << e.what() << "\n" << kUsage;
+    return 2;
+  }
+  // every generated scene must load: a refusal here is a defect of the generator, said as such
+  try
+  {
+    at::loadSceneFromString(yaml, "generated scene");
+  }
+  catch (const at::SceneError& e)
+  {
+    std::cerr << "tensegrity_generate: the generated scene does not load (a defect): " << e.what() << "\n";
+    return 1;
+  }
+  if (out_path.empty() || out_path == "-")
+  {
+    std::cout << yaml;
+    return 0;
+  }
+  std::ofstream out(out_path);
+  if (!(out << yaml) || (out.close(), !out))
+  {
+    std::cerr << "tensegrity_generate: cannot write '" << out_path << "'\n";
+    return 1;
+  }
+  return 0;
+}

@@ -1,0 +1,216 @@
+// tensegrity_generate and tensegrity_formfind as a user runs them: generated scenes load and run, a generated
+// start is taken to its form, the form written is a fixed point, and bad arguments are refused with the
+// option and the value.
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <set>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "active_tensegrity/core/generators.h"
+#include "active_tensegrity/core/kinematics.h"
+#include "active_tensegrity/core/scene.h"
+#include "active_tensegrity/core/state.h"
+#include "command.h"
+
+namespace at = active_tensegrity::core;
+using Result = active_tensegrity::test::CommandResult;
+
+namespace
+{
+Result generate(const std::string& args)
+{
+  return active_tensegrity::test::runCommand(std::string(TENSEGRITY_GENERATE_PATH) + " " + args + " 2>&1");
+}
+
+Result formfind(const std::string& args)
+{
+  return active_tensegrity::test::runCommand(std::string(TENSEGRITY_FORMFIND_PATH) + " " + args + " 2>&1");
+}
+
+std::string tmp(const std::string& name)
+{
+  return ::testing::TempDir() + "form_tools_" + name;
+}
+
+std::string text(const std::string& path)
+{
+  std::ifstream in(path);
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+/// The number after "key: " in a report (NaN when absent).
+double reported(const std::string& report, const std::string& key)
+{
+  const size_t at = report.find("\n" + key + ": ");
+  if (at == std::string::npos)
+    return NAN;
+  return std::stod(report.substr(at + key.size() + 3));
+}
+
+/// Every strut's end points, rounded to 0.1 mm and ordered, as a set (names aside).
+std::set<std::vector<long>> strutEnds(const at::Model& model)
+{
+  const at::State s = at::initialState(model);
+  std::set<std::vector<long>> out;
+  for (int b = 0; b < static_cast<int>(model.bodies.size()); ++b)
+  {
+    if (model.bodies[b].kind != at::BodyKind::kStrut)
+      continue;
+    std::vector<long> a, c;
+    const at::Vec3 p = at::pointPosition(model, { b, at::Vec3(0.0, 0.0, -0.5 * model.bodies[b].length) }, s.q);
+    const at::Vec3 q = at::pointPosition(model, { b, at::Vec3(0.0, 0.0, 0.5 * model.bodies[b].length) }, s.q);
+    for (int k = 0; k < 3; ++k)
+    {
+      a.push_back(std::lround(p[k] * 1e4));
+      c.push_back(std::lround(q[k] * 1e4));
+    }
+    std::vector<long> both = std::min(a, c);
+    const std::vector<long>& other = std::max(a, c);
+    both.insert(both.end(), other.begin(), other.end());
+    out.insert(both);
+  }
+  return out;
+}
+}  // namespace
+
+TEST(TensegrityGenerate, EveryStructureLoads)
+{
+  for (const char* args :
+       { "prism --struts 3", "prism --struts 12 --radius 0.3 --height 1.2 --prestress 50 --pinned",
+         "octahedron --strut-length 2 --pinned", "quadruplex-lattice --cells 2x3", "tower --stages 3" })
+  {
+    const std::string out = tmp("generated.yaml");
+    const Result r = generate(std::string(args) + " --out " + out);
+    ASSERT_EQ(r.code, 0) << args << ": " << r.output;
+    EXPECT_NO_THROW(at::loadScene(out)) << args;
+  }
+  // stdout without --out
+  const Result r = generate("octahedron");
+  EXPECT_EQ(r.code, 0);
+  EXPECT_NE(r.output.find("name: octahedron"), std::string::npos) << r.output;
+}
+
+// The generated four-stage tower is the package's tower scene: the same struts (the node names differ)
+TEST(TensegrityGenerate, FourStageTowerIsTheShippedTower)
+{
+  const at::Model generated = at::loadSceneFromString(at::towerScene({}), "tower4");
+  const at::Model shipped = at::loadScene(std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) + "/config/scenes/tower.yaml");
+  EXPECT_EQ(strutEnds(generated), strutEnds(shipped));
+  EXPECT_EQ(generated.cables.size(), shipped.cables.size());
+  EXPECT_EQ(generated.checked_pairs.size(), shipped.checked_pairs.size());
+  EXPECT_EQ(generated.actuators.size(), shipped.actuators.size());
+  // six stages: 24 struts, 4 sliding cables through 7 levels and a driven body
+  const at::Model six = at::loadSceneFromString(at::towerScene({ 6, 1.0 }), "tower6");
+  EXPECT_EQ(strutEnds(six).size(), 24u);
+}
+
+TEST(TensegrityGenerate, BadArgumentsNameTheOptionAndValue)
+{
+  const std::vector<std::pair<std::string, std::string>> cases = {
+    { "", "no structure given" },
+    { "dodecahedron", "unknown structure 'dodecahedron'" },
+    { "prism", "--struts N is required" },
+    { "prism --struts 2", "3 to 64 struts, got '2'" },
+    { "prism --struts 5 --radius -1", "--radius: expected a positive number, got '-1'" },
+    { "prism --struts 5 --twist abc", "--twist: expected an angle in degrees, got 'abc'" },
+    { "prism --struts 5 --height", "--height needs a value" },
+    { "octahedron --struts 5", "unknown option '--struts'" },
+    { "quadruplex-lattice --cells 3", "--cells: expected AxB" },
+    { "quadruplex-lattice --cells 2x2 --top-radius 0.6", "--top-radius: must be below half the pitch" },
+    { "tower --stages 41", "1 to 40 stages, got '41'" },
+  };
+  for (const auto& [args, message] : cases)
+  {
+    const Result r = generate(args);
+    EXPECT_EQ(r.code, 2) << args << ": " << r.output;
+    EXPECT_NE(r.output.find(message), std::string::npos) << args << ": " << r.output;
+  }
+  const Result r = generate("prism --struts 4 --out /nonexistent/dir/p.yaml");
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find("cannot write '/nonexistent/dir/p.yaml'"), std::string::npos) << r.output;
+}
+
+// A seven-strut prism generated 15 degrees off its twist: tensegrity_formfind takes it to the form, and the
+// form written, found again, moves nothing
+TEST(TensegrityFormfind, GeneratedStartToFormAndFixedPoint)
+{
+  const std::string start = tmp("start.yaml"), form = tmp("form.yaml"), again = tmp("again.yaml");
+  ASSERT_EQ(generate("prism --struts 7 --twist -130 --out " + start).code, 0);
+  const Result r = formfind(start + " --out " + form + " --prestress rings=80");
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_GT(reported(r.output, "max_move"), 0.05) << r.output;
+  EXPECT_LT(reported(r.output, "residual"), 1e-9) << r.output;
+  EXPECT_NE(r.output.find("prestress_stable: true"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("slack_cables: 0"), std::string::npos) << r.output;
+  const at::Model model = at::loadScene(form);
+  EXPECT_NE(text(form).find("prestress: 80\n"), std::string::npos) << text(form);
+  const Result a = formfind(form + " --out " + again);
+  ASSERT_EQ(a.code, 0) << a.output;
+  EXPECT_LT(reported(a.output, "max_move"), 1e-9) << a.output;
+  // to stdout, the report on stderr
+  const Result s = formfind(form + " --out -");
+  ASSERT_EQ(s.code, 0) << s.output;
+  EXPECT_NE(s.output.find("name: prism7"), std::string::npos);
+  EXPECT_NE(s.output.find("iterations:"), std::string::npos);
+}
+
+// The quadruplex's prestress designed at its geometry: Table 1's ratios
+TEST(TensegrityFormfind, PrestressModeOnTheQuadruplex)
+{
+  const std::string out = tmp("quadruplex.yaml");
+  const Result r = formfind(std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) +
+                            "/config/scenes/quadruplex.yaml --mode prestress "
+                            "--prestress lower=200 --out " +
+                            out);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(text(out).find("prestress: 282.84271247461"), std::string::npos) << text(out);
+  EXPECT_LT(reported(r.output, "max_move"), 1e-15) << r.output;
+}
+
+TEST(TensegrityFormfind, RefusalsNameTheOptionAndValue)
+{
+  const std::string prism = tmp("refusal_start.yaml"), out = tmp("refusal_out.yaml");
+  ASSERT_EQ(generate("prism --struts 4 --out " + prism).code, 0);
+  const std::vector<std::tuple<std::string, int, std::string>> cases = {
+    { "", 2, "no scene given" },
+    { prism, 2, "no --out given" },
+    { prism + " --out " + out + " --prestress rings", 2, "--prestress: expected FAMILY=VALUE, got 'rings'" },
+    { prism + " --out " + out + " --prestress rings=-5", 2, "--prestress rings: expected a positive number, got '-5'" },
+    { prism + " --out " + out + " --prestress rings=nan", 2, "got 'nan'" },
+    { prism + " --out " + out + " --mode fast", 2, "--mode: expected free or prestress, got 'fast'" },
+    { prism + " --out " + out + " --supports maybe", 2, "--supports: expected fixed or react, got 'maybe'" },
+    { prism + " --out " + out + " --tolerance 0.1", 2, "--tolerance: expected a relative tolerance below 1e-3" },
+    { prism + " --out " + out + " --prestress rings=1 --prestress rings=2", 2, "family 'rings' given twice" },
+    { prism + " --out " + out + " --prestress bracing=5", 1, "no cable or spring family 'bracing'" },
+    { prism + " --out " + out + " --mode prestress", 1, "needs a target tension" },
+    { prism + " --out " + out + " --mode prestress --prestress rings=5 --strut-lengths keep", 1,
+      "--strut-lengths keep: prestress mode keeps the whole geometry" },
+    { prism + " --out " + out + " --prestress rings=5 --force-density rings=5", 1, "held already" },
+    { "/nonexistent/in.yaml --out " + out, 1, "cannot read '/nonexistent/in.yaml'" },
+    { prism + " --out /nonexistent/dir/out.yaml", 1, "cannot write '/nonexistent/dir/out.yaml'" },
+  };
+  for (const auto& [args, code, message] : cases)
+  {
+    std::remove(out.c_str());
+    const Result r = formfind(args);
+    EXPECT_EQ(r.code, code) << args << ": " << r.output;
+    EXPECT_NE(r.output.find(message), std::string::npos) << args << ": " << r.output;
+    if (code != 0)
+    {
+      EXPECT_FALSE(std::ifstream(out).good()) << args << ": a refused run wrote its output";
+    }
+  }
+  // a malformed scene is refused by the loader, naming the key
+  const std::string bad = tmp("bad.yaml");
+  std::ofstream(bad) << text(prism) << "struts: {radius: 0.01}\n";
+  const Result r = formfind(bad + " --out " + out);
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find("scene refused"), std::string::npos) << r.output;
+}
