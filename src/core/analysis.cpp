@@ -150,6 +150,106 @@ bool hasLoadPath(const Model& model)
          model.analysis.load_factor_start != model.analysis.load_factor_end;
 }
 
+std::vector<double> strutAxialForces(const Model& model, const State& state, std::vector<double>* end_imbalance)
+{
+  const size_t n_bodies = model.bodies.size();
+  std::vector<double> force(n_bodies, 0.0), net(n_bodies, 0.0);
+  std::vector<Vec3> axis(n_bodies, Vec3::Zero());
+  for (size_t b = 0; b < n_bodies; ++b)
+    if (model.bodies[b].kind == BodyKind::kStrut)
+    {
+      const double half = 0.5 * model.bodies[b].length;
+      const int body = static_cast<int>(b);
+      axis[b] = (pointPosition(model, { body, Vec3(0.0, 0.0, half) }, state.q) -
+                 pointPosition(model, { body, Vec3(0.0, 0.0, -half) }, state.q))
+                    .normalized();
+    }
+  // +1: the top end (local +z), -1: the bottom end, 0: not a strut end
+  const auto end = [&](const PointRef& p)
+  {
+    if (p.body < 0 || model.bodies[p.body].kind != BodyKind::kStrut)
+      return 0;
+    const double half = 0.5 * model.bodies[p.body].length;
+    if (p.local.head<2>().norm() > 1e-9 * half)
+      return 0;
+    return std::abs(p.local.z() - half) <= 1e-9 * half ? 1 : std::abs(p.local.z() + half) <= 1e-9 * half ? -1 : 0;
+  };
+  // half of (F_top - F_bottom) . u, and (F_top + F_bottom) . u
+  const auto add = [&](const PointRef& p, const Vec3& f)
+  {
+    if (const int e = end(p))
+    {
+      force[p.body] += 0.5 * e * f.dot(axis[p.body]);
+      net[p.body] += f.dot(axis[p.body]);
+    }
+  };
+  const std::vector<CableState> cables = cableStates(model, state);
+  for (size_t c = 0; c < model.cables.size(); ++c)
+  {
+    const std::vector<PointRef>& pts = model.cables[c].points;
+    if (cables[c].tension == 0.0)
+      continue;
+    for (size_t k = 0; k + 1 < pts.size(); ++k)
+    {
+      const Vec3 d = pointPosition(model, pts[k + 1], state.q) - pointPosition(model, pts[k], state.q);
+      const double l = d.norm();
+      if (!(l > 0.0))
+        continue;
+      const Vec3 f = cables[c].tension * d / l;  // pulls point k towards k + 1 and k + 1 back
+      add(pts[k], f);
+      add(pts[k + 1], -f);
+    }
+  }
+  Eigen::Index row = 0;
+  for (const Constraint& c : model.constraints)
+  {
+    const Eigen::Index rows = c.rows();
+    if (c.kind == Constraint::Kind::kPoints && row + rows <= state.lambda.size())
+    {
+      Vec3 w = Vec3::Zero();
+      for (Eigen::Index k = 0; k < rows; ++k)
+        w += state.lambda[row + k] * c.directions[static_cast<size_t>(k)];
+      add(c.a, -w);
+      add(c.b, w);
+    }
+    row += rows;
+  }
+  const double factor = loadFactor(model, state);
+  for (const PointLoad& l : model.loads)
+    add(l.point, factor * l.force);
+  if (end_imbalance)
+    *end_imbalance = net;
+  return force;
+}
+
+std::vector<std::string> memberColumns(const Model& model)
+{
+  std::vector<std::string> cols = { "t" };
+  for (const Cable& c : model.cables)
+    for (const char* what : { "_tension", "_length", "_rest_length" })
+      cols.push_back(c.name + what);
+  for (const Body& b : model.bodies)
+    if (b.kind == BodyKind::kStrut)
+      cols.push_back(b.name + "_force");
+  return cols;
+}
+
+std::vector<double> memberRow(const Model& model, const State& state)
+{
+  std::vector<double> row = { state.t };
+  for (const CableState& c : cableStates(model, state))
+  {
+    row.push_back(c.tension);
+    row.push_back(c.length);
+    row.push_back(c.rest_length);
+  }
+  const std::vector<double> axial = strutAxialForces(model, state);
+  for (size_t b = 0; b < model.bodies.size(); ++b)
+    if (model.bodies[b].kind == BodyKind::kStrut)
+      row.push_back(axial[b]);
+  return row;
+}
+
 double loadFactor(const Model& model, const State& state)
 {
   const AnalysisSettings& an = model.analysis;

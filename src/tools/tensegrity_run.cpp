@@ -24,8 +24,8 @@ namespace
 {
 const char* kUsage =
     "usage: tensegrity_run SCENE.yaml [--set key=value]... [--out FILE.csv] [--summary FILE.yaml]\n"
-    "                     [--contacts FILE.csv] [--nodes FILE.csv] [--bag FILE.bag] [--bag-ns /NAME]\n"
-    "                     [--modes FILE.csv]\n"
+    "                     [--contacts FILE.csv] [--nodes FILE.csv] [--members FILE.csv] [--bag FILE.bag]\n"
+    "                     [--bag-ns /NAME] [--modes FILE.csv]\n"
     "       tensegrity_run SCENE.yaml [--set key=value]... --check\n"
     "  Runs the scene's analysis (static path or dynamic run) and writes one CSV row per output step\n"
     "  (stdout when --out is not given) and a YAML summary. Any scene key can be overridden with\n"
@@ -33,6 +33,9 @@ const char* kUsage =
     "  --contacts writes one row per strut pair in contact per output step (points, normal, forces).\n"
     "  --nodes writes one row per output step: t and the x, y, z (m) of every node, in the scene's order\n"
     "  (columns NAME_x, NAME_y, NAME_z).\n"
+    "  --members writes one row per output step: t, every cable's and spring's tension (N), length and rest\n"
+    "  length (m) (NAME_tension, NAME_length, NAME_rest_length) and every strut's axial force (NAME_force, N,\n"
+    "  negative in compression) from the forces at its ends.\n"
     "  --bag writes, per output step, what the tensegrity_sim node publishes (/tf, NS/contacts, NS/cables,\n"
     "  NS/actuators, NS/markers with NS = --bag-ns, default /tensegrity_sim), stamped in simulated time\n"
     "  from the wall time of the start; no master needed. Watch it with\n"
@@ -231,7 +234,8 @@ int runModalScene(const std::string& scene, const at::Model& model, std::ostream
 
 int main(int argc, char** argv)
 {
-  std::string scene, out_path, summary_path, contacts_path, nodes_path, bag_path, modes_path, bag_ns = kDefaultBagNs;
+  std::string scene, out_path, summary_path, contacts_path, nodes_path, members_path, bag_path, modes_path,
+      bag_ns = kDefaultBagNs;
   bool check = false;
   std::vector<at::Override> overrides;
   try
@@ -260,6 +264,8 @@ int main(int argc, char** argv)
         contacts_path = value("--contacts");
       else if (arg == "--nodes")
         nodes_path = value("--nodes");
+      else if (arg == "--members")
+        members_path = value("--members");
       else if (arg == "--bag")
         bag_path = value("--bag");
       else if (arg == "--bag-ns")
@@ -282,9 +288,9 @@ int main(int argc, char** argv)
     else if (bag_ns != kDefaultBagNs)
       throw std::invalid_argument("--bag-ns needs --bag");
     if (check && !(out_path.empty() && summary_path.empty() && contacts_path.empty() && nodes_path.empty() &&
-                   bag_path.empty() && modes_path.empty()))
+                   members_path.empty() && bag_path.empty() && modes_path.empty()))
       throw std::invalid_argument("--check prints its report on stdout and runs no analysis: it takes no --out, "
-                                  "--summary, --contacts, --nodes, --bag or --modes");
+                                  "--summary, --contacts, --nodes, --members, --bag or --modes");
   }
   catch (const std::exception& e)
   {
@@ -307,8 +313,8 @@ int main(int argc, char** argv)
     return runCheck(scene, model);
   const bool modal = model.analysis.type == at::AnalysisType::kModal;
   const char* misfit = nullptr;
-  if (modal && !(contacts_path.empty() && nodes_path.empty() && bag_path.empty()))
-    misfit = "a modal analysis writes no --contacts, --nodes or --bag (its mode shapes: --modes)";
+  if (modal && !(contacts_path.empty() && nodes_path.empty() && members_path.empty() && bag_path.empty()))
+    misfit = "a modal analysis writes no --contacts, --nodes, --members or --bag (its mode shapes: --modes)";
   else if (!modal && !modes_path.empty())
     misfit = "--modes writes the mode shapes of a modal analysis (analysis.type: modal)";
   if (misfit)
@@ -327,9 +333,9 @@ int main(int argc, char** argv)
       std::cerr << "tensegrity_run: cannot write '" << path << "'\n";
     return static_cast<bool>(f);
   };
-  std::ofstream file, contacts, nodes, summary_file, shapes;
+  std::ofstream file, contacts, nodes, members, summary_file, shapes;
   if (!open(out_path, file) || !open(contacts_path, contacts) || !open(nodes_path, nodes) ||
-      !open(summary_path, summary_file) || !open(modes_path, shapes))
+      !open(members_path, members) || !open(summary_path, summary_file) || !open(modes_path, shapes))
     return 1;
   if (modal)
     return runModalScene(scene, model, out_path.empty() ? std::cout : file, shapes, summary_file, summary_path);
@@ -355,6 +361,13 @@ int main(int argc, char** argv)
     for (const at::Node& n : model.nodes)
       nodes << "," << n.name << "_x," << n.name << "_y," << n.name << "_z";
     nodes << "\n";
+  }
+  if (members.is_open())
+  {
+    const std::vector<std::string> member_cols = at::memberColumns(model);
+    for (size_t i = 0; i < member_cols.size(); ++i)
+      members << (i ? "," : "") << member_cols[i];
+    members << "\n";
   }
   const std::vector<std::string> cols = at::csvColumns(model);
   for (size_t i = 0; i < cols.size(); ++i)
@@ -402,6 +415,13 @@ int main(int argc, char** argv)
             nodes << "," << csvNumber(p.x()) << "," << csvNumber(p.y()) << "," << csvNumber(p.z());
           }
           nodes << "\n";
+        }
+        if (members.is_open())
+        {
+          const std::vector<double> member_row = at::memberRow(model, s);
+          for (size_t i = 0; i < member_row.size(); ++i)
+            members << (i ? "," : "") << csvNumber(member_row[i]);
+          members << "\n";
         }
         if (!contacts.is_open())
           return;

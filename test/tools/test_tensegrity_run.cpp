@@ -399,3 +399,34 @@ TEST(TensegrityRun, NodesFileHasEveryNodesPositionPerOutputStep)
   const Result check = run(scene("prism.yaml") + " --check --nodes " + nodes);
   EXPECT_EQ(check.code, 2) << check.output;
 }
+
+TEST(TensegrityRun, MembersFileHasEveryMembersForcePerOutputStep)
+{
+  const std::string csv = tmp("members_main.csv"), members = tmp("members.csv");
+  const Result r = run(scene("quadruplex.yaml") + " --set analysis.max_actuation=0.5 --set analysis.steps=10 --out " +
+                       csv + " --members " + members);
+  ASSERT_EQ(r.code, 0) << r.output;
+  const std::vector<std::string> main_rows = lines(csv), member_rows = lines(members);
+  ASSERT_EQ(member_rows.size(), main_rows.size());
+  // t, 12 cables x (tension, length, rest length), 4 struts
+  std::vector<std::string> header;
+  std::stringstream in(member_rows[0]);
+  for (std::string cell; std::getline(in, cell, ',');)
+    header.push_back(cell);
+  ASSERT_EQ(header.size(), 1u + 12u * 3u + 4u);
+  EXPECT_EQ(header[1], "C1_tension");
+  EXPECT_EQ(header[2], "C1_length");
+  EXPECT_EQ(header[3], "C1_rest_length");
+  EXPECT_EQ(header.back(), "S4_force");
+  std::vector<double> first;
+  std::stringstream row(member_rows[1]);
+  for (std::string cell; std::getline(row, cell, ',');)
+    first.push_back(std::stod(cell));
+  EXPECT_NEAR(first[1], 200.0, 1e-6);                        // C1, a lower cable (Table 1)
+  EXPECT_NEAR(first.back(), -200.0 * std::sqrt(6.0), 0.01);  // S4
+  EXPECT_GT(first[2], first[3]);                             // stretched: longer than its rest length
+  const Result modal = run(scene("quadruplex.yaml") + " --set analysis.type=modal --members " + members);
+  EXPECT_EQ(modal.code, 2) << modal.output;
+  const Result check = run(scene("prism.yaml") + " --check --members " + members);
+  EXPECT_EQ(check.code, 2) << check.output;
+}

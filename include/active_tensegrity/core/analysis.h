@@ -43,6 +43,23 @@ double maxStrutBendingStress(const Model& model, const Eigen::VectorXd& q,
 /// Length, rate, rest length, stiffness, tension and slackness of every cable (Model::cables order).
 std::vector<CableState> cableStates(const Model& model, const State& state);
 
+/// The axial force of every strut (Model::bodies order, 0 for point masses), N, positive in tension: half
+/// the difference of the axial components of the forces applied at its two ends (F_top . u - F_bottom . u,
+/// u from the bottom end, local -z, to the top end): the tensions of the cables and springs attached or
+/// running over an end, the reactions of the constraints at an end (ball joints, pins, drives: -Phi_q^T
+/// lambda, from state.lambda) and the point loads there. Forces along the strut (contact, gravity,
+/// inertia) are not end forces: with none and at rest both ends give the same force. `end_imbalance`
+/// (when given) receives F_top . u + F_bottom . u per strut: the net axial force of the ends, which the
+/// forces along the strut balance (0 in a static state without them).
+std::vector<double> strutAxialForces(const Model& model, const State& state,
+                                     std::vector<double>* end_imbalance = nullptr);
+
+/// Column names of tensegrity_run --members: t, then NAME_tension, NAME_length, NAME_rest_length per cable
+/// and spring (Model::cables order), then NAME_force per strut.
+std::vector<std::string> memberColumns(const Model& model);
+/// The row of memberColumns (state.t first).
+std::vector<double> memberRow(const Model& model, const State& state);
+
 /// Largest stress T / A in a material cable (springs have no section and are left out), Pa.
 double maxCableStress(const Model& model, const State& state);
 

@@ -1,0 +1,122 @@
+// Member forces (analysis.h: strutAxialForces, memberColumns, memberRow): the quadruplex's strut force of
+// Table 1, the tower's struts through their ball joints in static equilibrium (both ends agree), a
+// form-found prism at rest in a dynamic run.
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "active_tensegrity/core/analysis.h"
+#include "active_tensegrity/core/form_finding.h"
+#include "active_tensegrity/core/generators.h"
+#include "active_tensegrity/core/scene.h"
+
+namespace at = active_tensegrity::core;
+
+namespace
+{
+std::string scene(const std::string& name)
+{
+  return std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) + "/config/scenes/" + name;
+}
+
+std::vector<at::Override> overrides(const std::vector<std::string>& texts)
+{
+  std::vector<at::Override> out;
+  for (const std::string& t : texts)
+    out.push_back(at::parseOverride(t));
+  return out;
+}
+
+/// The states a run writes.
+std::vector<at::State> run(const at::Model& model)
+{
+  std::vector<at::State> states;
+  const at::RunResult r = at::runAnalysis(model, [&](const at::State& s) { states.push_back(s); });
+  EXPECT_TRUE(r.summary.ok()) << r.summary.message;
+  return states;
+}
+
+std::vector<double> strutForces(const at::Model& model, const at::State& s, std::vector<double>& imbalance)
+{
+  const std::vector<double> all = at::strutAxialForces(model, s, &imbalance);
+  std::vector<double> out, net;
+  for (size_t b = 0; b < model.bodies.size(); ++b)
+    if (model.bodies[b].kind == at::BodyKind::kStrut)
+    {
+      out.push_back(all[b]);
+      net.push_back(imbalance[b]);
+    }
+  imbalance = net;
+  return out;
+}
+}  // namespace
+
+// The quadruplex at its start (the static path's first state, pins and drives solved): Table 1's lower
+// cables at 200 N, upper and bracing at 282.84 N, struts at -200 sqrt(6) N (to the rounding of 282.84)
+TEST(MemberForces, QuadruplexStrutsCarryTable1)
+{
+  const at::Model model =
+      at::loadScene(scene("quadruplex.yaml"), overrides({ "analysis.max_actuation=0.1", "analysis.steps=2" }));
+  const std::vector<at::State> states = run(model);
+  ASSERT_FALSE(states.empty());
+  std::vector<double> imbalance;
+  for (double f : strutForces(model, states.front(), imbalance))
+    EXPECT_NEAR(f, -200.0 * std::sqrt(6.0), 0.01);
+  for (double n : imbalance)
+    EXPECT_LT(std::abs(n), 1e-6);
+  const std::vector<std::string> cols = at::memberColumns(model);
+  const std::vector<double> row = at::memberRow(model, states.front());
+  ASSERT_EQ(cols.size(), row.size());
+  EXPECT_EQ(cols.front(), "t");
+  EXPECT_EQ(cols[1], model.cables[0].name + "_tension");
+  EXPECT_EQ(cols.back(), model.bodies.back().name + "_force");
+  EXPECT_NEAR(row[1], 200.0, 1e-6);  // C1, lower
+}
+
+// The tower folded quasi-statically by 0.6 m without contact: its struts meet at ball joints (joint
+// reactions at both ends), the sliding cables run over the joints. In equilibrium each strut's two ends give
+// the same axial force, and every strut is in compression.
+TEST(MemberForces, TowerStrutsBalanceThroughTheirJoints)
+{
+  const at::Model model = at::loadScene(
+      scene("tower.yaml"), overrides({ "contact.enabled=false", "analysis.max_actuation=0.6", "analysis.steps=60" }));
+  const std::vector<at::State> states = run(model);
+  ASSERT_FALSE(states.empty());
+  std::vector<double> imbalance;
+  const std::vector<double> forces = strutForces(model, states.back(), imbalance);
+  ASSERT_EQ(forces.size(), 16u);
+  for (size_t k = 0; k < forces.size(); ++k)
+  {
+    EXPECT_LT(forces[k], -10.0) << k;
+    EXPECT_LT(std::abs(imbalance[k]), 1e-6 * std::abs(forces[k])) << k;
+  }
+  // without the joints' reactions the ends would not agree: a strut's cables alone leave a net force
+  at::State no_lambda = states.back();
+  no_lambda.lambda.setZero();
+  strutForces(model, no_lambda, imbalance);
+  double largest = 0.0;
+  for (double n : imbalance)
+    largest = std::max(largest, std::abs(n));
+  EXPECT_GT(largest, 1.0);
+}
+
+// A free-standing prism in its form, in a dynamic run: at rest, each strut carries the form's force at both
+// ends
+TEST(MemberForces, FormFoundPrismAtRest)
+{
+  at::FormFindingOptions o;
+  o.tension["rings"] = 60.0;
+  const at::FormFindingResult form = at::findForm(at::prismScene({ 5 }), "prism", o);
+  const at::Model model = at::loadSceneFromString(form.scene, "prism", overrides({ "analysis.duration=0.05" }));
+  const std::vector<at::State> states = run(model);
+  ASSERT_GE(states.size(), 2u);
+  std::vector<double> imbalance;
+  const std::vector<double> forces = strutForces(model, states.back(), imbalance);
+  for (size_t k = 0; k < forces.size(); ++k)
+  {
+    EXPECT_NEAR(forces[k], form.members[k].tension, 1e-6 * std::abs(form.members[k].tension)) << k;
+    EXPECT_LT(std::abs(imbalance[k]), 1e-6 * std::abs(forces[k])) << k;
+  }
+}
