@@ -16,6 +16,7 @@
 #include "active_tensegrity/core/modal.h"
 #include "active_tensegrity/core/scene.h"
 #include "active_tensegrity/core/structure_check.h"
+#include "active_tensegrity/core/vtk_writer.h"
 #include "active_tensegrity/ros/bag_writer.h"
 
 namespace at = active_tensegrity::core;
@@ -25,7 +26,7 @@ namespace
 const char* kUsage =
     "usage: tensegrity_run SCENE.yaml [--set key=value]... [--out FILE.csv] [--summary FILE.yaml]\n"
     "                     [--contacts FILE.csv] [--nodes FILE.csv] [--members FILE.csv] [--bag FILE.bag]\n"
-    "                     [--bag-ns /NAME] [--modes FILE.csv]\n"
+    "                     [--bag-ns /NAME] [--vtk DIR] [--modes FILE.csv]\n"
     "       tensegrity_run SCENE.yaml [--set key=value]... --check\n"
     "  Runs the scene's analysis (static path or dynamic run) and writes one CSV row per output step\n"
     "  (stdout when --out is not given) and a YAML summary. Any scene key can be overridden with\n"
@@ -36,6 +37,9 @@ const char* kUsage =
     "  --members writes one row per output step: t, every cable's and spring's tension (N), length and rest\n"
     "  length (m) (NAME_tension, NAME_length, NAME_rest_length) and every strut's axial force (NAME_force, N,\n"
     "  negative in compression) from the forces at its ends.\n"
+    "  --vtk writes DIR/run_000000.vtp ... (one VTK PolyData file per output step: struts and cables as lines\n"
+    "  with kind, force and radius, contact points with their forces) and DIR/run.pvd, the collection\n"
+    "  ParaView opens to play the run.\n"
     "  --bag writes, per output step, what the tensegrity_sim node publishes (/tf, NS/contacts, NS/cables,\n"
     "  NS/actuators, NS/markers with NS = --bag-ns, default /tensegrity_sim), stamped in simulated time\n"
     "  from the wall time of the start; no master needed. Watch it with\n"
@@ -234,7 +238,7 @@ int runModalScene(const std::string& scene, const at::Model& model, std::ostream
 
 int main(int argc, char** argv)
 {
-  std::string scene, out_path, summary_path, contacts_path, nodes_path, members_path, bag_path, modes_path,
+  std::string scene, out_path, summary_path, contacts_path, nodes_path, members_path, vtk_dir, bag_path, modes_path,
       bag_ns = kDefaultBagNs;
   bool check = false;
   std::vector<at::Override> overrides;
@@ -266,6 +270,8 @@ int main(int argc, char** argv)
         nodes_path = value("--nodes");
       else if (arg == "--members")
         members_path = value("--members");
+      else if (arg == "--vtk")
+        vtk_dir = value("--vtk");
       else if (arg == "--bag")
         bag_path = value("--bag");
       else if (arg == "--bag-ns")
@@ -288,9 +294,9 @@ int main(int argc, char** argv)
     else if (bag_ns != kDefaultBagNs)
       throw std::invalid_argument("--bag-ns needs --bag");
     if (check && !(out_path.empty() && summary_path.empty() && contacts_path.empty() && nodes_path.empty() &&
-                   members_path.empty() && bag_path.empty() && modes_path.empty()))
+                   members_path.empty() && vtk_dir.empty() && bag_path.empty() && modes_path.empty()))
       throw std::invalid_argument("--check prints its report on stdout and runs no analysis: it takes no --out, "
-                                  "--summary, --contacts, --nodes, --members, --bag or --modes");
+                                  "--summary, --contacts, --nodes, --members, --vtk, --bag or --modes");
   }
   catch (const std::exception& e)
   {
@@ -313,8 +319,9 @@ int main(int argc, char** argv)
     return runCheck(scene, model);
   const bool modal = model.analysis.type == at::AnalysisType::kModal;
   const char* misfit = nullptr;
-  if (modal && !(contacts_path.empty() && nodes_path.empty() && members_path.empty() && bag_path.empty()))
-    misfit = "a modal analysis writes no --contacts, --nodes, --members or --bag (its mode shapes: --modes)";
+  if (modal &&
+      !(contacts_path.empty() && nodes_path.empty() && members_path.empty() && vtk_dir.empty() && bag_path.empty()))
+    misfit = "a modal analysis writes no --contacts, --nodes, --members, --vtk or --bag (its mode shapes: --modes)";
   else if (!modal && !modes_path.empty())
     misfit = "--modes writes the mode shapes of a modal analysis (analysis.type: modal)";
   if (misfit)
@@ -339,6 +346,19 @@ int main(int argc, char** argv)
     return 1;
   if (modal)
     return runModalScene(scene, model, out_path.empty() ? std::cout : file, shapes, summary_file, summary_path);
+  std::unique_ptr<at::VtkWriter> vtk;
+  if (!vtk_dir.empty())
+  {
+    try
+    {
+      vtk = std::make_unique<at::VtkWriter>(model, vtk_dir);
+    }
+    catch (const std::exception& e)
+    {
+      std::cerr << "tensegrity_run: --vtk: " << e.what() << "\n";
+      return 1;
+    }
+  }
   std::unique_ptr<active_tensegrity::ros_layer::BagWriter> bag;
   if (!bag_path.empty())
   {
@@ -406,6 +426,8 @@ int main(int argc, char** argv)
         csv << "\n";
         if (bag)
           bag->write(s);
+        if (vtk)
+          vtk->write(s);
         if (nodes.is_open())
         {
           nodes << csvNumber(s.t);

@@ -430,3 +430,58 @@ TEST(TensegrityRun, MembersFileHasEveryMembersForcePerOutputStep)
   const Result check = run(scene("prism.yaml") + " --check --members " + members);
   EXPECT_EQ(check.code, 2) << check.output;
 }
+
+// --vtk as ParaView reads it: the files read back with Python's XML parser (test/tools/read_vtk.py checks
+// counts, offsets and array lengths) agree with --nodes, --members and --contacts step by step
+TEST(TensegrityRun, VtkFilesAgreeWithTheCsvFiles)
+{
+  const std::string dir = tmp("vtk"), members = tmp("vtk_members.csv"), nodes = tmp("vtk_nodes.csv"),
+                    contacts = tmp("vtk_contacts.csv");
+  const Result r = run(scene("tower.yaml") +
+                       " --set analysis.type=dynamic --set actuation.speed=2 --set analysis.duration=0.8 "
+                       "--set analysis.output_interval=0.1 --out /dev/null --vtk " +
+                       dir + " --members " + members + " --nodes " + nodes + " --contacts " + contacts);
+  ASSERT_EQ(r.code, 0) << r.output;
+  const Result read =
+      active_tensegrity::test::runCommand("/usr/bin/python3 " + std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) +
+                                          "/test/tools/read_vtk.py --csv " + dir + "/run.pvd 2>&1");
+  ASSERT_EQ(read.code, 0) << read.output;
+  const auto numbers = [](const std::string& row)
+  {
+    std::vector<double> v;
+    std::stringstream in(row);
+    for (std::string cell; std::getline(in, cell, ',');)
+      v.push_back(std::stod(cell));
+    return v;
+  };
+  std::vector<std::string> steps;
+  std::stringstream in(read.output);
+  for (std::string l; std::getline(in, l);)
+    steps.push_back(l);
+  const std::vector<std::string> member_rows = lines(members), node_rows = lines(nodes), contact_rows = lines(contacts);
+  ASSERT_EQ(steps.size() + 1, member_rows.size());
+  ASSERT_EQ(steps.size(), 9u);
+  size_t touching_total = 0;
+  for (size_t k = 0; k < steps.size(); ++k)
+  {
+    // t, contact-point cells, the first point (the first node, G1), the 16 strut cells' forces
+    const std::vector<double> v = numbers(steps[k]), m = numbers(member_rows[k + 1]), n = numbers(node_rows[k + 1]);
+    ASSERT_EQ(v.size(), 5u + 16u) << steps[k];
+    EXPECT_NEAR(v[0], m[0], 1e-9) << k;
+    for (int c = 0; c < 3; ++c)
+      EXPECT_NEAR(v[2 + c], n[1 + c], 1e-9) << k;
+    for (size_t i = 0; i < 16; ++i)
+      EXPECT_NEAR(v[5 + i], m[m.size() - 16 + i], 1e-6 * (1.0 + std::abs(v[5 + i]))) << k;
+    // two contact points per touching pair (the contact rows' first field is t)
+    size_t touching = 0;
+    for (size_t i = 1; i < contact_rows.size(); ++i)
+      touching += std::abs(std::stod(contact_rows[i].substr(0, contact_rows[i].find(','))) - m[0]) < 1e-9;
+    EXPECT_EQ(v[1], 2.0 * touching) << k;
+    touching_total += touching;
+  }
+  EXPECT_GT(touching_total, 0u) << "the fold should bring struts into contact";
+  // a directory that cannot be made: refused before the run
+  const Result bad = run(scene("prism.yaml") + " --vtk /proc/no/such/dir --out /dev/null");
+  EXPECT_EQ(bad.code, 1) << bad.output;
+  EXPECT_NE(bad.output.find("--vtk: cannot make the directory '/proc/no/such/dir'"), std::string::npos) << bad.output;
+}
