@@ -111,6 +111,17 @@ mjModel* loadMjcf(const std::string& xml)
     throw std::runtime_error(std::string("MuJoCo peer: MuJoCo refused the model: ") + error);
   return m;
 }
+
+// MuJoCo's model from an MJCF file (std::runtime_error with MuJoCo's message)
+mjModel* loadMjcfFile(const std::string& path)
+{
+  char error[1000] = "";
+  mju_user_warning = warningHandler;
+  mjModel* m = mj_loadXML(path.c_str(), nullptr, error, sizeof(error));
+  if (!m)
+    throw std::runtime_error("MuJoCo peer: MuJoCo refused '" + path + "': " + error);
+  return m;
+}
 }  // namespace
 
 const char* toString(MujocoIntegrator integrator)
@@ -669,12 +680,49 @@ MujocoPeer::MujocoPeer(const core::Model& model, const MujocoOptions& options)
   im.mapConnects(im.mapDrivenNodes(), tr);
   im.mapCables(tr);
   xml_ = im.mjcf(tr);
-  m_ = loadMjcf(xml_);
+  m_ = options.xml_file.empty() ? loadMjcf(xml_) : loadMjcfFile(options.xml_file);
   d_ = mj_makeData(m_);
   im.findIds(m_, tr);
   im.setUpCarriers(m_);
   im.setContactParameters(m_);
   reset();
+}
+
+std::string MujocoPeer::exportXml() const
+{
+  // the compiled model's contact parameters written into the text: each pair's solref in its <pair> (in the
+  // order of the pairs), the friction rows' impratio in <option>
+  std::string out = xml_;
+  const std::string placeholder = "solref=\"-1 -1\"";
+  size_t at = 0;
+  for (int i = 0; i < m_->npair; ++i)
+  {
+    at = out.find(placeholder, at);
+    if (at == std::string::npos)
+      break;
+    const std::string solref = "solref=\"" + num(m_->pair_solref[2 * i]) + " " + num(m_->pair_solref[2 * i + 1]) + "\"";
+    out.replace(at, placeholder.size(), solref);
+    at += solref.size();
+  }
+  const size_t option = out.find("<option ");
+  if (option != std::string::npos)
+    out.insert(option + 8, "impratio=\"" + num(m_->opt.impratio) + "\" ");
+  std::string name = impl_->model.name;  // "--" may not appear in an XML comment
+  for (size_t dash = name.find("--"); dash != std::string::npos; dash = name.find("--", dash))
+    name.replace(dash, 2, "- ");
+  const std::string header =
+      "<!-- active_tensegrity's MuJoCo translation of the scene '" + name +
+      "' (tensegrity_export).\n"
+      "  Struts are capsules on free joints with our masses and inertias; pins and ball joints are equality\n"
+      "  connects; contact is a linear spring-dashpot per checked pair (solref in MuJoCo's direct format).\n"
+      "  Cables and springs are spatial tendons, each carrying a motor actuator whose control must be set to\n"
+      "  -T every step, T = k (l - l0) + c l_dot when positive (tension only; l0, k and c from the scene).\n"
+      "  Driven strut ends ride on carrier bodies whose drive joint follows the actuation; driven point\n"
+      "  masses are not bodies here. Loaded alone, with no controls, the cables carry nothing and the\n"
+      "  drives hold still. -->\n";
+  const size_t root = out.find("<mujoco");
+  out.insert(root == std::string::npos ? 0 : root, header);
+  return out;
 }
 
 MujocoPeer::~MujocoPeer()

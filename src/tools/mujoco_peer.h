@@ -67,6 +67,9 @@ struct MujocoOptions
   double carrier_mass_fraction = 1e-8;
   int solver_iterations = 100;
   double solver_tolerance = 1e-10;
+  /// Load the model from this MJCF file (one MujocoPeer::exportXml wrote for the same scene and options)
+  /// instead of the text generated here; empty: the generated text.
+  std::string xml_file;
 };
 
 /// A scene translated and loaded into MuJoCo: the model, its data and the state of the drives.
@@ -84,6 +87,9 @@ public:
   {
     return xml_;
   }
+  /// The translation as a file (tensegrity_export --mjcf): xml() with the contact parameters MuJoCo's
+  /// compiled model got here (each pair's solref, the impratio) and a comment on what runs outside MuJoCo.
+  std::string exportXml() const;
   const mjModel_* mujocoModel() const
   {
     return m_;

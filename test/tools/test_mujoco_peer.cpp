@@ -14,6 +14,7 @@
 #include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/contact.h"
 #include "active_tensegrity/core/scene.h"
+#include "command.h"
 #include "mujoco_peer.h"
 
 namespace at = active_tensegrity::core;
@@ -298,4 +299,74 @@ TEST(MujocoPeer, UnsupportedConstraintsAreNamed)
   {
     EXPECT_NE(std::string(e.what()).find("'odd'"), std::string::npos) << e.what();
   }
+}
+
+// tensegrity_export --mjcf: the file MuJoCo's own parser (mj_loadXML) loads has the in-memory translation's
+// bodies, joints, tendons, actuators, equalities and contact pairs (their solref as compiled here), and a
+// peer built from the file runs as the in-memory one, step for step: the quadruplex (driven strut ends) and
+// the tower with contact (driven point masses, sliding cables, pairs)
+TEST(MujocoPeer, ExportedMjcfLoadsAndRunsAsTheTranslation)
+{
+  const std::vector<std::pair<std::string, std::vector<std::string>>> cases = {
+    { "quadruplex.yaml", { "analysis.type=dynamic", "analysis.duration=0.05", "actuation.speed=0.5" } },
+    { "tower.yaml",
+      { "analysis.type=dynamic", "actuation.speed=5", "actuation.blend_time=0.1", "analysis.duration=0.05" } },
+  };
+  for (const auto& [file, overrides] : cases)
+  {
+    std::string sets;
+    for (const std::string& o : overrides)
+      sets += " --set " + o;
+    const std::string out = ::testing::TempDir() + "export_" + file + ".xml";
+    const active_tensegrity::test::CommandResult r = active_tensegrity::test::runCommand(
+        std::string(TENSEGRITY_EXPORT_PATH) + " " + kScenes + file + sets + " --mjcf " + out + " 2>&1");
+    ASSERT_EQ(r.code, 0) << file << ": " << r.output;
+
+    const at::Model model = scene(file, overrides);
+    tools::MujocoOptions o;
+    tools::MujocoPeer memory(model, o);
+    char error[1000] = "";
+    mjModel* loaded = mj_loadXML(out.c_str(), nullptr, error, sizeof error);
+    ASSERT_NE(loaded, nullptr) << file << ": " << error;
+    const mjModel* m = memory.mujocoModel();
+    EXPECT_EQ(loaded->nbody, m->nbody) << file;
+    EXPECT_EQ(loaded->njnt, m->njnt) << file;
+    EXPECT_EQ(loaded->ntendon, m->ntendon) << file;
+    EXPECT_EQ(loaded->nu, m->nu) << file;
+    EXPECT_EQ(loaded->neq, m->neq) << file;
+    ASSERT_EQ(loaded->npair, m->npair) << file;
+    for (int i = 0; i < 2 * m->npair; ++i)
+      EXPECT_NEAR(loaded->pair_solref[i], m->pair_solref[i], 1e-9 * std::abs(m->pair_solref[i])) << file;
+    EXPECT_NEAR(loaded->opt.impratio, m->opt.impratio, 1e-9 * m->opt.impratio) << file;
+    for (int i = 0; i < m->nbody; ++i)
+      EXPECT_EQ(loaded->body_mass[i], m->body_mass[i]) << file << " body " << i;
+    mj_deleteModel(loaded);
+
+    o.xml_file = out;
+    tools::MujocoPeer from_file(model, o);
+    for (int k = 0; k < 50; ++k)
+    {
+      ASSERT_TRUE(memory.step()) << memory.message();
+      ASSERT_TRUE(from_file.step()) << from_file.message();
+    }
+    memory.forward();
+    from_file.forward();
+    for (int b = 0; b < static_cast<int>(model.bodies.size()); ++b)
+      EXPECT_LT((memory.bodyPosition(b) - from_file.bodyPosition(b)).norm(), 1e-9) << file << " body " << b;
+    EXPECT_NEAR(from_file.time(), 0.05, 1e-12);
+  }
+  // bad arguments, a file that cannot be written
+  const auto run = [](const std::string& args)
+  { return active_tensegrity::test::runCommand(std::string(TENSEGRITY_EXPORT_PATH) + " " + args + " 2>&1"); };
+  const active_tensegrity::test::CommandResult none = run(kScenes + "quadruplex.yaml");
+  EXPECT_EQ(none.code, 2);
+  EXPECT_NE(none.output.find("no format given (--mjcf OUT.xml)"), std::string::npos) << none.output;
+  const active_tensegrity::test::CommandResult integrator =
+      run(kScenes + "quadruplex.yaml --mjcf /dev/null --integrator leapfrog");
+  EXPECT_EQ(integrator.code, 2);
+  EXPECT_NE(integrator.output.find("--integrator: expected euler, implicit or rk4, got 'leapfrog'"), std::string::npos)
+      << integrator.output;
+  const active_tensegrity::test::CommandResult unwritable = run(kScenes + "quadruplex.yaml --mjcf /nonexistent/q.xml");
+  EXPECT_EQ(unwritable.code, 1);
+  EXPECT_NE(unwritable.output.find("cannot write '/nonexistent/q.xml'"), std::string::npos) << unwritable.output;
 }
