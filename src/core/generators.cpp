@@ -47,6 +47,9 @@ std::string prismScene(const PrismSpec& s)
   requirePositive("radius", s.radius);
   requirePositive("height", s.height);
   requirePositive("ring_prestress", s.ring_prestress);
+  requirePositive("strut_radius", s.strut_radius);
+  if (s.driven && !s.pinned)
+    throw std::invalid_argument("driven: a driven prism must be pinned (its top nodes are pushed against its base)");
   const double twist = std::isnan(s.twist) ? prismTwist(s.struts) : s.twist;
   if (!std::isfinite(twist))
     throw std::invalid_argument("twist: must be finite, got " + shortestNumber(twist));
@@ -71,26 +74,46 @@ std::string prismScene(const PrismSpec& s)
     << ".\n# Force densities rings : verticals : struts = 1 : 2 sin(180/n) : -2 sin(180/n) = 1 : "
     << roundedNumber(2.0 * std::sin(M_PI / n), 9) << " : " << roundedNumber(-2.0 * std::sin(M_PI / n), 9) << ".\n";
   y << "name: prism" << n << "\n";
-  y << "description: class-1 prism of " << n << " struts" << (s.pinned ? ", pinned at its bottom nodes" : "") << "\n";
-  y << kMaterials << "nodes:\n";
+  y << "description: class-1 prism of " << n << " struts" << (s.pinned ? ", pinned at its bottom nodes" : "")
+    << (s.driven ? ", its top nodes pressed down by the actuator press" : "") << "\n";
+  y << kMaterials;
+  // a driven prism folds: its cables are elastic (EA = 7.84 MPa * pi * (1 cm)^2 = 2463 N, the quadruplex's)
+  const std::string cable =
+      s.driven ? "    material: elastic\n    radius: 0.01\n" : "    material: fibreglass\n    radius: 0.0015\n";
+  if (s.driven)
+    y << "  elastic: {youngs_modulus: 7.84e6, density: 1000.0}\n";
+  y << "nodes:\n";
   for (int i = 0; i < n; ++i)
     y << "  B" << i + 1 << ": {position: " << vec(bottom[i]) << (s.pinned ? ", fixed: true" : "") << "}\n";
   for (int i = 0; i < n; ++i)
     y << "  T" << i + 1 << ": {position: " << vec(top[i]) << "}\n";
-  y << "struts:\n  radius: 0.012\n  material: aluminium\n  members:\n";
+  y << "struts:\n  radius: " << shortestNumber(s.strut_radius) << "\n  material: aluminium\n  members:\n";
   for (int i = 0; i < n; ++i)
     y << "    S" << i + 1 << ": [B" << i + 1 << ", T" << i + 1 << "]\n";
-  y << "cables:\n  rings:\n    material: fibreglass\n    radius: 0.0015\n    prestress: "
-    << shortestNumber(s.ring_prestress) << "\n    members:\n";
+  y << "cables:\n  rings:\n" << cable << "    prestress: " << shortestNumber(s.ring_prestress) << "\n    members:\n";
   for (int i = 0; i < n; ++i)
     y << "      R" << i + 1 << ": [B" << i + 1 << ", B" << (i + 1) % n + 1 << "]\n";
   for (int i = 0; i < n; ++i)
     y << "      R" << n + i + 1 << ": [T" << i + 1 << ", T" << (i + 1) % n + 1 << "]\n";
-  y << "  verticals:\n    material: fibreglass\n    radius: 0.0015\n    prestress: "
-    << shortestNumber(vertical_prestress) << "\n    members:\n";
+  y << "  verticals:\n" << cable << "    prestress: " << shortestNumber(vertical_prestress) << "\n    members:\n";
   for (int i = 0; i < n; ++i)
     y << "      V" << i + 1 << ": [B" << i + 1 << ", T" << (i + 1) % n + 1 << "]\n";
-  y << "contact: {enabled: false, pairs: auto}\n" << analysis(s.pinned);
+  if (!s.driven)
+  {
+    y << "contact: {enabled: false, pairs: auto}\n" << analysis(s.pinned);
+    return y.str();
+  }
+  y << "actuators:\n  # the actuation value moves every top node down by as much (each free across)\n  press:\n    "
+       "nodes: [";
+  for (int i = 0; i < n; ++i)
+    y << "T" << i + 1 << (i + 1 < n ? ", " : "]\n");
+  y << "    direction: [0.0, 0.0, -1.0]\n    range: [0.0, " << shortestNumber(s.height) << "]\n";
+  y << "contact: {enabled: true, pairs: auto}\n";
+  y << "actuation: {speed: " << shortestNumber(0.25 * s.height) << "}\n";
+  y << "analysis: {type: static, max_actuation: " << shortestNumber(0.3 * s.height) << ", steps: 30}\n";
+  y << "outputs: {height_nodes: [";
+  for (int i = 0; i < n; ++i)
+    y << "T" << i + 1 << (i + 1 < n ? ", " : "]}\n");
   return y.str();
 }
 

@@ -18,10 +18,13 @@ namespace
 const char* kUsage =
     "usage: tensegrity_generate STRUCTURE [options] [--out FILE.yaml]\n"
     "  Writes the scene of a standard structure (stdout without --out); every scene loads as it is.\n"
-    "  prism --struts N [--radius R] [--height H] [--twist DEG] [--prestress T] [--pinned]\n"
+    "  prism --struts N [--radius R] [--height H] [--twist DEG] [--prestress T] [--strut-radius r]\n"
+    "        [--pinned [--driven]]\n"
     "      class-1 prism of N (3..64) struts, rings of radius R (0.5 m) H (0.8 m) apart; at the form's twist\n"
     "      -(90 + 180/N) deg unless --twist is given (then a start for tensegrity_formfind); ring cables at\n"
-    "      T N (100), verticals and struts at the form's prestress; --pinned fixes the bottom nodes\n"
+    "      T N (100), verticals and struts at the form's prestress; struts of radius r (0.012 m); --pinned\n"
+    "      fixes the bottom nodes; --driven adds the actuator press, which pushes the top nodes down (a\n"
+    "      static fold to 0.3 H with contact between the struts)\n"
     "  octahedron [--strut-length L] [--prestress T] [--pinned]\n"
     "      expanded octahedron of six struts of L (1 m), its 24 cables at T N (100); --pinned fixes three\n"
     "      nodes of its lowest cable triangle\n"
@@ -76,11 +79,17 @@ std::string generate(const std::string& structure, tools::Args& args, std::strin
         s.ring_prestress = number(args, arg);
       else if (arg == "--pinned")
         s.pinned = true;
+      else if (arg == "--driven")
+        s.driven = true;
+      else if (arg == "--strut-radius")
+        s.strut_radius = number(args, arg);
       else if (arg == "--out")
         out_path = args.value(arg);
       else
         throw unknown(arg);
     }
+    if (s.driven && !s.pinned)
+      throw tools::BadArgument("prism: --driven needs --pinned (the top nodes are pressed against the base)");
     if (!struts)
       throw tools::BadArgument("prism: --struts N is required");
     if (s.struts < 3 || s.struts > 64)

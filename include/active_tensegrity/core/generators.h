@@ -21,6 +21,10 @@ struct PrismSpec
   double twist = std::numeric_limits<double>::quiet_NaN();  // rad; NaN: the form's -(pi/2 + pi/n)
   double ring_prestress = 100.0;                            // N
   bool pinned = false;                                      // the bottom nodes fixed (a static analysis)
+  /// (with pinned) an actuator `press` drives the top nodes down (each along -z only, free across): a
+  /// static fold to 0.3 height with contact between the struts (radius strut_radius)
+  bool driven = false;
+  double strut_radius = 0.012;  // m
 };
 
 /// The twist of the n-strut prism's form, rad: -(pi/2 + pi/n).
