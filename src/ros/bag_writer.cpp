@@ -53,6 +53,7 @@ void BagWriter::write(const core::State& state)
   bag_.write("/tf", stamp, tf);
   bag_.write(ns_ + "/contacts", stamp, snap.contacts);
   bag_.write(ns_ + "/cables", stamp, snap.cables);
+  bag_.write(ns_ + "/struts", stamp, snap.struts);
   bag_.write(ns_ + "/actuators", stamp, snap.actuators);
   bag_.write(ns_ + "/markers", stamp, snap.markers);
   ++written_;

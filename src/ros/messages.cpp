@@ -148,6 +148,15 @@ Snapshot MessageBuilder::build(const core::State& state, const ros::Time& stamp)
     m.slack = cables[i].slack;
     out.cables.cables.push_back(m);
   }
+  out.struts.header.stamp = stamp;
+  out.struts.header.frame_id = frame_id_;
+  const std::vector<double> axial = core::strutAxialForces(model_, state);
+  for (size_t b = 0; b < model_.bodies.size(); ++b)
+    if (model_.bodies[b].kind == core::BodyKind::kStrut)
+    {
+      out.struts.names.push_back(model_.bodies[b].name);
+      out.struts.axial_forces.push_back(axial[b]);
+    }
 
   out.actuators.header.stamp = stamp;
   for (size_t i = 0; i < model_.actuators.size(); ++i)

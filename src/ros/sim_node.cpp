@@ -129,6 +129,7 @@ SimNode::SimNode(ros::NodeHandle& nh, ros::NodeHandle& pnh, SimParams params, co
 
   contacts_pub_ = pnh.advertise<active_tensegrity::ContactArray>("contacts", 10);
   cables_pub_ = pnh.advertise<active_tensegrity::CableArray>("cables", 10);
+  struts_pub_ = pnh.advertise<active_tensegrity::StrutArray>("struts", 10);
   actuators_pub_ = pnh.advertise<sensor_msgs::JointState>("actuators", 10);
   markers_pub_ = pnh.advertise<visualization_msgs::MarkerArray>("markers", 10);
   status_pub_ = pnh.advertise<active_tensegrity::SimStatus>("status", 10, true);
@@ -497,6 +498,7 @@ void SimNode::publishState(const core::State& state, const ros::Time& stamp)
   tf_.sendTransform(snap.transforms);
   contacts_pub_.publish(snap.contacts);
   cables_pub_.publish(snap.cables);
+  struts_pub_.publish(snap.struts);
   actuators_pub_.publish(snap.actuators);
   markers_pub_.publish(snap.markers);
 }

@@ -194,8 +194,8 @@ TEST(TensegrityRunBag, WritesEveryTopicPerOutputStepInSimulatedTime)
         last_max_force = std::max(last_max_force, k.normal_force);
     }
   }
-  for (const char* topic : { "/tf", "/tensegrity_sim/contacts", "/tensegrity_sim/cables", "/tensegrity_sim/actuators",
-                             "/tensegrity_sim/markers" })
+  for (const char* topic : { "/tf", "/tensegrity_sim/contacts", "/tensegrity_sim/cables", "/tensegrity_sim/struts",
+                             "/tensegrity_sim/actuators", "/tensegrity_sim/markers" })
     EXPECT_EQ(count[topic], 71) << topic;
   EXPECT_EQ(frames.size(), 20u);  // 16 struts and B1-B4
   // the bag's contact forces are the CSV's: last row's max_normal_force

@@ -22,7 +22,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from visualization_msgs.msg import MarkerArray
 
 from sim_test_util import wait_for
-from active_tensegrity.msg import ActuationCommand, CableArray, ContactArray, SimStatus
+from active_tensegrity.msg import ActuationCommand, CableArray, ContactArray, SimStatus, StrutArray
 
 NS = "/tensegrity_sim"
 STRUTS = ["S1", "S2", "S3"]
@@ -56,6 +56,7 @@ class Recorder:
         self.subs = [
             rospy.Subscriber(ns + "/contacts", ContactArray, self.on, "contacts"),
             rospy.Subscriber(ns + "/cables", CableArray, self.on, "cables"),
+            rospy.Subscriber(ns + "/struts", StrutArray, self.on, "struts"),
             rospy.Subscriber(ns + "/actuators", JointState, self.on, "actuators"),
             rospy.Subscriber(ns + "/markers", MarkerArray, self.on, "markers"),
             rospy.Subscriber(ns + "/status", SimStatus, self.on, "status"),
@@ -78,6 +79,9 @@ class Recorder:
                 for c in msg.cables:
                     if not finite(c.length, c.rest_length, c.tension):
                         self.nonfinite.append(("cables", c))
+            elif name == "struts":
+                if not finite(*msg.axial_forces):
+                    self.nonfinite.append(("struts", msg))
 
     def get(self, name):
         with self.lock:
@@ -150,12 +154,18 @@ class TestSimNode(unittest.TestCase):
 
     def test_01_frames_topics_and_rate(self):
         self.assertTrue(wait_for(lambda: all(self.rec.get(n) is not None for n in
-                                             ("contacts", "cables", "actuators", "markers", "status")), WAIT))
+                                             ("contacts", "cables", "struts", "actuators", "markers", "status")),
+                                 WAIT))
         self.assertTrue(wait_for(lambda: all(("world", s) in self.frames for s in STRUTS), WAIT), self.frames)
         cables = self.rec.get("cables")
         self.assertEqual([c.name for c in cables.cables], CABLES)
         self.assertTrue(all(c.tension > 0 and not c.slack for c in cables.cables))
         self.assertEqual(cables.header.frame_id, "world")
+        # the prestressed prism's struts push: every axial force is a compression
+        struts = self.rec.get("struts")
+        self.assertEqual(list(struts.names), STRUTS)
+        self.assertEqual(len(struts.axial_forces), len(STRUTS))
+        self.assertTrue(all(f < 0 for f in struts.axial_forces), struts.axial_forces)
         act = self.rec.get("actuators")
         self.assertEqual(act.name, ["lift"])
         markers = self.rec.get("markers").markers

@@ -1,4 +1,4 @@
-/// Writes what tensegrity_sim would publish (tf, contacts, cables, actuators, markers) for states of
+/// Writes what tensegrity_sim would publish (tf, contacts, cables, struts, actuators, markers) for states of
 /// a batch run into a bag, without a master (rosbag C++ API), so that a tensegrity_run result can be
 /// watched in rviz through playback.launch. Message times and stamps are origin + simulated time.
 #pragma once

@@ -12,6 +12,7 @@
 #include <visualization_msgs/MarkerArray.h>
 
 #include "active_tensegrity/CableArray.h"
+#include "active_tensegrity/StrutArray.h"
 #include "active_tensegrity/ContactArray.h"
 #include "active_tensegrity/core/model.h"
 #include "active_tensegrity/core/state.h"
@@ -36,6 +37,7 @@ struct Snapshot
   std::vector<geometry_msgs::TransformStamped> transforms;
   active_tensegrity::ContactArray contacts;
   active_tensegrity::CableArray cables;
+  active_tensegrity::StrutArray struts;
   sensor_msgs::JointState actuators;
   visualization_msgs::MarkerArray markers;
 };

@@ -1,6 +1,6 @@
 /// The tensegrity_sim node: steps the core's DynamicsSolver on a scene in simulated time, paced to a
 /// real-time factor, drives the actuators from ~actuation and ~trajectory through the core's
-/// ActuationController, and publishes tf, ~contacts, ~cables, ~actuators, ~markers, ~status and
+/// ActuationController, and publishes tf, ~contacts, ~cables, ~struts, ~actuators, ~markers, ~status and
 /// (optionally) /clock; plans foldings (the ~plan_folding service and action) and follows trajectories
 /// (the ~follow_trajectory action). No physics here: only conversion, pacing and delegation (docs/ros.md).
 #pragma once
@@ -94,7 +94,7 @@ private:
   uint64_t steps_ = 0, step_cuts_ = 0;
   double rtf_ = 0.0, publish_share_ = 0.0;
 
-  ros::Publisher contacts_pub_, cables_pub_, actuators_pub_, markers_pub_, status_pub_, clock_pub_;
+  ros::Publisher contacts_pub_, cables_pub_, struts_pub_, actuators_pub_, markers_pub_, status_pub_, clock_pub_;
   ros::Subscriber actuation_sub_, trajectory_sub_;
   ros::ServiceServer reset_srv_, pause_srv_, plan_srv_;
   tf2_ros::TransformBroadcaster tf_;
