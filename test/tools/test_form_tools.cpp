@@ -84,7 +84,8 @@ TEST(TensegrityGenerate, EveryStructureLoads)
 {
   for (const char* args :
        { "prism --struts 3", "prism --struts 12 --radius 0.3 --height 1.2 --prestress 50 --pinned",
-         "octahedron --strut-length 2 --pinned", "quadruplex-lattice --cells 2x3", "tower --stages 3" })
+         "prism --struts 6 --pinned --driven --strut-radius 0.03", "octahedron --strut-length 2 --pinned",
+         "quadruplex-lattice --cells 2x3", "tower --stages 3" })
   {
     const std::string out = tmp("generated.yaml");
     const Result r = generate(std::string(args) + " --out " + out);
@@ -125,6 +126,7 @@ TEST(TensegrityGenerate, BadArgumentsNameTheOptionAndValue)
     { "quadruplex-lattice --cells 3", "--cells: expected AxB" },
     { "quadruplex-lattice --cells 2x2 --top-radius 0.6", "--top-radius: must be below half the pitch" },
     { "tower --stages 41", "1 to 40 stages, got '41'" },
+    { "prism --struts 4 --driven", "--driven needs --pinned" },
   };
   for (const auto& [args, message] : cases)
   {
