@@ -9,6 +9,7 @@
 #include <Eigen/SVD>
 #include <yaml-cpp/yaml.h>
 
+#include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/kinematics.h"
 #include "active_tensegrity/core/scene.h"
 #include "active_tensegrity/core/state.h"
@@ -610,6 +611,12 @@ FormCheck checkWritten(const std::string& scene, const std::string& name, bool s
   {
     c.checked = false;
   }
+  for (const ContactPairState& p : activeContacts(model, start))
+  {
+    const StrutPair& pair = model.checked_pairs[p.pair];
+    c.overlapping.push_back(model.bodies[pair.body_a].name + "-" + model.bodies[pair.body_b].name + " (gap " +
+                            roundedNumber(p.gap, 3) + " m)");
+  }
   if (supported)  // a static solve needs a support
   {
     State state = start;
@@ -767,6 +774,11 @@ FormFindingResult findForm(const std::string& yaml, const std::string& name, con
   const std::string header = "# " + how + " (tensegrity_formfind) of " + clipped(name) + "\n";
   result.scene = writeScene(yaml, t, x, tension, header, result.notes);
   result.check = checkWritten(result.scene, name, std::find(t.fixed.begin(), t.fixed.end(), char(1)) != t.fixed.end());
+  if (!result.check.overlapping.empty())
+    result.notes.push_back(
+        "struts overlap in the form (form-finding takes no account of their thickness): " +
+        joinNames(result.check.overlapping) +
+        "; the scene starts with them in contact: start from another geometry, or check fewer pairs");
   return result;
 }
 

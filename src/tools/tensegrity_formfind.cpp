@@ -87,6 +87,7 @@ void report(std::ostream& out, const at::FormFindingResult& r, const at::FormFin
     out << "  mechanisms: " << c.mechanisms << "\n";
     out << "  slack_cables: " << c.slack_cables.size() << "\n";
   }
+  out << "  overlapping_struts: " << c.overlapping.size() << "\n";
   if (c.newton_converged || c.newton_move > 0.0)
     out << "  static_solve: {converged: " << (c.newton_converged ? "true" : "false")
         << ", largest_move: " << at::roundedNumber(c.newton_move, 3) << "}  # m, from the form at zero actuation\n";
@@ -213,6 +214,9 @@ int main(int argc, char** argv)
     }
   }
   report(log, r, o);
+  if (!r.check.overlapping.empty())
+    std::cerr << "tensegrity_formfind: warning: struts overlap in the form: " << r.check.overlapping.front()
+              << (r.check.overlapping.size() > 1 ? " ..." : "") << "\n";
   if (r.check.checked && !r.check.prestress_stable)
     std::cerr << "tensegrity_formfind: warning: the form is not prestress stable (tensegrity_run " << out_path
               << " --check)\n";

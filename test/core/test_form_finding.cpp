@@ -394,3 +394,25 @@ TEST(FormFinding, RefusesWhatItCannotDo)
   // the scene itself is refused by the loader, with its message
   EXPECT_THROW(at::findForm("name: x\nnodes: {}\n", "x.yaml", {}), at::SceneError);
 }
+
+// Form-finding knows no strut thickness: a form whose struts overlap (here struts thicker than their spacing)
+// is written, with the overlapping pairs in the check and a note
+TEST(FormFinding, OverlappingStrutsAreNamed)
+{
+  at::PrismSpec spec;
+  spec.struts = 3;
+  spec.pinned = true;
+  spec.driven = true;  // contact between every pair of struts
+  spec.strut_radius = 0.3;
+  at::FormFindingOptions o;
+  o.tension["rings"] = 50.0;
+  const at::FormFindingResult r = at::findForm(at::prismScene(spec), "thick", o);
+  ASSERT_EQ(r.check.overlapping.size(), 3u);
+  EXPECT_EQ(r.check.overlapping[0].rfind("S1-S2 (gap -", 0), 0u) << r.check.overlapping[0];
+  bool noted = false;
+  for (const std::string& n : r.notes)
+    noted = noted || n.find("struts overlap in the form") != std::string::npos;
+  EXPECT_TRUE(noted);
+  spec.strut_radius = 0.012;  // the same form with thin struts: nothing overlaps
+  EXPECT_TRUE(at::findForm(at::prismScene(spec), "thin", o).check.overlapping.empty());
+}

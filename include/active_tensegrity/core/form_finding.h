@@ -78,6 +78,9 @@ struct FormCheck
   int self_stress_states = 0;
   int mechanisms = 0;
   std::vector<std::string> slack_cables;
+  /// checked strut pairs that overlap in the form (form-finding knows no strut thickness): "S1-S3 (gap
+  /// -0.004 m)"; the written scene starts with these struts in contact
+  std::vector<std::string> overlapping;
   bool newton_converged = false;  // the static solve from the start at zero actuation
   double newton_move = 0.0;       // m: the largest node displacement that solve made
 };
