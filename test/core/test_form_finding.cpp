@@ -170,13 +170,19 @@ TEST(FormFinding, AsymmetricStartGivesAValidForm)
     for (const at::FormMember& m : r.members)
     {
       if (m.family == "rings")
+      {
         EXPECT_NEAR(m.tension, 100.0, 1e-9);
+      }
       if (m.family == "verticals")
+      {
         EXPECT_NEAR(m.tension, member(r, "V1").tension, 1e-9);
+      }
       if (m.strut && q_strut == 0.0)
         q_strut = m.tension / m.length;
       if (m.strut)
+      {
         EXPECT_NEAR(m.tension / m.length, q_strut, 1e-9 * std::abs(q_strut));
+      }
     }
     EXPECT_LT(q_strut, 0.0);
     EXPECT_LT(r.check.equilibrium_residual, 1e-6);
@@ -239,8 +245,12 @@ TEST(FormFinding, ExpandedOctahedronProportions)
     q_cable = m.tension / m.length;
   }
   for (const at::FormMember& m : r.members)
+  {
     if (m.strut)
+    {
       EXPECT_NEAR(m.tension / m.length / q_cable, -1.5, 3e-5) << m.name;
+    }
+  }
   // parallel struts (S1 | S2 ...) half a strut length apart: the distance between their midpoints
   for (int k = 0; k < 3; ++k)
   {
@@ -344,8 +354,12 @@ TEST(FormFinding, ForceDensitiesAndSplitFamilies)
   o.force_density["verticals"] = 200.0 * std::sqrt(3.0);
   const at::FormFindingResult fdm = at::findForm(perturbedPrism(3, 0.1, 0.03, 2), "prism", o);
   for (const at::FormMember& m : fdm.members)
+  {
     if (m.family == "rings")
+    {
       EXPECT_NEAR(m.tension / m.length, 200.0, 1e-9);
+    }
+  }
   EXPECT_TRUE(fdm.check.slack_cables.empty());
   EXPECT_LT(fdm.check.equilibrium_residual, 1e-6);
 }
