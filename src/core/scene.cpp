@@ -94,9 +94,10 @@ public:
   {
     source_->fail(key, what);
   }
+  /// The dotted path of key k, k cut like any echoed text (a key can be a whole multi-line scalar).
   std::string key(const std::string& k) const
   {
-    return path_.empty() ? k : path_ + "." + k;
+    return path_.empty() ? clipped(k) : path_ + "." + clipped(k);
   }
 
   bool has(const std::string& k) const

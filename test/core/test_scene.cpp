@@ -954,6 +954,19 @@ TEST(SceneMessages, LongValuesAreCut)
     EXPECT_LT(std::string(e.what()).size(), 1000u);
     EXPECT_NE(std::string(e.what()).find("unknown node 'xxx"), std::string::npos);
   }
+  // a key that is a long text (found by libFuzzer: a multi-line plain scalar as a material's name, missing
+  // its required keys, gave a 4 kB message)
+  try
+  {
+    loadSceneFromString(
+        edited({ { "materials:\n", "materials:\n  " + std::string(1000, 'k') + ": {density: 1.0}\n" } }), "mini.yaml");
+    FAIL() << "loaded";
+  }
+  catch (const SceneError& e)
+  {
+    EXPECT_LT(std::string(e.what()).size(), 1000u) << e.what();
+    EXPECT_NE(std::string(e.what()).find("(1000 bytes)"), std::string::npos) << e.what();
+  }
 }
 
 TEST(SceneMessages, TheRealCauseOfAMasslessStrutIsNamed)
