@@ -21,10 +21,14 @@ namespace active_tensegrity::core
 {
 namespace
 {
-constexpr double kCollapsedLength = 1e-9;     // times the mean member length: a member that short has collapsed
-constexpr double kSlackTension = 1e-9;        // times the largest member force: a cable below it is slack
-constexpr double kSameTension = 1e-9;         // relative: members of one family within it share a prestress
-constexpr double kTargetFit = 1e-6;           // relative: how closely prestress mode must meet a target tension
+constexpr double kCollapsedLength = 1e-9;  // times the mean member length: a member that short has collapsed
+constexpr double kSlackTension = 1e-9;     // times the largest member force: a cable below it is slack
+constexpr double kSameTension = 1e-9;      // relative: members of one family within it share a prestress
+constexpr double kTargetFit = 1e-6;        // relative: how closely prestress mode must meet a target tension
+// what else lets a form exist when the iterations find none: the struts' force densities (a sliding cable
+// that runs inside some struts adds to their force only) and the supports
+constexpr const char* kOtherWays =
+    " (or let each strut have its own force density, --struts free, or the supports react, --supports react)";
 constexpr int kMaxNamed = 10;                 // names a message lists
 constexpr double kStepRankTolerance = 1e-10;  // relative: smaller pivots of the scaled Jacobian count as zero
 constexpr int kPolishIterations = 30;  // Gauss-Newton iterations past the tolerance while they halve the residual
@@ -421,7 +425,7 @@ int solveForm(const FormEquations& eq, Eigen::VectorXd& z, const Eigen::VectorXd
     residual = largestForce(r);
     if (!std::isfinite(residual))
       throw FormFindingError("form-finding diverged (a non-finite force after " + std::to_string(it) +
-                             " iterations): start nearer a form, or hold more families");
+                             " iterations): start nearer a form, or hold more families" + kOtherWays);
     const bool converged = residual <= o.tolerance * largest;
     if (converged && (polish == kPolishIterations || !(residual < 0.5 * previous)))
       return it;
@@ -430,7 +434,7 @@ int solveForm(const FormEquations& eq, Eigen::VectorXd& z, const Eigen::VectorXd
     else if (it >= o.max_iterations)
       throw FormFindingError("form-finding did not converge in " + std::to_string(o.max_iterations) +
                              " iterations: force residual " + roundedNumber(residual, 3) + " N (tolerance " +
-                             roundedNumber(o.tolerance * largest, 3) + " N)");
+                             roundedNumber(o.tolerance * largest, 3) + " N)" + kOtherWays);
     previous = residual;
     const Eigen::MatrixXd j = eq.jacobian(z) * column_scale.asDiagonal() / force_scale;
     Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod;
@@ -460,7 +464,8 @@ int solveForm(const FormEquations& eq, Eigen::VectorXd& z, const Eigen::VectorXd
       if (cut == kMaxStepCuts)
         throw FormFindingError("form-finding stalled at a force residual of " + roundedNumber(residual, 3) +
                                " N after " + std::to_string(it) +
-                               " iterations (no step reduces it): start nearer a form, or hold other families");
+                               " iterations (no step reduces it): start nearer a form, or hold other families" +
+                               kOtherWays);
     }
   }
 }

@@ -430,3 +430,28 @@ TEST(FormFinding, OverlappingStrutsAreNamed)
   spec.strut_radius = 0.012;  // the same form with thin struts: nothing overlaps
   EXPECT_TRUE(at::findForm(at::prismScene(spec), "thin", o).check.overlapping.empty());
 }
+
+// The pinned prism whose verticals are one sliding cable running inside two hollow struts: its given
+// geometry is a form (the pins carry nothing), but the cable inside S2 and S3 adds to their compression
+// only, so one force density for every strut cannot hold it (refused, naming --struts free); with a force
+// density per strut nothing moves and the cable keeps the scene's tension
+TEST(FormFinding, SlidingCableInsideStrutsNeedsTheirOwnForceDensities)
+{
+  at::FormFindingOptions o;
+  try
+  {
+    at::findForm(sceneFile("prism_pinned_sliding.yaml"), "sliding", o);
+    ADD_FAILURE() << "a form with uniform struts";
+  }
+  catch (const at::FormFindingError& e)
+  {
+    EXPECT_NE(std::string(e.what()).find("--struts free"), std::string::npos) << e.what();
+  }
+  o.uniform_struts = false;
+  const at::FormFindingResult r = at::findForm(sceneFile("prism_pinned_sliding.yaml"), "sliding", o);
+  EXPECT_LT(r.max_move, 1e-9);
+  EXPECT_NEAR(member(r, "V").tension, 291.2704512527, 1e-6);
+  // the struts the cable runs inside carry its tension on top of S1's compression
+  EXPECT_NEAR(member(r, "S2").tension - member(r, "S1").tension, -member(r, "V").tension, 1e-6);
+  EXPECT_TRUE(r.check.prestress_stable);
+}
