@@ -704,10 +704,12 @@ FormFindingResult findForm(const std::string& yaml, const std::string& name, con
       for (size_t j = 0; j + 1 < t.members[e].nodes.size(); ++j)
         if ((x[t.members[e].nodes[j + 1]] - x[t.members[e].nodes[j]]).norm() < kCollapsedLength * mean_length)
           throw FormFindingError("the form found collapses member " + quoted(t.members[e].name) +
-                                 " to zero length: start nearer a form, or hold other families");
+                                 " to zero length: start nearer a form, or hold other families" + kOtherWays);
     if (thickness(t.positions) > kFlat * length && thickness(x) < kCollapsedLength * mean_length)
-      throw FormFindingError("the form found is flat (every node in one plane) though the scene is not: keep the "
-                             "strut lengths (--strut-lengths keep), start nearer a form, or hold other families");
+      throw FormFindingError(std::string("the form found is flat (every node in one plane) though the scene is not: "
+                                         "keep the strut lengths (--strut-lengths keep), start nearer a form, or "
+                                         "hold other families") +
+                             kOtherWays);
     // a free-standing form whose equations are homogeneous in scale keeps the given mean strut length
     bool any_fixed = false, tensions_held = false, densities_held = false;
     for (char f : t.fixed)
