@@ -45,24 +45,17 @@ const at::FormMember& member(const at::FormFindingResult& r, const std::string& 
   throw std::runtime_error("no member " + name);
 }
 
-/// A prism a few degrees off its form, its nodes moved by up to `jitter` m at random.
-std::string perturbedPrism(int n, double twist_error, double jitter, unsigned seed, bool pinned = false)
+/// The scene with the position of every node whose line starts with `prefix` ("  T": the top nodes) moved by
+/// up to `jitter` m in each direction at random.
+std::string jitterNodes(const std::string& yaml, const std::string& prefix, double jitter, unsigned seed)
 {
-  at::PrismSpec spec;
-  spec.struts = n;
-  spec.twist = at::prismTwist(n) + twist_error;
-  spec.pinned = pinned;
-  std::string yaml = at::prismScene(spec);
-  if (jitter == 0.0)
-    return yaml;
-  // move the top nodes: replace each "Ti: {position: [x, y, z]}" line
   std::mt19937 rng(seed);
   std::uniform_real_distribution<double> d(-jitter, jitter);
   std::istringstream in(yaml);
   std::string out;
   for (std::string line; std::getline(in, line);)
   {
-    if (line.rfind("  T", 0) == 0 && line.find("position: [") != std::string::npos)
+    if (line.rfind(prefix, 0) == 0 && line.find("position: [") != std::string::npos)
     {
       const size_t open = line.find('['), close = line.find(']');
       std::istringstream nums(line.substr(open + 1, close - open - 1));
@@ -77,6 +70,17 @@ std::string perturbedPrism(int n, double twist_error, double jitter, unsigned se
     out += line + "\n";
   }
   return out;
+}
+
+/// A prism a few degrees off its form, its top nodes moved by up to `jitter` m at random.
+std::string perturbedPrism(int n, double twist_error, double jitter, unsigned seed, bool pinned = false)
+{
+  at::PrismSpec spec;
+  spec.struts = n;
+  spec.twist = at::prismTwist(n) + twist_error;
+  spec.pinned = pinned;
+  const std::string yaml = at::prismScene(spec);
+  return jitter == 0.0 ? yaml : jitterNodes(yaml, "  T", jitter, seed);
 }
 }  // namespace
 
@@ -196,27 +200,7 @@ TEST(FormFinding, AsymmetricStartGivesAValidForm)
 TEST(FormFinding, ExpandedOctahedronProportions)
 {
   at::OctahedronSpec spec;
-  const std::string exact = at::octahedronScene(spec);
-  std::mt19937 rng(5);
-  std::uniform_real_distribution<double> d(-0.05, 0.05);
-  std::istringstream in(exact);
-  std::string yaml;
-  for (std::string line; std::getline(in, line);)
-  {
-    if (line.rfind("  N", 0) == 0)
-    {
-      const size_t open = line.find('['), close = line.find(']');
-      std::istringstream nums(line.substr(open + 1, close - open - 1));
-      double x, y, z;
-      char c;
-      nums >> x >> c >> y >> c >> z;
-      std::ostringstream p;
-      p.precision(17);
-      p << "[" << x + d(rng) << ", " << y + d(rng) << ", " << z + d(rng) << "]";
-      line = line.substr(0, open) + p.str() + line.substr(close + 1);
-    }
-    yaml += line + "\n";
-  }
+  const std::string yaml = jitterNodes(at::octahedronScene(spec), "  N", 0.05, 5);
   at::FormFindingOptions o;
   o.tension["cables"] = 100.0;
   const at::FormFindingResult r = at::findForm(yaml, "octahedron", o);

@@ -43,6 +43,16 @@ std::string text(const std::string& path)
   return all;
 }
 
+/// The cells of a CSV row of numbers.
+std::vector<double> numbers(const std::string& row)
+{
+  std::vector<double> v;
+  std::stringstream in(row);
+  for (std::string cell; std::getline(in, cell, ',');)
+    v.push_back(std::stod(cell));
+  return v;
+}
+
 std::string tmp(const std::string& name)
 {
   return ::testing::TempDir() + "tensegrity_run_" + name;
@@ -370,14 +380,6 @@ TEST(TensegrityRun, NodesFileHasEveryNodesPositionPerOutputStep)
   ASSERT_EQ(node_rows.size(), main_rows.size());
   EXPECT_EQ(node_rows[0],
             "t,B1_x,B1_y,B1_z,B2_x,B2_y,B2_z,B3_x,B3_y,B3_z,T1_x,T1_y,T1_z,T2_x,T2_y,T2_z,T3_x,T3_y,T3_z");
-  const auto numbers = [](const std::string& row)
-  {
-    std::vector<double> v;
-    std::stringstream in(row);
-    for (std::string cell; std::getline(in, cell, ',');)
-      v.push_back(std::stod(cell));
-    return v;
-  };
   // the scene's positions at t = 0; the height column (highest of T1-T3 above the ground at z = 0) on every row
   const std::vector<double> first = numbers(node_rows[1]);
   ASSERT_EQ(first.size(), 19u);
@@ -418,10 +420,7 @@ TEST(TensegrityRun, MembersFileHasEveryMembersForcePerOutputStep)
   EXPECT_EQ(header[2], "C1_length");
   EXPECT_EQ(header[3], "C1_rest_length");
   EXPECT_EQ(header.back(), "S4_force");
-  std::vector<double> first;
-  std::stringstream row(member_rows[1]);
-  for (std::string cell; std::getline(row, cell, ',');)
-    first.push_back(std::stod(cell));
+  const std::vector<double> first = numbers(member_rows[1]);
   EXPECT_NEAR(first[1], 200.0, 1e-6);                        // C1, a lower cable (Table 1)
   EXPECT_NEAR(first.back(), -200.0 * std::sqrt(6.0), 0.01);  // S4
   EXPECT_GT(first[2], first[3]);                             // stretched: longer than its rest length
@@ -446,14 +445,6 @@ TEST(TensegrityRun, VtkFilesAgreeWithTheCsvFiles)
       active_tensegrity::test::runCommand("/usr/bin/python3 " + std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) +
                                           "/test/tools/read_vtk.py --csv " + dir + "/run.pvd 2>&1");
   ASSERT_EQ(read.code, 0) << read.output;
-  const auto numbers = [](const std::string& row)
-  {
-    std::vector<double> v;
-    std::stringstream in(row);
-    for (std::string cell; std::getline(in, cell, ',');)
-      v.push_back(std::stod(cell));
-    return v;
-  };
   std::vector<std::string> steps;
   std::stringstream in(read.output);
   for (std::string l; std::getline(in, l);)
