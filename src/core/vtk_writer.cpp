@@ -187,6 +187,7 @@ void VtkWriter::write(const State& state)
     writeCells(out, "Verts", verts);
     writeCells(out, "Lines", lines);
     out << "    </Piece>\n  </PolyData>\n</VTKFile>\n";
+    out.close();  // the buffer's last write fails here on a full disk
     if (!out)
       throw std::runtime_error("cannot write '" + path + "'");
   }

@@ -201,6 +201,10 @@ int main(int argc, char** argv)
   {
     return fail(std::string("no form: ") + e.what());
   }
+  catch (const std::exception& e)  // nothing else is expected: said, never a crash
+  {
+    return fail(std::string("form-finding failed: ") + e.what());
+  }
   std::ostream& log = out_path == "-" ? std::cerr : std::cout;
   if (out_path == "-")
     std::cout << r.scene;

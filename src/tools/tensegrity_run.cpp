@@ -347,6 +347,7 @@ int main(int argc, char** argv)
   if (modal)
     return runModalScene(scene, model, out_path.empty() ? std::cout : file, shapes, summary_file, summary_path);
   std::unique_ptr<at::VtkWriter> vtk;
+  bool vtk_failed = false;
   if (!vtk_dir.empty())
   {
     try
@@ -427,7 +428,18 @@ int main(int argc, char** argv)
         if (bag)
           bag->write(s);
         if (vtk)
-          vtk->write(s);
+        {
+          try
+          {
+            vtk->write(s);
+          }
+          catch (const std::exception& e)  // a full disk: said once, the run goes on without VTK files
+          {
+            std::cerr << "tensegrity_run: --vtk: " << e.what() << " (no more VTK files are written)\n";
+            vtk.reset();
+            vtk_failed = true;
+          }
+        }
         if (nodes.is_open())
         {
           nodes << csvNumber(s.t);
@@ -528,5 +540,6 @@ int main(int argc, char** argv)
   for (size_t k = 0; k < peak_cols.size(); ++k)
     summary << "  " << peak_names[k] << ": {value: " << csvNumber(peak_value[k]) << ", t: " << csvNumber(peak_time[k])
             << "}\n";
-  return finish(summary.str(), summary_file, summary_path, result.summary);
+  const int code = finish(summary.str(), summary_file, summary_path, result.summary);
+  return code == 0 && vtk_failed ? 1 : code;
 }
