@@ -1,0 +1,141 @@
+"""The Python API (active_tensegrity) against tensegrity_run: the same runs, the same numbers, the same refusals.
+
+Run by scripts/test through catkin (pytest, with the devel space's environment)."""
+
+import csv
+import math
+import os
+import subprocess
+import tempfile
+import threading
+
+import numpy as np
+import pytest
+
+import active_tensegrity as at
+
+SOURCE = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+SCENES = os.path.join(SOURCE, "config", "scenes")
+# the package's module lives in <space>/lib/python3/dist-packages/active_tensegrity; the tools in
+# <space>/lib/active_tensegrity
+SPACE = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(at._core.__file__)))))
+TENSEGRITY_RUN = os.path.join(SPACE, "lib", "active_tensegrity", "tensegrity_run")
+
+
+def cli(scene, sets, *outputs):
+    """tensegrity_run on scene with --set texts; the CSV files it wrote (--out and the given outputs)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        paths = {flag: os.path.join(tmp, flag.strip("-") + ".csv") for flag in ("--out",) + outputs}
+        command = [TENSEGRITY_RUN, scene]
+        for s in sets:
+            command += ["--set", s]
+        for flag, path in paths.items():
+            command += [flag, path]
+        done = subprocess.run(command, capture_output=True, text=True, timeout=600)
+        assert done.returncode == 0, done.stderr
+        tables = {}
+        for flag, path in paths.items():
+            with open(path) as f:
+                rows = list(csv.reader(f))
+            tables[flag] = (rows[0], [[math.inf if v == "" else float(v) for v in r] for r in rows[1:]])
+        return tables
+
+
+def printed(values):
+    """values as tensegrity_run prints them (10 significant digits), read back"""
+    return np.array([[float("%.10g" % v) if math.isfinite(v) else v for v in row] for row in values])
+
+
+def assert_same_as_printed(ours, columns, theirs):
+    cli_columns, cli_rows = theirs
+    assert list(columns) == cli_columns
+    assert ours.shape == (len(cli_rows), len(cli_columns))
+    np.testing.assert_array_equal(printed(ours), np.array(cli_rows))
+
+
+@pytest.mark.parametrize("sets", [
+    ["analysis.steps=20"],
+    ["analysis.type=dynamic", "actuation.speed=0.01", "analysis.duration=0.1", "analysis.output_interval=0.005"],
+])
+def test_a_prism_run_equals_the_command_line_to_its_printed_digits(sets):
+    scene = os.path.join(SCENES, "prism_pinned.yaml")
+    theirs = cli(scene, sets, "--nodes", "--members")
+    result = at.run(scene, sets)
+    assert result.ok, result.summary
+    assert result.summary["output_steps"] == len(theirs["--out"][1])
+    assert_same_as_printed(result.table, result.columns, theirs["--out"])
+    nodes = result.nodes.reshape(result.nodes.shape[0], -1)
+    node_columns = ["t"] + [n + "_" + a for n in result.node_names for a in "xyz"]
+    assert_same_as_printed(np.column_stack([result["t"], nodes]), node_columns, theirs["--nodes"])
+    assert_same_as_printed(result.members, result.member_columns, theirs["--members"])
+
+
+def test_overrides_as_a_dict_equal_the_same_texts():
+    scene = os.path.join(SCENES, "prism_pinned.yaml")
+    a = at.run(scene, {"analysis.steps": 5, "analysis.max_actuation": 0.001})
+    b = at.run(scene, ["analysis.steps=5", "analysis.max_actuation=0.001"])
+    np.testing.assert_array_equal(a.table, b.table)
+    assert a["actuation"][-1] == pytest.approx(0.001)
+
+
+def test_scene_text_loads_like_its_file():
+    path = os.path.join(SCENES, "prism_pinned.yaml")
+    with open(path) as f:
+        text = f.read()
+    from_text = at.run(at.load(text, {"analysis.steps": 5}))
+    from_file = at.run(path, {"analysis.steps": 5})
+    np.testing.assert_array_equal(from_text.table, from_file.table)
+
+
+def test_a_refused_scene_raises_with_the_key_named():
+    path = os.path.join(SCENES, "prism_pinned.yaml")
+    with pytest.raises(at.SceneError) as refused:
+        at.load(path, {"solver.dt": -1.0})
+    assert refused.value.key == "solver.dt"
+    assert "solver.dt" in str(refused.value) and "-1" in str(refused.value)
+    assert isinstance(refused.value, ValueError)
+    with pytest.raises(at.SceneError) as missing:
+        at.load(os.path.join(SCENES, "no_such_scene.yaml"))
+    assert "no_such_scene.yaml" in str(missing.value)
+    with pytest.raises(at.SceneError) as syntax:
+        at.load("nodes: [\nstruts: 1\n")
+    assert "<string>" in str(syntax.value)
+    with pytest.raises(at.SceneError) as unknown:
+        at.load(path, {"analysis.no_such_key": 1})
+    assert unknown.value.key.startswith("analysis")
+    with pytest.raises(TypeError):
+        at.load(path, "analysis.steps=5")
+
+
+def test_a_contact_run_reports_its_contacts_per_step():
+    # the quadruplex folded to its ultimate configuration with contact (4 mm load steps): its struts touch
+    result = at.run(os.path.join(SCENES, "quadruplex.yaml"), {"contact.enabled": True, "analysis.steps": 430})
+    assert result.ok, result.summary
+    contacts = result.contacts
+    assert contacts.shape[1] == len(at.Result.CONTACT_COLUMNS)
+    per_step = np.bincount(contacts[:, 0].astype(int), minlength=len(result.table))
+    assert per_step.max() >= 2
+    np.testing.assert_array_equal(per_step, result["active_contacts"])
+    largest = np.zeros(len(result.table))
+    np.maximum.at(largest, contacts[:, 0].astype(int), contacts[:, at.Result.CONTACT_COLUMNS.index("normal_force")])
+    np.testing.assert_allclose(largest, result["max_normal_force"], rtol=1e-12)
+    names = at.load(os.path.join(SCENES, "quadruplex.yaml")).bodies
+    assert set(contacts[:, 1].astype(int)) | set(contacts[:, 2].astype(int)) <= set(range(len(names)))
+
+
+def test_runs_in_threads_give_the_same_results():
+    # the interpreter's lock is released during a run: two threads run at once, each result its own
+    scene = at.load(os.path.join(SCENES, "prism_pinned.yaml"), {"analysis.steps": 30})
+    alone = at.run(scene)
+    results = [None, None]
+
+    def work(i):
+        results[i] = at.run(scene)
+
+    threads = [threading.Thread(target=work, args=(i,)) for i in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    for r in results:
+        np.testing.assert_array_equal(r.table, alone.table)
