@@ -15,7 +15,7 @@ import os
 from active_tensegrity._core import Model, SceneError  # noqa: F401  (re-exported)
 from active_tensegrity import _core
 
-__all__ = ["Model", "SceneError", "Result", "load", "run"]
+__all__ = ["Model", "SceneError", "Result", "Simulation", "check", "load", "run"]
 
 
 def _override_text(key, value):
@@ -48,6 +48,15 @@ def load(scene, overrides=None, name="<string>"):
     if "\n" in scene and not os.path.exists(scene):
         return _core.load_scene_text(scene, name, sets)
     return _core.load_scene(os.fspath(scene), sets)
+
+
+def check(scene, overrides=None):
+    """The structural diagnostics of a scene's initial state, as tensegrity_run --check prints them: a dict of
+    self_stress_states, mechanisms, rigid_body_modes, prestress_stable, the stiffness eigenvalues, slack_cables,
+    equilibrium_residual (N) ... (docs/physics.md). A model above the size the check handles gives
+    checked=False and a note."""
+    model = scene if isinstance(scene, Model) else load(scene, overrides)
+    return _core.check(model)
 
 
 class Result:
@@ -96,3 +105,48 @@ def run(scene, overrides=None):
     """
     model = scene if isinstance(scene, Model) else load(scene, overrides)
     return Result(model, _core.run(model))
+
+
+class Simulation:
+    """A dynamic simulation stepped from Python, as the ROS node steps it: fixed steps of the scene's
+    solver.dt from the scene's initial state; actuation commands ramp each actuator to a target under speed and
+    acceleration limits without a jump in value or rate.
+
+        sim = at.Simulation("config/scenes/tower.yaml")
+        sim.set_targets({"pull1": 0.3})
+        sim.advance(seconds=1.0, callback=lambda s: print(s.t, s.height), every=0.01)
+
+    State (read at any time): t (s), steps, height (m), actuation ({name: value}), row (the CSV row as a dict),
+    nodes (array nodes x 3, m). A step that fails raises RuntimeError with the solver's status; the simulation
+    keeps its last good state.
+    """
+
+    def __init__(self, scene, overrides=None):
+        self.model = scene if isinstance(scene, Model) else load(scene, overrides)
+        self._sim = _core.Simulation(self.model)
+
+    def __getattr__(self, name):
+        if name in ("t", "steps", "dt", "height", "actuation", "row", "nodes"):
+            return getattr(self._sim, name)
+        raise AttributeError(name)
+
+    def set_targets(self, targets, speed=0.0, accel=0.0):
+        """Ramps the named actuators to their targets ({name: value}, m) from now, at most `speed` (m/s) and
+        `accel` (m/s^2); 0 takes the node's defaults (the scene's actuation.speed, else 0.1 m/s). An unknown
+        name, a target out of the actuator's range, a NaN or a speed <= 0 raises ValueError and changes
+        nothing."""
+        names = list(targets)
+        self._sim.set_targets(names, [float(targets[n]) for n in names], [], [], float(speed), float(accel))
+
+    def advance(self, seconds=None, steps=None, callback=None, every=None):
+        """Advances by `seconds` (rounded to whole steps) or `steps`. callback(sim), when given, is called every
+        `every` seconds of simulated time (default: every step); it may read the state and set targets, and
+        ends the advance early by returning False. Returns the number of steps taken."""
+        if (seconds is None) == (steps is None):
+            raise ValueError("advance: give seconds or steps")
+        dt = self._sim.dt
+        n = steps if steps is not None else int(round(seconds / dt))
+        k = 1 if every is None else max(1, int(round(every / dt)))
+        if callback is None:
+            return self._sim.advance(n)
+        return self._sim.advance(n, lambda _: callback(self), k)

@@ -7,9 +7,12 @@
 #include <string>
 #include <vector>
 
+#include "active_tensegrity/core/actuation_control.h"
 #include "active_tensegrity/core/analysis.h"
+#include "active_tensegrity/core/dynamics.h"
 #include "active_tensegrity/core/kinematics.h"
 #include "active_tensegrity/core/scene.h"
+#include "active_tensegrity/core/structure_check.h"
 
 namespace py = pybind11;
 namespace at = active_tensegrity::core;
@@ -112,6 +115,124 @@ py::dict run(const at::Model& model)
   out["summary"] = summary;
   return out;
 }
+bool finite(const at::State& s)
+{
+  return s.q.allFinite() && s.qd.allFinite() && s.lambda.allFinite();
+}
+
+/// A dynamic simulation stepped from Python: the ROS node's loop without ROS (fixed steps of solver.dt, the
+/// actuation from an ActuationController that commands change without jumps in value or rate).
+class Simulation
+{
+public:
+  explicit Simulation(at::Model model)
+    : model_(std::move(model))
+    , solver_(model_, model_.solver)
+    , controller_(model_, at::initialState(model_).u)
+    , state_(at::initialState(model_))
+  {
+    const at::Summary init = solver_.initialize(state_, law());
+    if (!init.ok())
+      throw std::runtime_error(std::string("Simulation: the initial state could not be made consistent (") +
+                               at::toString(init.status) + ": " + init.message + ")");
+  }
+
+  /// Advances by `steps` steps of solver.dt, calling `callback(self)` after every `every` steps (when given);
+  /// stops early when the callback returns False. The last good state is kept when a step fails; the
+  /// failure raises RuntimeError with the solver's status and message.
+  int advance(long steps, const py::object& self, const py::object& callback, long every)
+  {
+    if (steps < 0)
+      throw py::value_error("advance: steps must be >= 0, got " + std::to_string(steps));
+    if (every < 1)
+      throw py::value_error("advance: every must be >= 1, got " + std::to_string(every));
+    long done = 0;
+    while (done < steps)
+    {
+      const long chunk = callback.is_none() ? steps - done : std::min(every, steps - done);
+      std::string failure;
+      {
+        const py::gil_scoped_release release;
+        failure = stepMany(chunk);
+      }
+      if (!failure.empty())
+        throw std::runtime_error(failure);
+      done += chunk;
+      if (!callback.is_none())
+      {
+        const py::object go_on = callback(self);
+        if (!go_on.is_none() && !go_on.cast<bool>())
+          break;
+      }
+    }
+    return static_cast<int>(done);
+  }
+
+  void setTargets(const std::vector<std::string>& names, const std::vector<double>& targets,
+                  const std::vector<double>& speeds, const std::vector<double>& accels, double speed, double accel)
+  {
+    // 0: the node's defaults, the scene's actuation.speed (else 0.1 m/s), reached in its blend_time (else 0.1 s)
+    const at::RampSchedule& ramp = model_.analysis.schedule;
+    if (speed == 0.0)
+      speed = ramp.speed > 0.0 ? ramp.speed : 0.1;
+    if (accel == 0.0)
+      accel = speed / (ramp.blend_time > 0.0 ? ramp.blend_time : 0.1);
+    const std::string err = controller_.setTargets(state_.t, names, targets, speeds, accels, speed, accel);
+    if (!err.empty())
+      throw py::value_error("set_targets: " + err);
+  }
+
+  const at::Model& model() const
+  {
+    return model_;
+  }
+  const at::State& state() const
+  {
+    return state_;
+  }
+  long steps() const
+  {
+    return steps_;
+  }
+  at::ActuationValues actuation() const
+  {
+    return controller_.values(state_.t);
+  }
+
+private:
+  at::ActuationLaw law()
+  {
+    return [this](double t) { return controller_.values(t); };
+  }
+  std::string stepMany(long n)
+  {
+    const at::ActuationLaw l = law();
+    const double dt = model_.solver.dt;
+    for (long i = 0; i < n; ++i)
+    {
+      const at::State before = state_;
+      const double t_next = static_cast<double>(steps_ + 1) * dt;  // t = k dt exactly
+      const at::Summary s = solver_.step(state_, t_next - state_.t, l);
+      if (!s.ok() || !finite(state_))
+      {
+        state_ = before;
+        return "the solver failed at t = " + std::to_string(before.t) + " s (" +
+               (s.ok() ? std::string("non_finite: non-finite state") :
+                         std::string(at::toString(s.status)) + ": " + s.message) +
+               "); the simulation keeps the last good state";
+      }
+      state_.t = t_next;
+      ++steps_;
+    }
+    return {};
+  }
+
+  at::Model model_;
+  at::DynamicsSolver solver_;
+  at::ActuationController controller_;
+  at::State state_;
+  long steps_ = 0;
+};
 }  // namespace
 
 PYBIND11_MODULE(_core, m)
@@ -192,6 +313,82 @@ PYBIND11_MODULE(_core, m)
       },
       py::arg("text"), py::arg("name") = "<string>", py::arg("overrides") = std::vector<std::string>{},
       "The same from YAML text (`name` stands for the file in messages)");
+  py::class_<Simulation>(m, "Simulation")
+      .def(py::init<at::Model>(), py::arg("model"))
+      .def(
+          "advance",
+          [](py::object self, long steps, const py::object& callback, long every)
+          { return self.cast<Simulation&>().advance(steps, self, callback, every); },
+          py::arg("steps"), py::arg("callback") = py::none(), py::arg("every") = 1)
+      .def("set_targets", &Simulation::setTargets, py::arg("names"), py::arg("targets"),
+           py::arg("speeds") = std::vector<double>{}, py::arg("accels") = std::vector<double>{}, py::arg("speed") = 0.0,
+           py::arg("accel") = 0.0)
+      .def_property_readonly("t", [](const Simulation& s) { return s.state().t; })
+      .def_property_readonly("steps", &Simulation::steps)
+      .def_property_readonly("dt", [](const Simulation& s) { return s.model().solver.dt; })
+      .def_property_readonly("model", &Simulation::model)
+      .def_property_readonly("height", [](const Simulation& s) { return at::structureHeight(s.model(), s.state().q); })
+      .def_property_readonly("actuation",
+                             [](const Simulation& s)
+                             {
+                               py::dict d;
+                               const at::ActuationValues u = s.state().u;
+                               for (size_t i = 0; i < s.model().actuators.size(); ++i)
+                                 d[py::str(s.model().actuators[i].name)] = u[i].value;
+                               return d;
+                             })
+      .def_property_readonly("row",
+                             [](const Simulation& s)
+                             {
+                               py::dict d;
+                               const std::vector<std::string> cols = at::csvColumns(s.model());
+                               const std::vector<double> row = at::csvRow(s.model(), s.state());
+                               for (size_t i = 0; i < cols.size(); ++i)
+                                 d[py::str(cols[i])] = row[i];
+                               return d;
+                             })
+      .def_property_readonly("nodes",
+                             [](const Simulation& s)
+                             {
+                               py::array_t<double> a({ s.model().nodes.size(), size_t{ 3 } });
+                               double* out = a.mutable_data();
+                               for (const at::Node& n : s.model().nodes)
+                               {
+                                 const at::Vec3 p = at::pointPosition(s.model(), n.point, s.state().q);
+                                 *out++ = p.x();
+                                 *out++ = p.y();
+                                 *out++ = p.z();
+                               }
+                               return a;
+                             });
+  m.def(
+      "check",
+      [](const at::Model& model)
+      {
+        at::StructureReport r;
+        {
+          const py::gil_scoped_release release;
+          r = at::checkStructure(model, at::initialState(model));
+        }
+        py::dict d;
+        d["checked"] = r.checked;
+        d["note"] = r.note;
+        d["coordinates"] = r.coordinates;
+        d["free_coordinates"] = r.free_coordinates;
+        d["members"] = r.members;
+        d["equilibrium_matrix_rank"] = r.rank;
+        d["self_stress_states"] = r.self_stress_states;
+        d["mechanisms"] = r.mechanisms;
+        d["rigid_body_modes"] = r.rigid_body_modes;
+        d["prestress_stable"] = r.prestress_stable;
+        d["smallest_rigid_mode_eigenvalue"] = r.smallest_rigid_mode_eigenvalue;
+        d["smallest_stiffness_eigenvalue"] = r.smallest_stiffness_eigenvalue;
+        d["largest_stiffness_eigenvalue"] = r.largest_stiffness_eigenvalue;
+        d["slack_cables"] = r.slack_cables;
+        d["equilibrium_residual"] = r.equilibrium_residual;
+        return d;
+      },
+      py::arg("model"), "The structural diagnostics of the scene's initial state (tensegrity_run --check)");
   m.def("run", &run, py::arg("model"),
         "Runs the scene's analysis (static or dynamic); a dict of numpy arrays per output step and the summary");
 }

@@ -139,3 +139,80 @@ def test_runs_in_threads_give_the_same_results():
         t.join()
     for r in results:
         np.testing.assert_array_equal(r.table, alone.table)
+
+
+def test_a_python_controller_holds_the_tower_at_one_metre():
+    # PID on the four pulls from the height, every 20 ms of simulated time, in-process: the tower (2 m at rest,
+    # a lightly damped soft mode of about 5 s that swings it by +-7 cm for tens of seconds at a held pull)
+    # settles at 1.0 m
+    sim = at.Simulation(os.path.join(SCENES, "tower.yaml"))
+    assert sim.height == pytest.approx(2.0)
+    names = sim.model.actuators
+    every = 0.02
+    state = {"integral": 0.0, "height": sim.height}
+    log = []
+
+    def control(s):
+        error = s.height - 1.0
+        rate = (s.height - state["height"]) / every
+        state["height"] = s.height
+        state["integral"] = min(1.8, max(0.0, state["integral"] + 0.3 * error * every))
+        pull = min(1.8, max(0.0, state["integral"] + 0.3 * error + 1.0 * rate))
+        s.set_targets({n: pull for n in names}, speed=1.0, accel=5.0)
+        log.append((s.t, s.height, s.actuation[names[0]]))
+
+    steps = sim.advance(seconds=20.0, callback=control, every=every)
+    assert steps == round(20.0 / sim.dt) and sim.t == pytest.approx(20.0)
+    t, h, u = np.array(log).T
+    early, late = h[(t > 5) & (t <= 10)], h[t > 15]
+    print("[ measured ] height from 5 to 10 s: %.4f..%.4f m; from 15 to 20 s: %.4f..%.4f m; pull %.4f m"
+          % (early.min(), early.max(), late.min(), late.max(), u[-1]))
+    assert np.abs(late - 1.0).max() < 0.015
+    assert np.ptp(late) < 0.5 * np.ptp(early)
+    assert 0.3 < u[-1] < 1.0
+
+
+def test_a_simulation_refuses_bad_commands_and_goes_on():
+    sim = at.Simulation(os.path.join(SCENES, "tower.yaml"))
+    sim.advance(steps=10)
+    for targets, speed, words in (({"no_such_cable": 0.1}, 0.0, "no_such_cable"),
+                                  ({"pull1": float("nan")}, 0.0, "pull1"),
+                                  ({"pull1": 5.0}, 0.0, "pull1"),
+                                  ({"pull1": 0.1}, -1.0, "speed")):
+        with pytest.raises(ValueError) as refused:
+            sim.set_targets(targets, speed=speed)
+        assert words in str(refused.value), str(refused.value)
+    assert sim.actuation["pull1"] == 0.0
+    sim.set_targets({"pull1": 0.01}, speed=0.1)
+    calls = []
+    taken = sim.advance(seconds=1.0, callback=lambda s: calls.append(s.t) or len(calls) < 3, every=0.01)
+    assert len(calls) == 3 and taken == 3 * round(0.01 / sim.dt)
+    sim.advance(seconds=0.5)
+    assert sim.actuation["pull1"] == pytest.approx(0.01)
+    assert np.isfinite(sim.nodes).all() and sim.nodes.shape == (len(sim.model.nodes), 3)
+    assert sim.row["actuation_pull1"] == pytest.approx(0.01)
+    with pytest.raises(ValueError):
+        sim.advance(seconds=1.0, steps=3)
+
+
+@pytest.mark.parametrize("name", ["prism_pinned.yaml", "prism_pinned_sliding.yaml", "quadruplex.yaml"])
+def test_check_equals_the_command_line_check(name):
+    import yaml
+    scene = os.path.join(SCENES, name)
+    done = subprocess.run([TENSEGRITY_RUN, scene, "--check"], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    theirs = yaml.safe_load(done.stdout)
+    ours = at.check(scene)
+    compared = 0
+    for key, value in ours.items():
+        if key not in theirs:
+            continue
+        compared += 1
+        if isinstance(value, float):
+            if math.isnan(value):
+                assert theirs[key] is None, key
+            else:
+                assert float("%.10g" % value) == pytest.approx(theirs[key], rel=1e-9, abs=1e-300), key
+        else:
+            assert value == theirs[key], key
+    assert compared >= 12
