@@ -15,7 +15,7 @@ import os
 from active_tensegrity._core import Model, SceneError  # noqa: F401  (re-exported)
 from active_tensegrity import _core
 
-__all__ = ["Model", "SceneError", "Result", "Simulation", "check", "load", "run"]
+__all__ = ["Model", "SceneError", "Result", "Simulation", "check", "load", "modal", "run"]
 
 
 def _override_text(key, value):
@@ -57,6 +57,20 @@ def check(scene, overrides=None):
     checked=False and a note."""
     model = scene if isinstance(scene, Model) else load(scene, overrides)
     return _core.check(model)
+
+
+def modal(scene, overrides=None):
+    """The natural modes of a scene about its equilibrium at analysis.max_actuation (analysis.type is set to
+    modal; analysis.modes gives how many, the lowest). A dict: frequency_hz, omega (rad/s), eigenvalue (1/s^2)
+    per mode (ascending; negative where the equilibrium is unstable along the mode), shapes (modes x nodes x 3,
+    node displacements scaled to a largest of 1), free_coordinates, structure (check() of the equilibrium),
+    status, message, warnings, wall_time (s)."""
+    if isinstance(scene, Model):
+        model = scene
+    else:
+        sets = _overrides(overrides)
+        model = load(scene, ["analysis.type=modal"] + sets)
+    return _core.modal(model)
 
 
 class Result:

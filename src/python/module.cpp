@@ -11,6 +11,7 @@
 #include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/dynamics.h"
 #include "active_tensegrity/core/kinematics.h"
+#include "active_tensegrity/core/modal.h"
 #include "active_tensegrity/core/scene.h"
 #include "active_tensegrity/core/structure_check.h"
 
@@ -115,6 +116,68 @@ py::dict run(const at::Model& model)
   out["summary"] = summary;
   return out;
 }
+py::dict report(const at::StructureReport& r)
+{
+  py::dict d;
+  d["checked"] = r.checked;
+  d["note"] = r.note;
+  d["coordinates"] = r.coordinates;
+  d["free_coordinates"] = r.free_coordinates;
+  d["members"] = r.members;
+  d["equilibrium_matrix_rank"] = r.rank;
+  d["self_stress_states"] = r.self_stress_states;
+  d["mechanisms"] = r.mechanisms;
+  d["rigid_body_modes"] = r.rigid_body_modes;
+  d["prestress_stable"] = r.prestress_stable;
+  d["smallest_rigid_mode_eigenvalue"] = r.smallest_rigid_mode_eigenvalue;
+  d["smallest_stiffness_eigenvalue"] = r.smallest_stiffness_eigenvalue;
+  d["largest_stiffness_eigenvalue"] = r.largest_stiffness_eigenvalue;
+  d["slack_cables"] = r.slack_cables;
+  d["equilibrium_residual"] = r.equilibrium_residual;
+  return d;
+}
+
+py::dict modal(const at::Model& model)
+{
+  if (model.analysis.type != at::AnalysisType::kModal)
+    throw py::value_error("modal: the scene's analysis.type is " + std::string(analysisName(model.analysis.type)) +
+                          ", not modal (set analysis.type=modal)");
+  at::ModalRun r;
+  {
+    const py::gil_scoped_release release;
+    r = at::runModal(model);
+  }
+  const size_t n = r.modal.modes.size();
+  py::array_t<double> frequency(n), omega(n), eigenvalue(n);
+  py::array_t<double> shapes({ n, model.nodes.size(), size_t{ 3 } });
+  double* out = shapes.mutable_data();
+  for (size_t k = 0; k < n; ++k)
+  {
+    const at::NaturalMode& mode = r.modal.modes[k];
+    frequency.mutable_at(k) = mode.frequency_hz;
+    omega.mutable_at(k) = mode.omega;
+    eigenvalue.mutable_at(k) = mode.eigenvalue;
+    for (const at::Vec3& d : mode.node_displacements)
+    {
+      *out++ = d.x();
+      *out++ = d.y();
+      *out++ = d.z();
+    }
+  }
+  py::dict d;
+  d["status"] = at::toString(r.summary.status);
+  d["message"] = r.summary.message;
+  d["warnings"] = r.summary.warnings;
+  d["free_coordinates"] = r.modal.free_coordinates;
+  d["frequency_hz"] = frequency;
+  d["omega"] = omega;
+  d["eigenvalue"] = eigenvalue;
+  d["shapes"] = shapes;
+  d["structure"] = report(r.structure);
+  d["wall_time"] = r.wall_time;
+  return d;
+}
+
 bool finite(const at::State& s)
 {
   return s.q.allFinite() && s.qd.allFinite() && s.lambda.allFinite();
@@ -370,25 +433,11 @@ PYBIND11_MODULE(_core, m)
           const py::gil_scoped_release release;
           r = at::checkStructure(model, at::initialState(model));
         }
-        py::dict d;
-        d["checked"] = r.checked;
-        d["note"] = r.note;
-        d["coordinates"] = r.coordinates;
-        d["free_coordinates"] = r.free_coordinates;
-        d["members"] = r.members;
-        d["equilibrium_matrix_rank"] = r.rank;
-        d["self_stress_states"] = r.self_stress_states;
-        d["mechanisms"] = r.mechanisms;
-        d["rigid_body_modes"] = r.rigid_body_modes;
-        d["prestress_stable"] = r.prestress_stable;
-        d["smallest_rigid_mode_eigenvalue"] = r.smallest_rigid_mode_eigenvalue;
-        d["smallest_stiffness_eigenvalue"] = r.smallest_stiffness_eigenvalue;
-        d["largest_stiffness_eigenvalue"] = r.largest_stiffness_eigenvalue;
-        d["slack_cables"] = r.slack_cables;
-        d["equilibrium_residual"] = r.equilibrium_residual;
-        return d;
+        return report(r);
       },
       py::arg("model"), "The structural diagnostics of the scene's initial state (tensegrity_run --check)");
+  m.def("modal", &modal, py::arg("model"),
+        "The natural modes about the equilibrium at analysis.max_actuation (a scene of analysis.type modal)");
   m.def("run", &run, py::arg("model"),
         "Runs the scene's analysis (static or dynamic); a dict of numpy arrays per output step and the summary");
 }

@@ -216,3 +216,28 @@ def test_check_equals_the_command_line_check(name):
         else:
             assert value == theirs[key], key
     assert compared >= 12
+
+
+def test_modal_equals_the_command_line_modes():
+    scene = os.path.join(SCENES, "prism_pinned.yaml")
+    theirs = cli(scene, ["analysis.type=modal"])
+    ours = at.modal(scene)
+    assert ours["status"] == "converged" and ours["structure"]["prestress_stable"]
+    columns, rows = theirs["--out"]
+    assert columns == ["mode", "frequency_hz", "omega", "eigenvalue"]
+    assert len(rows) == len(ours["frequency_hz"]) > 0
+    np.testing.assert_array_equal(printed(np.column_stack([ours["frequency_hz"], ours["omega"], ours["eigenvalue"]])),
+                                  np.array(rows)[:, 1:])
+    # the mode shapes file: mode, node, dx, dy, dz (node names are text): read it again as text
+    done = subprocess.run([TENSEGRITY_RUN, scene, "--set", "analysis.type=modal", "--modes", "/dev/stdout",
+                           "--out", os.devnull], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    lines = list(csv.reader(done.stdout.splitlines()))
+    assert lines[0] == ["mode", "node", "dx", "dy", "dz"]
+    names = at.load(scene).nodes
+    for mode, node, dx, dy, dz in lines[1:]:
+        k, i = int(mode) - 1, names.index(node)
+        assert [float(v) for v in (dx, dy, dz)] == [float("%.10g" % v) for v in ours["shapes"][k, i]]
+    assert len(lines) - 1 == ours["shapes"].shape[0] * ours["shapes"].shape[1]
+    with pytest.raises(ValueError):
+        at._core.modal(at.load(scene))  # a static scene given as a model: not modal
