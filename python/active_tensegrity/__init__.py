@@ -12,10 +12,11 @@ docs/python.md describes the API.
 
 import os
 
-from active_tensegrity._core import Model, SceneError  # noqa: F401  (re-exported)
+from active_tensegrity._core import FormFindingError, Model, SceneError  # noqa: F401  (re-exported)
 from active_tensegrity import _core
 
-__all__ = ["Model", "SceneError", "Result", "Simulation", "check", "load", "modal", "run"]
+__all__ = ["FormFindingError", "Model", "SceneError", "Result", "Simulation", "check", "find_form", "load", "modal",
+           "run"]
 
 
 def _override_text(key, value):
@@ -57,6 +58,33 @@ def check(scene, overrides=None):
     checked=False and a note."""
     model = scene if isinstance(scene, Model) else load(scene, overrides)
     return _core.check(model)
+
+
+def find_form(scene, mode="free", tension=None, force_density=None, supports="fixed", struts="uniform",
+              strut_lengths="free", tolerance=1e-12, max_iterations=100):
+    """Form-finding, as tensegrity_formfind (docs/form_finding.md): the self-equilibrated form of a scene's
+    topology. scene: a path or YAML text. mode: "free" (the geometry is found with each family's tension (N) or
+    force density (N/m) held) or "prestress" (the geometry kept, its self-stress fitted to the tensions);
+    supports "fixed" or "react"; struts "uniform" or "free"; strut_lengths "free" or "keep".
+
+    Returns a dict: scene (the written scene, YAML text: load() takes it), node_names, positions (nodes x 3, m),
+    members (name, family, strut, tension, length), iterations, residual (N), max_move (m), scale,
+    self_stress_states, notes, check (the written scene's own check). A refused scene raises SceneError; a form
+    that cannot be found raises FormFindingError with the reason."""
+    def choice(what, value, a, b):
+        if value not in (a, b):
+            raise ValueError("find_form: %s must be %r or %r, got %r" % (what, a, b, value))
+        return value == a
+    if "\n" in scene and not os.path.exists(scene):
+        text, name = scene, "<string>"
+    else:
+        with open(os.fspath(scene)) as f:
+            text, name = f.read(), os.fspath(scene)
+    return _core.find_form(text, name, mode, dict(tension or {}), dict(force_density or {}),
+                           not choice("supports", supports, "fixed", "react"),
+                           choice("struts", struts, "uniform", "free"),
+                           not choice("strut_lengths", strut_lengths, "free", "keep"),
+                           float(tolerance), int(max_iterations))
 
 
 def modal(scene, overrides=None):

@@ -4,16 +4,20 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <cmath>
+#include <map>
 #include <string>
 #include <vector>
 
 #include "active_tensegrity/core/actuation_control.h"
 #include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/dynamics.h"
+#include "active_tensegrity/core/form_finding.h"
 #include "active_tensegrity/core/kinematics.h"
 #include "active_tensegrity/core/modal.h"
 #include "active_tensegrity/core/scene.h"
 #include "active_tensegrity/core/structure_check.h"
+#include "active_tensegrity/core/text.h"
 
 namespace py = pybind11;
 namespace at = active_tensegrity::core;
@@ -178,6 +182,81 @@ py::dict modal(const at::Model& model)
   return d;
 }
 
+py::dict findForm(const std::string& yaml, const std::string& name, const std::string& mode,
+                  const std::map<std::string, double>& tension, const std::map<std::string, double>& force_density,
+                  bool supports_react, bool uniform_struts, bool keep_strut_lengths, double tolerance,
+                  int max_iterations)
+{
+  // the options tensegrity_formfind refuses, refused alike
+  at::FormFindingOptions o;
+  if (mode != "free" && mode != "prestress")
+    throw py::value_error("find_form: mode must be 'free' or 'prestress', got '" + mode.substr(0, 200) + "'");
+  o.mode = mode == "free" ? at::FormFindingMode::kFree : at::FormFindingMode::kPrestress;
+  if (!(tolerance > 0.0 && tolerance < 1e-3))
+    throw py::value_error("find_form: tolerance must be a relative tolerance in (0, 1e-3), got " +
+                          at::shortestNumber(tolerance));
+  if (max_iterations < 1 || max_iterations > 10000)
+    throw py::value_error("find_form: max_iterations must be 1 ... 10000, got " + std::to_string(max_iterations));
+  for (const auto* values : { &tension, &force_density })
+    for (const auto& [family, value] : *values)
+      if (!std::isfinite(value))
+        throw py::value_error("find_form: family '" + family.substr(0, 200) + "' has a non-finite value");
+  o.tension = tension;
+  o.force_density = force_density;
+  o.supports_react = supports_react;
+  o.uniform_struts = uniform_struts;
+  o.keep_strut_lengths = keep_strut_lengths;
+  o.tolerance = tolerance;
+  o.max_iterations = max_iterations;
+  at::FormFindingResult r;
+  {
+    const py::gil_scoped_release release;
+    r = at::findForm(yaml, name, o);
+  }
+  py::array_t<double> positions({ r.positions.size(), size_t{ 3 } });
+  double* out = positions.mutable_data();
+  for (const at::Vec3& p : r.positions)
+  {
+    *out++ = p.x();
+    *out++ = p.y();
+    *out++ = p.z();
+  }
+  py::list members;
+  for (const at::FormMember& m : r.members)
+  {
+    py::dict d;
+    d["name"] = m.name;
+    d["family"] = m.family;
+    d["strut"] = m.strut;
+    d["tension"] = m.tension;
+    d["length"] = m.length;
+    members.append(d);
+  }
+  py::dict check;
+  check["checked"] = r.check.checked;
+  check["equilibrium_residual"] = r.check.equilibrium_residual;
+  check["prestress_stable"] = r.check.prestress_stable;
+  check["self_stress_states"] = r.check.self_stress_states;
+  check["mechanisms"] = r.check.mechanisms;
+  check["slack_cables"] = r.check.slack_cables;
+  check["overlapping"] = r.check.overlapping;
+  check["newton_converged"] = r.check.newton_converged;
+  check["newton_move"] = r.check.newton_move;
+  py::dict d;
+  d["scene"] = r.scene;
+  d["node_names"] = r.node_names;
+  d["positions"] = positions;
+  d["members"] = members;
+  d["iterations"] = r.iterations;
+  d["residual"] = r.residual;
+  d["max_move"] = r.max_move;
+  d["scale"] = r.scale;
+  d["self_stress_states"] = r.self_stress_states;
+  d["notes"] = r.notes;
+  d["check"] = check;
+  return d;
+}
+
 bool finite(const at::State& s)
 {
   return s.q.allFinite() && s.qd.allFinite() && s.lambda.allFinite();
@@ -319,6 +398,9 @@ PYBIND11_MODULE(_core, m)
         }
       });
 
+  // a form that cannot be found: RuntimeError with form-finding's message
+  py::register_exception<at::FormFindingError>(m, "FormFindingError", PyExc_RuntimeError);
+
   py::class_<at::Model>(m, "Model", "A loaded, validated scene")
       .def_property_readonly("name", [](const at::Model& s) { return s.name; })
       .def_property_readonly("source", [](const at::Model& s) { return s.source; })
@@ -438,6 +520,12 @@ PYBIND11_MODULE(_core, m)
       py::arg("model"), "The structural diagnostics of the scene's initial state (tensegrity_run --check)");
   m.def("modal", &modal, py::arg("model"),
         "The natural modes about the equilibrium at analysis.max_actuation (a scene of analysis.type modal)");
+  m.def("find_form", &findForm, py::arg("yaml"), py::arg("name"), py::arg("mode") = "free",
+        py::arg("tension") = std::map<std::string, double>{},
+        py::arg("force_density") = std::map<std::string, double>{}, py::arg("supports_react") = false,
+        py::arg("uniform_struts") = true, py::arg("keep_strut_lengths") = false, py::arg("tolerance") = 1e-12,
+        py::arg("max_iterations") = 100,
+        "Form-finding (tensegrity_formfind): the self-equilibrated form of a scene's topology");
   m.def("run", &run, py::arg("model"),
         "Runs the scene's analysis (static or dynamic); a dict of numpy arrays per output step and the summary");
 }

@@ -241,3 +241,48 @@ def test_modal_equals_the_command_line_modes():
     assert len(lines) - 1 == ours["shapes"].shape[0] * ours["shapes"].shape[1]
     with pytest.raises(ValueError):
         at._core.modal(at.load(scene))  # a static scene given as a model: not modal
+
+
+def tool(name):
+    return os.path.join(SPACE, "lib", "active_tensegrity", name)
+
+
+def test_find_form_equals_tensegrity_formfind_and_the_closed_form():
+    with tempfile.TemporaryDirectory() as tmp:
+        start, form = os.path.join(tmp, "start.yaml"), os.path.join(tmp, "form.yaml")
+        subprocess.run([tool("tensegrity_generate"), "prism", "--struts", "7", "--twist", "-130", "--out", start],
+                       check=True, capture_output=True, timeout=600)
+        done = subprocess.run([tool("tensegrity_formfind"), start, "--out", form, "--prestress", "rings=80"],
+                              capture_output=True, text=True, timeout=600)
+        assert done.returncode == 0, done.stderr
+        with open(form) as f:
+            theirs = f.read()
+        ours = at.find_form(start, tension={"rings": 80.0})
+    assert ours["scene"] == theirs
+    # the class-1 prism's twist, 90 + 180 / n degrees (here turned the other way), between B1 and T1
+    p = dict(zip(ours["node_names"], ours["positions"]))
+    twist = math.degrees(math.atan2(p["T1"][1], p["T1"][0]) - math.atan2(p["B1"][1], p["B1"][0]))
+    assert (twist + 360.0) % 360.0 == pytest.approx(360.0 - (90.0 + 180.0 / 7), abs=1e-6)
+    rings = [m for m in ours["members"] if m["family"] == "rings"]
+    assert len(rings) == 14 and all(m["tension"] == pytest.approx(80.0) for m in rings)
+    assert all(m["tension"] < 0 for m in ours["members"] if m["strut"])
+    assert ours["check"]["prestress_stable"] and not ours["check"]["slack_cables"]
+    scene = at.load(ours["scene"])
+    assert at.check(scene)["equilibrium_residual"] < 1e-6
+
+
+def test_find_form_refuses_what_the_tool_refuses():
+    path = os.path.join(SCENES, "prism_pinned.yaml")
+    with pytest.raises(ValueError):
+        at.find_form(path, mode="sideways")
+    with pytest.raises(ValueError):
+        at.find_form(path, tolerance=0.1)
+    with pytest.raises(ValueError):
+        at.find_form(path, struts="some")
+    with pytest.raises(ValueError):
+        at.find_form(path, tension={"rings": float("nan")})
+    with pytest.raises(at.SceneError):
+        at.find_form("nodes: [\n")
+    with pytest.raises(at.FormFindingError) as no_form:
+        at.find_form(path, tension={"no_such_family": 10.0})
+    assert "no_such_family" in str(no_form.value)
