@@ -16,7 +16,7 @@ from active_tensegrity._core import FormFindingError, Model, SceneError  # noqa:
 from active_tensegrity import _core
 
 __all__ = ["FormFindingError", "Model", "SceneError", "Result", "Simulation", "check", "find_form", "load", "modal",
-           "run"]
+           "plan_folding", "planners", "run"]
 
 
 def _override_text(key, value):
@@ -85,6 +85,36 @@ def find_form(scene, mode="free", tension=None, force_density=None, supports="fi
                            choice("struts", struts, "uniform", "free"),
                            not choice("strut_lengths", strut_lengths, "free", "keep"),
                            float(tolerance), int(max_iterations))
+
+
+def planners():
+    """The names of the OMPL planners plan_folding takes."""
+    return _core.planners()
+
+
+def plan_folding(scene, **request):
+    """The collision-aware folding planner (docs/planning.md). scene: a Model, what load() takes, or a
+    Simulation (the plan starts from its live state's nearest equilibrium; else from the scene's start).
+
+    request: the planner's fields by name: actuators (names), target_height (m) or target_values (one per
+    actuator), min_clearance (m), allow_contact, max_contact_force (N), max_cable_stress (Pa), max_speeds,
+    max_accelerations, planner, time_limit (s), seed, continuation_step (m), range, sample_dt (s),
+    reachability_check, verify_dynamics, find_speed_limit, max_bending_stress (Pa), settle_time (s),
+    blend_tolerance (m). An unknown name raises ValueError; a request the planner refuses comes back with
+    status "invalid_request" and the reason.
+
+    Returns a dict: status, message, names; waypoints (points x actuators); the trajectory as times (s) and
+    positions, velocities, accelerations (times x actuators); duration, rest_to_rest_duration, min_gap,
+    peak_contact_force, final_height, equilibrium_solves, planning_time, stopped_by_time_limit; with
+    verify_dynamics: dynamics_verified, dynamics_within_limits, dynamic_peak_contact_force,
+    dynamic_peak_bending_stress, dynamic_min_gap, settle_duration, time_scale."""
+    if isinstance(scene, Simulation):
+        target = scene._sim
+    elif isinstance(scene, Model):
+        target = scene
+    else:
+        target = load(scene)
+    return _core.plan_folding(target, **request)
 
 
 def modal(scene, overrides=None):

@@ -5,6 +5,7 @@
 #include <pybind11/stl.h>
 
 #include <cmath>
+#include <limits>
 #include <map>
 #include <string>
 #include <vector>
@@ -18,6 +19,7 @@
 #include "active_tensegrity/core/scene.h"
 #include "active_tensegrity/core/structure_check.h"
 #include "active_tensegrity/core/text.h"
+#include "active_tensegrity/planning/folding_planner.h"
 
 namespace py = pybind11;
 namespace at = active_tensegrity::core;
@@ -375,6 +377,114 @@ private:
   at::State state_;
   long steps_ = 0;
 };
+namespace ap = active_tensegrity::planning;
+
+py::array_t<double> rows(const std::vector<std::vector<double>>& v, size_t columns)
+{
+  py::array_t<double> a({ v.size(), columns });
+  double* out = a.mutable_data();
+  for (const std::vector<double>& r : v)
+    for (size_t j = 0; j < columns; ++j)
+      *out++ = j < r.size() ? r[j] : std::numeric_limits<double>::quiet_NaN();
+  return a;
+}
+
+/// The folding planner from a start state (the scene's initial state, or a Simulation's live state: its
+/// nearest equilibrium), the request from keyword arguments named as PlanRequest's fields.
+py::dict plan(const at::Model& model, const at::State* live, const py::dict& args)
+{
+  ap::PlanRequest req;
+  for (const auto& [k, v] : args)
+  {
+    const std::string key = py::str(k);
+    if (key == "actuators")
+      req.actuators = v.cast<std::vector<std::string>>();
+    else if (key == "target_height")
+      req.target_height = v.cast<double>();
+    else if (key == "target_values")
+      req.target_values = v.cast<std::vector<double>>();
+    else if (key == "min_clearance")
+      req.limits.min_clearance = v.cast<double>();
+    else if (key == "allow_contact")
+      req.limits.allow_contact = v.cast<bool>();
+    else if (key == "max_contact_force")
+      req.limits.max_contact_force = v.cast<double>();
+    else if (key == "max_cable_stress")
+      req.limits.max_cable_stress = v.cast<double>();
+    else if (key == "max_speeds")
+      req.max_speeds = v.cast<std::vector<double>>();
+    else if (key == "max_accelerations")
+      req.max_accelerations = v.cast<std::vector<double>>();
+    else if (key == "planner")
+      req.planner = v.cast<std::string>();
+    else if (key == "time_limit")
+      req.time_limit = v.cast<double>();
+    else if (key == "seed")
+      req.seed = v.cast<unsigned>();
+    else if (key == "continuation_step")
+      req.continuation_step = v.cast<double>();
+    else if (key == "range")
+      req.range = v.cast<double>();
+    else if (key == "sample_dt")
+      req.sample_dt = v.cast<double>();
+    else if (key == "reachability_check")
+      req.reachability_check = v.cast<bool>();
+    else if (key == "verify_dynamics")
+      req.verify_dynamics = v.cast<bool>();
+    else if (key == "find_speed_limit")
+      req.find_speed_limit = v.cast<bool>();
+    else if (key == "max_bending_stress")
+      req.max_bending_stress = v.cast<double>();
+    else if (key == "settle_time")
+      req.settle_time = v.cast<double>();
+    else if (key == "blend_tolerance")
+      req.blend_tolerance = v.cast<double>();
+    else
+      throw py::value_error("plan_folding: unknown argument '" + key.substr(0, 200) + "'");
+  }
+  ap::PlanResult r;
+  std::string start_error;
+  {
+    const py::gil_scoped_release release;
+    at::State start;
+    start_error = ap::startEquilibrium(model, live ? *live : at::initialState(model), start);
+    if (start_error.empty())
+      r = ap::planFolding(model, start, req);
+  }
+  if (!start_error.empty())
+  {
+    r.status = ap::PlanStatus::kInvalidStart;
+    r.message = "no equilibrium to start from: " + start_error;
+  }
+  const size_t n = r.names.size();
+  py::dict d;
+  d["status"] = ap::toString(r.status);
+  d["message"] = r.message;
+  d["names"] = r.names;
+  d["waypoints"] = rows(r.waypoints, n);
+  py::array_t<double> times(r.times.size());
+  std::copy(r.times.begin(), r.times.end(), times.mutable_data());
+  d["times"] = times;
+  d["positions"] = rows(r.positions, n);
+  d["velocities"] = rows(r.velocities, n);
+  d["accelerations"] = rows(r.accelerations, n);
+  d["duration"] = r.duration;
+  d["rest_to_rest_duration"] = r.rest_to_rest_duration;
+  d["min_gap"] = r.min_gap;
+  d["peak_contact_force"] = r.peak_contact_force;
+  d["final_height"] = r.final_height;
+  d["equilibrium_solves"] = r.equilibrium_solves;
+  d["planning_time"] = r.planning_time;
+  d["stopped_by_time_limit"] = r.stopped_by_time_limit;
+  d["dynamics_verified"] = r.dynamics_verified;
+  d["dynamics_within_limits"] = r.dynamics_within_limits;
+  d["dynamic_peak_contact_force"] = r.dynamic_peak_contact_force;
+  d["dynamic_peak_bending_stress"] = r.dynamic_peak_bending_stress;
+  d["dynamic_min_gap"] = r.dynamic_min_gap;
+  d["settle_duration"] = r.settle_duration;
+  d["time_scale"] = r.time_scale;
+  return d;
+}
 }  // namespace
 
 PYBIND11_MODULE(_core, m)
@@ -526,6 +636,19 @@ PYBIND11_MODULE(_core, m)
         py::arg("uniform_struts") = true, py::arg("keep_strut_lengths") = false, py::arg("tolerance") = 1e-12,
         py::arg("max_iterations") = 100,
         "Form-finding (tensegrity_formfind): the self-equilibrated form of a scene's topology");
+  m.def(
+      "plan_folding",
+      [](const py::object& scene, const py::kwargs& args)
+      {
+        if (py::isinstance<Simulation>(scene))
+        {
+          const Simulation& sim = scene.cast<const Simulation&>();
+          return plan(sim.model(), &sim.state(), args);
+        }
+        return plan(scene.cast<const at::Model&>(), nullptr, args);
+      },
+      py::arg("scene"), "The folding planner (docs/planning.md) from a Model's initial state or a Simulation's state");
+  m.def("planners", &ap::plannerNames, "The OMPL planners plan_folding accepts");
   m.def("run", &run, py::arg("model"),
         "Runs the scene's analysis (static or dynamic); a dict of numpy arrays per output step and the summary");
 }

@@ -286,3 +286,46 @@ def test_find_form_refuses_what_the_tool_refuses():
     with pytest.raises(at.FormFindingError) as no_form:
         at.find_form(path, tension={"no_such_family": 10.0})
     assert "no_such_family" in str(no_form.value)
+
+
+TOWER_PLAN = dict(actuators=["pull1", "pull2", "pull3", "pull4"], target_height=0.5, allow_contact=True,
+                  max_contact_force=400.0, max_speeds=[0.5], max_accelerations=[5.0], time_limit=60.0)
+
+
+def test_plan_folding_equals_tensegrity_bench_plan():
+    scene = os.path.join(SCENES, "tower.yaml")
+    done = subprocess.run([tool("tensegrity_bench"), "plan", scene, "--actuators", "pull1,pull2,pull3,pull4",
+                           "--height", "0.5", "--contact-limit", "400", "--seeds", "1"],
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    line = [l.split() for l in done.stdout.splitlines() if l.split()[:1] == ["1"]][0]
+    # seed status time solves waypoints final_h min_gap peak
+    ours = at.plan_folding(scene, **TOWER_PLAN)
+    assert ours["status"] == line[1] == "exact_solution"
+    assert ours["equilibrium_solves"] == int(line[3])
+    assert len(ours["waypoints"]) == int(line[4])
+    assert "%.4f" % ours["final_height"] == line[5] and ours["final_height"] <= 0.5
+    assert "%.1f" % ours["peak_contact_force"] == line[7]
+    # a trajectory from the start to the last waypoint, within the speed limit
+    assert ours["positions"].shape == (len(ours["times"]), 4)
+    np.testing.assert_allclose(ours["positions"][-1], ours["waypoints"][-1], atol=1e-12)
+    assert np.abs(ours["velocities"]).max() <= 0.5 + 1e-9
+    assert ours["times"][-1] == pytest.approx(ours["duration"])
+    assert "RRTConnect" in at.planners()
+
+
+def test_plan_folding_from_a_simulation_and_refusals():
+    sim = at.Simulation(os.path.join(SCENES, "tower.yaml"))
+    sim.set_targets({n: 0.3 for n in sim.model.actuators}, speed=0.5, accel=5.0)
+    sim.advance(seconds=1.0)  # folding, still moving
+    assert sim.height < 1.9
+    p = at.plan_folding(sim, **TOWER_PLAN)
+    assert p["status"] == "exact_solution", p["message"]
+    np.testing.assert_allclose(p["waypoints"][0], [0.3] * 4, atol=1e-9)
+    assert p["final_height"] <= 0.5
+    refused = at.plan_folding(sim.model, actuators=["pull1"], target_height=0.5, min_clearance=-1.0)
+    assert refused["status"] == "invalid_request" and "min_clearance" in refused["message"]
+    unknown = at.plan_folding(sim.model, actuators=["no_such_actuator"], target_height=0.5)
+    assert unknown["status"] == "invalid_request" and "no_such_actuator" in unknown["message"]
+    with pytest.raises(ValueError):
+        at.plan_folding(sim.model, actuator=["pull1"], target_height=0.5)
