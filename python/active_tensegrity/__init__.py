@@ -39,6 +39,11 @@ def _overrides(overrides):
     return [str(o) for o in overrides]
 
 
+def _is_text(scene):
+    """YAML text rather than a path: a str with a line break that names no file"""
+    return isinstance(scene, str) and "\n" in scene and not os.path.exists(scene)
+
+
 def load(scene, overrides=None, name="<string>"):
     """Loads and validates a scene: a file's path, or YAML text (any text with a line break).
 
@@ -46,7 +51,7 @@ def load(scene, overrides=None, name="<string>"):
     A refused scene raises SceneError (a ValueError) with the loader's message; its `key` is the key named.
     """
     sets = _overrides(overrides)
-    if "\n" in scene and not os.path.exists(scene):
+    if _is_text(scene):
         return _core.load_scene_text(scene, name, sets)
     return _core.load_scene(os.fspath(scene), sets)
 
@@ -75,7 +80,7 @@ def find_form(scene, mode="free", tension=None, force_density=None, supports="fi
         if value not in (a, b):
             raise ValueError("find_form: %s must be %r or %r, got %r" % (what, a, b, value))
         return value == a
-    if "\n" in scene and not os.path.exists(scene):
+    if _is_text(scene):
         text, name = scene, "<string>"
     else:
         with open(os.fspath(scene)) as f:

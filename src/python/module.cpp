@@ -281,6 +281,9 @@ public:
                                at::toString(init.status) + ": " + init.message + ")");
   }
 
+  Simulation(const Simulation&) = delete;  // the solver and the controller refer to model_
+  Simulation& operator=(const Simulation&) = delete;
+
   /// Advances by `steps` steps of solver.dt, calling `callback(self)` after every `every` steps (when given);
   /// stops early when the callback returns False. The last good state is kept when a step fails; the
   /// failure raises RuntimeError with the solver's status and message.

@@ -5,6 +5,7 @@ Run by scripts/test through catkin (pytest, with the devel space's environment).
 import csv
 import math
 import os
+import pathlib
 import subprocess
 import tempfile
 import threading
@@ -85,6 +86,10 @@ def test_scene_text_loads_like_its_file():
     from_text = at.run(at.load(text, {"analysis.steps": 5}))
     from_file = at.run(path, {"analysis.steps": 5})
     np.testing.assert_array_equal(from_text.table, from_file.table)
+    from_path = at.run(pathlib.Path(path), {"analysis.steps": 5})
+    np.testing.assert_array_equal(from_path.table, from_file.table)
+    with pytest.raises(TypeError):
+        at.load(42)
 
 
 def test_a_refused_scene_raises_with_the_key_named():
