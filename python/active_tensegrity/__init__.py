@@ -11,6 +11,12 @@ docs/python.md describes the API.
 """
 
 import os
+import pkgutil
+
+# The package's parts may lie in several folders on sys.path (in a devel space: this source folder, and the
+# devel space's with the compiled module and the messages). A process started with a devel space's sys.path
+# (a dask or multiprocessing worker) finds this folder first: it looks in the others too.
+__path__ = pkgutil.extend_path(__path__, __name__)
 
 from active_tensegrity._core import FormFindingError, Model, SceneError  # noqa: F401  (re-exported)
 from active_tensegrity import _core
