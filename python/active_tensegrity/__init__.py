@@ -150,7 +150,9 @@ class Result:
     member_columns, members: tensegrity_run --members (cable tensions, lengths, rest lengths; strut forces).
     contacts: one row per active contact pair and step: step index, strut a, strut b (body indices), point on
       a (x, y, z), point on b, normal, penetration, penetration rate, normal force, friction force on a (x, y, z).
-    summary: status, message, warnings, newton_iterations, step_cuts, output_steps, solver_steps, wall_time.
+    summary: status, message, warnings, newton_iterations, step_cuts, output_steps, solver_steps, wall_time, and
+      peaks: {column: {"value", "t"}}, the largest magnitude over every step (not only the output steps) of
+      actuation_force, max_normal_force, max_friction_force, max_strut_bending_stress, max_cable_stress.
     """
 
     CONTACT_COLUMNS = ("step", "strut_a", "strut_b", "point_a_x", "point_a_y", "point_a_z", "point_b_x",

@@ -284,6 +284,28 @@ std::vector<std::string> csvColumns(const Model& model)
   return cols;
 }
 
+PeakTracker::PeakTracker(const Model& model) : model_(model)
+{
+  const std::vector<std::string> cols = csvColumns(model);
+  for (const char* name :
+       { "actuation_force", "max_normal_force", "max_friction_force", "max_strut_bending_stress", "max_cable_stress" })
+  {
+    columns_.push_back(static_cast<int>(std::find(cols.begin(), cols.end(), name) - cols.begin()));
+    peaks_.push_back({ name, 0.0, 0.0 });
+  }
+}
+
+void PeakTracker::add(const State& state)
+{
+  const std::vector<double> row = csvRow(model_, state);
+  for (size_t k = 0; k < columns_.size(); ++k)
+    if (std::abs(row[columns_[k]]) > std::abs(peaks_[k].value))
+    {
+      peaks_[k].value = row[columns_[k]];
+      peaks_[k].t = state.t;
+    }
+}
+
 std::vector<double> csvRow(const Model& model, const State& state)
 {
   const bool any = !model.actuators.empty();

@@ -71,33 +71,35 @@ py::dict run(const at::Model& model)
                           "tensegrity_run)");
   Collected c;
   at::RunResult result;
+  at::PeakTracker peaks(model);
   {
     const py::gil_scoped_release release;
-    result = at::runAnalysis(model,
-                             [&](const at::State& s)
-                             {
-                               const std::vector<double> row = at::csvRow(model, s);
-                               c.rows.insert(c.rows.end(), row.begin(), row.end());
-                               for (const at::Node& n : model.nodes)
-                               {
-                                 const at::Vec3 p = at::pointPosition(model, n.point, s.q);
-                                 c.nodes.insert(c.nodes.end(), { p.x(), p.y(), p.z() });
-                               }
-                               const std::vector<double> m = at::memberRow(model, s);
-                               c.members.insert(c.members.end(), m.begin(), m.end());
-                               for (const at::ContactPairState& k : at::activeContacts(model, s))
-                               {
-                                 const at::StrutPair& pair = model.checked_pairs[k.pair];
-                                 c.contacts.insert(c.contacts.end(),
-                                                   { static_cast<double>(c.steps), static_cast<double>(pair.body_a),
-                                                     static_cast<double>(pair.body_b), k.point_a.x(), k.point_a.y(),
-                                                     k.point_a.z(), k.point_b.x(), k.point_b.y(), k.point_b.z(),
-                                                     k.normal.x(), k.normal.y(), k.normal.z(), k.penetration,
-                                                     k.penetration_rate, k.normal_force, k.friction_on_a.x(),
-                                                     k.friction_on_a.y(), k.friction_on_a.z() });
-                               }
-                               ++c.steps;
-                             });
+    result = at::runAnalysis(
+        model,
+        [&](const at::State& s)
+        {
+          const std::vector<double> row = at::csvRow(model, s);
+          c.rows.insert(c.rows.end(), row.begin(), row.end());
+          for (const at::Node& n : model.nodes)
+          {
+            const at::Vec3 p = at::pointPosition(model, n.point, s.q);
+            c.nodes.insert(c.nodes.end(), { p.x(), p.y(), p.z() });
+          }
+          const std::vector<double> m = at::memberRow(model, s);
+          c.members.insert(c.members.end(), m.begin(), m.end());
+          for (const at::ContactPairState& k : at::activeContacts(model, s))
+          {
+            const at::StrutPair& pair = model.checked_pairs[k.pair];
+            c.contacts.insert(c.contacts.end(),
+                              { static_cast<double>(c.steps), static_cast<double>(pair.body_a),
+                                static_cast<double>(pair.body_b), k.point_a.x(), k.point_a.y(), k.point_a.z(),
+                                k.point_b.x(), k.point_b.y(), k.point_b.z(), k.normal.x(), k.normal.y(), k.normal.z(),
+                                k.penetration, k.penetration_rate, k.normal_force, k.friction_on_a.x(),
+                                k.friction_on_a.y(), k.friction_on_a.z() });
+          }
+          ++c.steps;
+        },
+        {}, [&](const at::State& s) { peaks.add(s); });
   }
   const std::vector<std::string> columns = at::csvColumns(model);
   const std::vector<std::string> member_columns = at::memberColumns(model);
@@ -119,6 +121,15 @@ py::dict run(const at::Model& model)
   summary["output_steps"] = result.steps;
   summary["solver_steps"] = result.solver_steps;
   summary["wall_time"] = result.wall_time;
+  py::dict peak;
+  for (const at::Peak& p : peaks.peaks())
+  {
+    py::dict one;
+    one["value"] = p.value;
+    one["t"] = p.t;
+    peak[py::str(p.name)] = one;
+  }
+  summary["peaks"] = peak;
   out["summary"] = summary;
   return out;
 }

@@ -396,22 +396,8 @@ int main(int argc, char** argv)
   csv << "\n";
 
   // peaks over every time step (or load step), not only the output steps
-  const std::vector<std::string> peak_names = { "actuation_force", "max_normal_force", "max_friction_force",
-                                                "max_strut_bending_stress", "max_cable_stress" };
-  std::vector<int> peak_cols;
-  for (const std::string& n : peak_names)
-    peak_cols.push_back(static_cast<int>(std::find(cols.begin(), cols.end(), n) - cols.begin()));
-  std::vector<double> peak_value(peak_cols.size(), 0.0), peak_time(peak_cols.size(), 0.0);
-  const auto track_peaks = [&](const at::State& s)
-  {
-    const std::vector<double> row = at::csvRow(model, s);
-    for (size_t k = 0; k < peak_cols.size(); ++k)
-      if (std::abs(row[peak_cols[k]]) > std::abs(peak_value[k]))
-      {
-        peak_value[k] = row[peak_cols[k]];
-        peak_time[k] = s.t;
-      }
-  };
+  at::PeakTracker peaks(model);
+  const auto track_peaks = [&](const at::State& s) { peaks.add(s); };
 
   at::State last;
   const auto wall_start = std::chrono::steady_clock::now();
@@ -537,9 +523,8 @@ int main(int argc, char** argv)
   for (size_t i = 0; i < cols.size(); ++i)
     summary << "  " << cols[i] << ": " << csvNumber(final_row[i]) << "\n";
   summary << "peaks:  # largest magnitude over every step, and when (t: time, or path parameter in statics)\n";
-  for (size_t k = 0; k < peak_cols.size(); ++k)
-    summary << "  " << peak_names[k] << ": {value: " << csvNumber(peak_value[k]) << ", t: " << csvNumber(peak_time[k])
-            << "}\n";
+  for (const at::Peak& p : peaks.peaks())
+    summary << "  " << p.name << ": {value: " << csvNumber(p.value) << ", t: " << csvNumber(p.t) << "}\n";
   const int code = finish(summary.str(), summary_file, summary_path, result.summary);
   return code == 0 && vtk_failed ? 1 : code;
 }

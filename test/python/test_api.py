@@ -69,6 +69,20 @@ def test_a_prism_run_equals_the_command_line_to_its_printed_digits(sets):
     node_columns = ["t"] + [n + "_" + a for n in result.node_names for a in "xyz"]
     assert_same_as_printed(np.column_stack([result["t"], nodes]), node_columns, theirs["--nodes"])
     assert_same_as_printed(result.members, result.member_columns, theirs["--members"])
+    # the peaks over every step (not only the output steps), as the summary lists them
+    import yaml
+    with tempfile.TemporaryDirectory() as tmp:
+        summary = os.path.join(tmp, "summary.yaml")
+        command = [TENSEGRITY_RUN, scene, "--out", os.devnull, "--summary", summary]
+        for s in sets:
+            command += ["--set", s]
+        subprocess.run(command, check=True, capture_output=True, timeout=600)
+        with open(summary) as f:
+            their_peaks = yaml.safe_load(f)["peaks"]
+    assert set(their_peaks) == set(result.summary["peaks"])
+    for name, peak in result.summary["peaks"].items():
+        assert [float("%.10g" % peak["value"]), float("%.10g" % peak["t"])] == \
+            [their_peaks[name]["value"], their_peaks[name]["t"]], name
 
 
 def test_overrides_as_a_dict_equal_the_same_texts():

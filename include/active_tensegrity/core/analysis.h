@@ -78,6 +78,34 @@ double loadFactor(const Model& model, const State& state);
 std::vector<std::string> csvColumns(const Model& model);
 std::vector<double> csvRow(const Model& model, const State& state);
 
+/// A CSV column's largest magnitude over every step of a run (time step or load step, not only the output
+/// steps), with its sign, and the time (or path parameter) at which it was reached.
+struct Peak
+{
+  std::string name;
+  double value = 0.0;
+  double t = 0.0;
+};
+
+/// Tracks the peaks of actuation_force, max_normal_force, max_friction_force, max_strut_bending_stress and
+/// max_cable_stress (what a run's summary lists under `peaks`): give it every step's state (runAnalysis's
+/// on_step) and the initial one.
+class PeakTracker
+{
+public:
+  explicit PeakTracker(const Model& model);
+  void add(const State& state);
+  const std::vector<Peak>& peaks() const
+  {
+    return peaks_;
+  }
+
+private:
+  const Model& model_;
+  std::vector<int> columns_;  // into csvColumns(model)
+  std::vector<Peak> peaks_;
+};
+
 struct RunResult
 {
   Summary summary;
