@@ -43,6 +43,27 @@ py::array_t<double> table(const std::vector<double>& values, size_t rows, size_t
   return a;
 }
 
+/// The names of a model's nodes, bodies, cables or actuators, in order.
+template <typename T>
+std::vector<std::string> namesOf(const std::vector<T>& items)
+{
+  std::vector<std::string> names;
+  names.reserve(items.size());
+  for (const T& item : items)
+    names.push_back(item.name);
+  return names;
+}
+
+/// Appends x, y, z of every node at q (m), in the model's node order.
+void appendNodePositions(const at::Model& model, const Eigen::VectorXd& q, std::vector<double>& out)
+{
+  for (const at::Node& n : model.nodes)
+  {
+    const at::Vec3 p = at::pointPosition(model, n.point, q);
+    out.insert(out.end(), { p.x(), p.y(), p.z() });
+  }
+}
+
 const char* analysisName(at::AnalysisType t)
 {
   switch (t)
@@ -80,11 +101,7 @@ py::dict run(const at::Model& model)
         {
           const std::vector<double> row = at::csvRow(model, s);
           c.rows.insert(c.rows.end(), row.begin(), row.end());
-          for (const at::Node& n : model.nodes)
-          {
-            const at::Vec3 p = at::pointPosition(model, n.point, s.q);
-            c.nodes.insert(c.nodes.end(), { p.x(), p.y(), p.z() });
-          }
+          appendNodePositions(model, s.q, c.nodes);
           const std::vector<double> m = at::memberRow(model, s);
           c.members.insert(c.members.end(), m.begin(), m.end());
           for (const at::ContactPairState& k : at::activeContacts(model, s))
@@ -529,38 +546,10 @@ PYBIND11_MODULE(_core, m)
       .def_property_readonly("name", [](const at::Model& s) { return s.name; })
       .def_property_readonly("source", [](const at::Model& s) { return s.source; })
       .def_property_readonly("analysis", [](const at::Model& s) { return analysisName(s.analysis.type); })
-      .def_property_readonly("nodes",
-                             [](const at::Model& s)
-                             {
-                               std::vector<std::string> v;
-                               for (const at::Node& n : s.nodes)
-                                 v.push_back(n.name);
-                               return v;
-                             })
-      .def_property_readonly("bodies",
-                             [](const at::Model& s)
-                             {
-                               std::vector<std::string> v;
-                               for (const at::Body& b : s.bodies)
-                                 v.push_back(b.name);
-                               return v;
-                             })
-      .def_property_readonly("cables",
-                             [](const at::Model& s)
-                             {
-                               std::vector<std::string> v;
-                               for (const at::Cable& c : s.cables)
-                                 v.push_back(c.name);
-                               return v;
-                             })
-      .def_property_readonly("actuators",
-                             [](const at::Model& s)
-                             {
-                               std::vector<std::string> v;
-                               for (const at::Actuator& a : s.actuators)
-                                 v.push_back(a.name);
-                               return v;
-                             });
+      .def_property_readonly("nodes", [](const at::Model& s) { return namesOf(s.nodes); })
+      .def_property_readonly("bodies", [](const at::Model& s) { return namesOf(s.bodies); })
+      .def_property_readonly("cables", [](const at::Model& s) { return namesOf(s.cables); })
+      .def_property_readonly("actuators", [](const at::Model& s) { return namesOf(s.actuators); });
 
   m.def(
       "load_scene",
@@ -619,16 +608,9 @@ PYBIND11_MODULE(_core, m)
       .def_property_readonly("nodes",
                              [](const Simulation& s)
                              {
-                               py::array_t<double> a({ s.model().nodes.size(), size_t{ 3 } });
-                               double* out = a.mutable_data();
-                               for (const at::Node& n : s.model().nodes)
-                               {
-                                 const at::Vec3 p = at::pointPosition(s.model(), n.point, s.state().q);
-                                 *out++ = p.x();
-                                 *out++ = p.y();
-                                 *out++ = p.z();
-                               }
-                               return a;
+                               std::vector<double> xyz;
+                               appendNodePositions(s.model(), s.state().q, xyz);
+                               return table(xyz, s.model().nodes.size(), 3);
                              });
   m.def(
       "check",
