@@ -420,6 +420,55 @@ py::array_t<double> rows(const std::vector<std::vector<double>>& v, size_t colum
   return a;
 }
 
+/// Sets the PlanRequest field named `key` from a Python value (py::cast_error on the wrong type).
+void setRequestField(ap::PlanRequest& req, const std::string& key, const py::handle& v)
+{
+  if (key == "actuators")
+    req.actuators = v.cast<std::vector<std::string>>();
+  else if (key == "target_height")
+    req.target_height = v.cast<double>();
+  else if (key == "target_values")
+    req.target_values = v.cast<std::vector<double>>();
+  else if (key == "min_clearance")
+    req.limits.min_clearance = v.cast<double>();
+  else if (key == "allow_contact")
+    req.limits.allow_contact = v.cast<bool>();
+  else if (key == "max_contact_force")
+    req.limits.max_contact_force = v.cast<double>();
+  else if (key == "max_cable_stress")
+    req.limits.max_cable_stress = v.cast<double>();
+  else if (key == "max_speeds")
+    req.max_speeds = v.cast<std::vector<double>>();
+  else if (key == "max_accelerations")
+    req.max_accelerations = v.cast<std::vector<double>>();
+  else if (key == "planner")
+    req.planner = v.cast<std::string>();
+  else if (key == "time_limit")
+    req.time_limit = v.cast<double>();
+  else if (key == "seed")
+    req.seed = v.cast<unsigned>();
+  else if (key == "continuation_step")
+    req.continuation_step = v.cast<double>();
+  else if (key == "range")
+    req.range = v.cast<double>();
+  else if (key == "sample_dt")
+    req.sample_dt = v.cast<double>();
+  else if (key == "reachability_check")
+    req.reachability_check = v.cast<bool>();
+  else if (key == "verify_dynamics")
+    req.verify_dynamics = v.cast<bool>();
+  else if (key == "find_speed_limit")
+    req.find_speed_limit = v.cast<bool>();
+  else if (key == "max_bending_stress")
+    req.max_bending_stress = v.cast<double>();
+  else if (key == "settle_time")
+    req.settle_time = v.cast<double>();
+  else if (key == "blend_tolerance")
+    req.blend_tolerance = v.cast<double>();
+  else
+    throw py::value_error("plan_folding: unknown argument '" + key.substr(0, 200) + "'");
+}
+
 /// The folding planner from a start state (the scene's initial state, or a Simulation's live state: its
 /// nearest equilibrium), the request from keyword arguments named as PlanRequest's fields.
 py::dict plan(const at::Model& model, const at::State* live, const py::dict& args)
@@ -428,50 +477,15 @@ py::dict plan(const at::Model& model, const at::State* live, const py::dict& arg
   for (const auto& [k, v] : args)
   {
     const std::string key = py::str(k);
-    if (key == "actuators")
-      req.actuators = v.cast<std::vector<std::string>>();
-    else if (key == "target_height")
-      req.target_height = v.cast<double>();
-    else if (key == "target_values")
-      req.target_values = v.cast<std::vector<double>>();
-    else if (key == "min_clearance")
-      req.limits.min_clearance = v.cast<double>();
-    else if (key == "allow_contact")
-      req.limits.allow_contact = v.cast<bool>();
-    else if (key == "max_contact_force")
-      req.limits.max_contact_force = v.cast<double>();
-    else if (key == "max_cable_stress")
-      req.limits.max_cable_stress = v.cast<double>();
-    else if (key == "max_speeds")
-      req.max_speeds = v.cast<std::vector<double>>();
-    else if (key == "max_accelerations")
-      req.max_accelerations = v.cast<std::vector<double>>();
-    else if (key == "planner")
-      req.planner = v.cast<std::string>();
-    else if (key == "time_limit")
-      req.time_limit = v.cast<double>();
-    else if (key == "seed")
-      req.seed = v.cast<unsigned>();
-    else if (key == "continuation_step")
-      req.continuation_step = v.cast<double>();
-    else if (key == "range")
-      req.range = v.cast<double>();
-    else if (key == "sample_dt")
-      req.sample_dt = v.cast<double>();
-    else if (key == "reachability_check")
-      req.reachability_check = v.cast<bool>();
-    else if (key == "verify_dynamics")
-      req.verify_dynamics = v.cast<bool>();
-    else if (key == "find_speed_limit")
-      req.find_speed_limit = v.cast<bool>();
-    else if (key == "max_bending_stress")
-      req.max_bending_stress = v.cast<double>();
-    else if (key == "settle_time")
-      req.settle_time = v.cast<double>();
-    else if (key == "blend_tolerance")
-      req.blend_tolerance = v.cast<double>();
-    else
-      throw py::value_error("plan_folding: unknown argument '" + key.substr(0, 200) + "'");
+    try
+    {
+      setRequestField(req, key, v);
+    }
+    catch (const py::cast_error&)
+    {
+      throw py::type_error("plan_folding: " + key + ": a value of the wrong type (" +
+                           std::string(py::str(py::repr(v))).substr(0, 200) + ")");
+    }
   }
   ap::PlanResult r;
   std::string start_error;

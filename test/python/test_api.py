@@ -348,3 +348,6 @@ def test_plan_folding_from_a_simulation_and_refusals():
     assert unknown["status"] == "invalid_request" and "no_such_actuator" in unknown["message"]
     with pytest.raises(ValueError):
         at.plan_folding(sim.model, actuator=["pull1"], target_height=0.5)
+    with pytest.raises(TypeError) as wrong:
+        at.plan_folding(sim.model, actuators=["pull1"], target_height="low")
+    assert "target_height" in str(wrong.value)
