@@ -10,6 +10,7 @@
 docs/python.md describes the API.
 """
 
+import math
 import os
 import pkgutil
 
@@ -221,7 +222,13 @@ class Simulation:
         name, a target out of the actuator's range, a NaN or a speed <= 0 raises ValueError and changes
         nothing."""
         names = list(targets)
-        self._sim.set_targets(names, [float(targets[n]) for n in names], [], [], float(speed), float(accel))
+        values = []
+        for n in names:
+            try:
+                values.append(float(targets[n]))
+            except (TypeError, ValueError):
+                raise ValueError("set_targets: %s: expected a number (m), got %r" % (n, targets[n])) from None
+        self._sim.set_targets(names, values, [], [], float(speed), float(accel))
 
     def advance(self, seconds=None, steps=None, callback=None, every=None):
         """Advances by `seconds` (rounded to whole steps) or `steps`. callback(sim), when given, is called every
@@ -229,6 +236,9 @@ class Simulation:
         ends the advance early by returning False. Returns the number of steps taken."""
         if (seconds is None) == (steps is None):
             raise ValueError("advance: give seconds or steps")
+        for what, value in (("seconds", seconds), ("every", every)):
+            if value is not None and not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+                raise ValueError("advance: %s must be a finite number >= 0, got %r" % (what, value))
         dt = self._sim.dt
         n = steps if steps is not None else int(round(seconds / dt))
         k = 1 if every is None else max(1, int(round(every / dt)))

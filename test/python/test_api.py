@@ -212,6 +212,13 @@ def test_a_simulation_refuses_bad_commands_and_goes_on():
     assert sim.row["actuation_pull1"] == pytest.approx(0.01)
     with pytest.raises(ValueError):
         sim.advance(seconds=1.0, steps=3)
+    for bad in (float("nan"), -1.0, "1"):
+        with pytest.raises(ValueError) as refused:
+            sim.advance(seconds=bad)
+        assert "seconds" in str(refused.value)
+    with pytest.raises(ValueError) as refused:
+        sim.set_targets({"pull1": "far"})
+    assert "pull1" in str(refused.value)
 
 
 @pytest.mark.parametrize("name", ["prism_pinned.yaml", "prism_pinned_sliding.yaml", "quadruplex.yaml"])
