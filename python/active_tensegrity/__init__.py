@@ -63,13 +63,23 @@ def load(scene, overrides=None, name="<string>"):
     return _core.load_scene(os.fspath(scene), sets)
 
 
+def _model(scene, overrides, extra=()):
+    """A loaded Model as given, or what load() takes loaded with `extra` then `overrides` (overrides cannot
+    change a Model already loaded: given with one, they are refused)."""
+    if isinstance(scene, Model):
+        if overrides:
+            raise ValueError("overrides apply when a scene is loaded; this one is a loaded Model (pass its path "
+                             "or text, or load it with them)")
+        return scene
+    return load(scene, list(extra) + _overrides(overrides))
+
+
 def check(scene, overrides=None):
     """The structural diagnostics of a scene's initial state, as tensegrity_run --check prints them: a dict of
     self_stress_states, mechanisms, rigid_body_modes, prestress_stable, the stiffness eigenvalues, slack_cables,
     equilibrium_residual (N) ... (docs/physics.md). A model above the size the check handles gives
     checked=False and a note."""
-    model = scene if isinstance(scene, Model) else load(scene, overrides)
-    return _core.check(model)
+    return _core.check(_model(scene, overrides))
 
 
 def find_form(scene, mode="free", tension=None, force_density=None, supports="fixed", struts="uniform",
@@ -120,12 +130,7 @@ def plan_folding(scene, **request):
     peak_contact_force, final_height, equilibrium_solves, planning_time, stopped_by_time_limit; with
     verify_dynamics: dynamics_verified, dynamics_within_limits, dynamic_peak_contact_force,
     dynamic_peak_bending_stress, dynamic_min_gap, settle_duration, time_scale."""
-    if isinstance(scene, Simulation):
-        target = scene._sim
-    elif isinstance(scene, Model):
-        target = scene
-    else:
-        target = load(scene)
+    target = scene._sim if isinstance(scene, Simulation) else _model(scene, None)
     return _core.plan_folding(target, **request)
 
 
@@ -135,12 +140,7 @@ def modal(scene, overrides=None):
     per mode (ascending; negative where the equilibrium is unstable along the mode), shapes (modes x nodes x 3,
     node displacements scaled to a largest of 1), free_coordinates, structure (check() of the equilibrium),
     status, message, warnings, wall_time (s)."""
-    if isinstance(scene, Model):
-        model = scene
-    else:
-        sets = _overrides(overrides)
-        model = load(scene, ["analysis.type=modal"] + sets)
-    return _core.modal(model)
+    return _core.modal(_model(scene, overrides, ["analysis.type=modal"]))
 
 
 class Result:
@@ -189,7 +189,7 @@ def run(scene, overrides=None):
     scene: a Model from load(), or what load() takes (then overrides apply). The interpreter's lock is
     released while the analysis runs: other Python threads go on.
     """
-    model = scene if isinstance(scene, Model) else load(scene, overrides)
+    model = _model(scene, overrides)
     return Result(model, _core.run(model))
 
 
@@ -208,7 +208,7 @@ class Simulation:
     """
 
     def __init__(self, scene, overrides=None):
-        self.model = scene if isinstance(scene, Model) else load(scene, overrides)
+        self.model = _model(scene, overrides)
         self._sim = _core.Simulation(self.model)
 
     def __getattr__(self, name):

@@ -99,6 +99,12 @@ def read_study(path):
     }
 
 
+def peak_column(column, kind):
+    """The results column of a peak: max_<column> or min_<column> (the column itself when its name already
+    starts so, as max_normal_force)."""
+    return column if column.startswith(kind + "_") else "%s_%s" % (kind, column)
+
+
 def point_id(overrides):
     """A name for a point that depends only on its overrides (the key of its kept result)."""
     text = json.dumps(overrides, sort_keys=True, default=str)
@@ -123,7 +129,7 @@ def run_point(text, name, overrides, summary, peaks, final):
     out["status"], out["message"] = result.summary["status"], result.summary["message"]
     for column, kind in peaks.items():
         values = result[column]
-        out["%s_%s" % (kind, column) if not column.startswith(kind) else column] = \
+        out[peak_column(column, kind)] = \
             float(values.max() if kind == "max" else values.min()) if len(values) else float("nan")
     for column in final:
         values = result[column]
@@ -134,7 +140,7 @@ def run_point(text, name, overrides, summary, peaks, final):
 def _columns(study):
     cols = ["point"] + study["parameters"]
     cols += [f for f in study["summary"] if f not in ("status", "message")] + ["status", "message"]
-    cols += ["%s_%s" % (k, c) if not c.startswith(k) else c for c, k in study["peaks"].items()]
+    cols += [peak_column(c, k) for c, k in study["peaks"].items()]
     cols += ["final_" + c for c in study["final"]]
     return cols
 

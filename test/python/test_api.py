@@ -104,6 +104,9 @@ def test_scene_text_loads_like_its_file():
     np.testing.assert_array_equal(from_path.table, from_file.table)
     with pytest.raises(TypeError):
         at.load(42)
+    with pytest.raises(ValueError) as loaded:  # overrides cannot change a model already loaded
+        at.run(at.load(path), {"analysis.steps": 5})
+    assert "loaded Model" in str(loaded.value)
 
 
 def test_a_refused_scene_raises_with_the_key_named():
