@@ -4,8 +4,9 @@
 usage: plot_tower.py RESULTS_DIR FIGURES_DIR
        plot_tower.py --demo DYNAMIC.csv STATIC.csv OUT.png   (one run: layer heights and contact force)
 
-RESULTS_DIR holds static_contact.csv, static_no_contact.csv and, per speed V, dynamic_vV.csv,
-dynamic_vV.yaml and contacts_vV.csv as tensegrity_run writes them. Writes
+RESULTS_DIR holds the folders of the two study files of scripts/tower_study: quasi_static/ with
+static_contact_true.csv and static_contact_false.csv, dynamic/ with, per speed V, dynamic_vV.csv, dynamic_vV.yaml
+and dynamic_vV_contacts.csv, as tensegrity_run writes them. Writes
   tower_quasi_static.png   heights against actuation, with and without contact (Fig. 14)
   tower_dynamic_heights.png layer heights against time per speed, quasi-static curve dashed (Fig. 15-19)
   tower_contact_forces.png  largest normal contact force per stage against time per speed (Fig. 21-25)
@@ -18,6 +19,7 @@ import os
 import sys
 
 import matplotlib
+import yaml
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -33,27 +35,9 @@ def read_csv(path):
 
 
 def read_summary(path):
-    """The flat and one-level keys of a tensegrity_run summary (enough YAML for our own files)."""
-    out, section = {}, None
+    """A tensegrity_run summary (YAML)."""
     with open(path) as f:
-        for line in f:
-            line = line.split("  #")[0].rstrip()
-            if not line:
-                continue
-            if not line.startswith(" "):
-                key, _, value = line.partition(":")
-                value = value.strip()
-                section = key if not value else None
-                out[key] = value.strip('"') if value else {}
-            elif section:
-                key, _, value = line.strip().partition(":")
-                value = value.strip()
-                if value.startswith("{"):
-                    parts = dict(p.split(":") for p in value.strip("{}").split(","))
-                    out[section][key] = {k.strip(): float(v) for k, v in parts.items()}
-                else:
-                    out[section][key] = float(value) if value not in ("inf", "-inf", "nan") else float(value)
-    return out
+        return yaml.safe_load(f)
 
 
 def crossing(xs, ys, level, below=True):
@@ -101,8 +85,9 @@ def main():
     if len(sys.argv) != 3:
         sys.exit(__doc__)
     res, figs = sys.argv[1], sys.argv[2]
-    sc = read_csv(os.path.join(res, "static_contact.csv"))
-    sn = read_csv(os.path.join(res, "static_no_contact.csv"))
+    sc = read_csv(os.path.join(res, "quasi_static", "static_contact_true.csv"))
+    sn = read_csv(os.path.join(res, "quasi_static", "static_contact_false.csv"))
+    res = os.path.join(res, "dynamic")
 
     # quasi-static findings
     onset = crossing(sn["actuation"], sn["min_gap"], 0.0)
@@ -175,7 +160,7 @@ def main():
     fig, axes = plt.subplots(len(speeds), 1, figsize=(10, 2.6 * len(speeds)), squeeze=False)
     stage_peak = {}
     for ax, v in zip(axes[:, 0], speeds):
-        path = os.path.join(res, f"contacts_v{v}.csv")
+        path = os.path.join(res, f"dynamic_v{v}_contacts.csv")
         by_stage = {s: {} for s in range(1, 5)}
         if os.path.exists(path) and os.path.getsize(path) > 0:
             c = read_csv(path)

@@ -3,7 +3,7 @@
 
 usage: quadruplex_findings.py DIR
 
-DIR holds contact_r<R>.csv (with contact) and no_contact_r<R>.csv (without) of scripts/quadruplex_study.
+DIR holds contact_r<R>.csv of scripts/quadruplex_study (the study config/studies/quadruplex_contact.yaml).
 Prints, per radius: the contact onset v and the force there, the stiffness just before and after it,
 the first slack cable, the ultimate state (largest force) and the largest overlap.
 """
