@@ -369,7 +369,7 @@ def make_plots(study, table, out):
             ax.set_xscale("log")
         if p.get("logy"):
             ax.set_yscale("log")
-        ax.set_title(p.get("title", os.path.basename(out)))
+        ax.set_title(p.get("title", os.path.basename(out)), fontsize=10)
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=8)
         ax.grid(alpha=0.3)
