@@ -4,6 +4,7 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <atomic>
 #include <cmath>
 #include <limits>
 #include <map>
@@ -367,7 +368,7 @@ public:
   }
   long steps() const
   {
-    return steps_;
+    return steps_.load(std::memory_order_relaxed);
   }
   at::ActuationValues actuation() const
   {
@@ -386,7 +387,7 @@ private:
     for (long i = 0; i < n; ++i)
     {
       const at::State before = state_;
-      const double t_next = static_cast<double>(steps_ + 1) * dt;  // t = k dt exactly
+      const double t_next = static_cast<double>(steps() + 1) * dt;  // t = k dt exactly
       const at::Summary s = solver_.step(state_, t_next - state_.t, l);
       if (!s.ok() || !finite(state_))
       {
@@ -397,7 +398,7 @@ private:
                "); the simulation keeps the last good state";
       }
       state_.t = t_next;
-      ++steps_;
+      steps_.fetch_add(1, std::memory_order_relaxed);
     }
     return {};
   }
@@ -406,7 +407,9 @@ private:
   at::DynamicsSolver solver_;
   at::ActuationController controller_;
   at::State state_;
-  long steps_ = 0;
+  // readable from another thread while an advance runs there (the interpreter's lock is released during
+  // the steps); the rest of the state is read between advances or from a callback
+  std::atomic<long> steps_{ 0 };
 };
 namespace ap = active_tensegrity::planning;
 

@@ -163,6 +163,23 @@ def test_runs_in_threads_give_the_same_results():
         np.testing.assert_array_equal(r.table, alone.table)
 
 
+def test_python_runs_while_a_simulation_advances():
+    # The interpreter's lock is released while the solver steps: a thread advances the tower by 2 x 2500 steps
+    # with a callback between the halves. After that callback this thread runs Python code and reads the step
+    # count (kept atomic for this). Had the second half held the lock, this thread could run only once the
+    # advance had taken all 5000 steps; it finds fewer.
+    sim = at.Simulation(os.path.join(SCENES, "tower.yaml"))
+    sim.set_targets({"pull1": 0.3, "pull2": 0.3})
+    halfway = threading.Event()
+    thread = threading.Thread(target=lambda: sim.advance(steps=5000, callback=lambda s: halfway.set(), every=0.5))
+    thread.start()
+    halfway.wait()
+    total = sum(i * i for i in range(1000))  # Python bytecode: needs the lock
+    during = sim.steps
+    thread.join()
+    assert total > 0 and 2500 <= during < 5000 and sim.steps == 5000
+
+
 def test_a_python_controller_holds_the_tower_at_one_metre():
     # PID on the four pulls from the height, every 20 ms of simulated time, in-process: the tower (2 m at rest,
     # a lightly damped soft mode of about 5 s that swings it by +-7 cm for tens of seconds at a held pull)
