@@ -441,7 +441,7 @@ def run_study(path, out=None, scheduler=None, workers=None, progress=True, sets=
         for i, p in zip(ids, study["points"]):
             with open(os.path.join(kept, i + ".json")) as pf:
                 collected = json.load(pf)["collected"]
-            row = dict(p, point=i, **collected)
+            row = dict({k: value_text(v) for k, v in p.items()}, point=i, **collected)
             writer.writerow(["" if row.get(c) is None else row.get(c, "") for c in columns])
     make_plots(study, table, out)
     return table
