@@ -212,11 +212,16 @@ void System::forEachConstraint(F&& f) const
   }
 }
 
-void System::constraintValue(const Eigen::VectorXd& q, const ActuationValues& u, Eigen::VectorXd& phi) const
+void System::constraintValue(const Eigen::VectorXd& q, const ActuationValues& u, Eigen::VectorXd& phi,
+                             bool driven_only) const
 {
   phi.setZero(n_lambda_);
-  forEachConstraint([&](const Constraint& c, const ConstraintKindFunctions& kind, int row, int /*group*/)
-                    { kind.value(model_, c, q, u, phi.segment(row, c.rows())); });
+  forEachConstraint(
+      [&](const Constraint& c, const ConstraintKindFunctions& kind, int row, int /*group*/)
+      {
+        if (!driven_only || c.actuator >= 0)
+          kind.value(model_, c, q, u, phi.segment(row, c.rows()));
+      });
 }
 
 void System::addConstraintJacobian(const Eigen::VectorXd& q, BlockSparseMatrix& jac) const

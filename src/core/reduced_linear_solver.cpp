@@ -19,6 +19,38 @@ void padded(const BlockSparseMatrix& m, int index, Eigen::Matrix<double, 8, 8>& 
       out.topLeftCorner(m.groupSize(m.blocks()[index].first), m.groupSize(m.blocks()[index].second));
   m.block(index, view);
 }
+
+using Mat8 = Eigen::Matrix<double, 8, 8>;
+
+/// out = a b for 8 x 8 matrices, the eight columns of out accumulated side by side: eight independent chains
+/// of multiply-adds where Eigen's lazy product runs one chain per column (measured: 18 ns against 51 ns per
+/// product on an AMD EPYC with AVX-512; one product is eight vector operations per column either way).
+void multiply8(const Mat8& a, const Mat8& b, Mat8& out)
+{
+  using Col = Eigen::Matrix<double, 8, 1>;
+  Col c0 = a.col(0) * b(0, 0), c1 = a.col(0) * b(0, 1), c2 = a.col(0) * b(0, 2), c3 = a.col(0) * b(0, 3);
+  Col c4 = a.col(0) * b(0, 4), c5 = a.col(0) * b(0, 5), c6 = a.col(0) * b(0, 6), c7 = a.col(0) * b(0, 7);
+  for (int k = 1; k < 8; ++k)
+  {
+    const Col ak = a.col(k);
+    c0 += ak * b(k, 0);
+    c1 += ak * b(k, 1);
+    c2 += ak * b(k, 2);
+    c3 += ak * b(k, 3);
+    c4 += ak * b(k, 4);
+    c5 += ak * b(k, 5);
+    c6 += ak * b(k, 6);
+    c7 += ak * b(k, 7);
+  }
+  out.col(0) = c0;
+  out.col(1) = c1;
+  out.col(2) = c2;
+  out.col(3) = c3;
+  out.col(4) = c4;
+  out.col(5) = c5;
+  out.col(6) = c6;
+  out.col(7) = c7;
+}
 }  // namespace
 
 void ReducedLinearSolver::analyze(const BlockSparseMatrix& m, int coordinate_groups)
@@ -222,7 +254,7 @@ bool ReducedLinearSolver::factorize(const BlockSparseMatrix& m, int coordinate_g
     // with T = [Z Y] per body: T_r^T A T_c in one pair of products; its Z-Z part goes into A_r, and the
     // products solve() needs are kept whole: T_r^T A (rows of Y_r^T A) and (T_r^T) A T_c (columns of A Y_c)
     if (br >= 0)
-      left.noalias() = bodies_[br].tt.lazyProduct(block);
+      multiply8(bodies_[br].tt, block, left);
     else
       left = block;
     if (force_position_[i] >= 0)
@@ -231,7 +263,7 @@ bool ReducedLinearSolver::factorize(const BlockSparseMatrix& m, int coordinate_g
     if (bc >= 0)
     {
       Mat8& whole = rhs_ops_[rhs_position_[i]];
-      whole.noalias() = left.lazyProduct(bodies_[bc].t);
+      multiply8(left, bodies_[bc].t, whole);
       reduced_.addBlock(j, whole.topLeftCorner(rr, rc));
     }
     else

@@ -95,8 +95,10 @@ public:
                      double c_weight) const;
   /// Mass matrix M(q) into jac (weighted).
   void addMass(const Eigen::VectorXd& q, BlockSparseMatrix& jac, double weight) const;
-  /// Phi(q, t) with actuation values u.
-  void constraintValue(const Eigen::VectorXd& q, const ActuationValues& u, Eigen::VectorXd& phi) const;
+  /// Phi(q, t) with actuation values u; with driven_only, the rows of driven constraints (those of an actuator)
+  /// and zeros elsewhere (the only rows that depend on u).
+  void constraintValue(const Eigen::VectorXd& q, const ActuationValues& u, Eigen::VectorXd& phi,
+                       bool driven_only = false) const;
   /// Phi_q^T lambda.
   void constraintForce(const Eigen::VectorXd& q, const Eigen::VectorXd& lambda, Eigen::VectorXd& out) const;
   /// Adds Phi_q (rows of lambda, columns of q) and its transpose into jac.

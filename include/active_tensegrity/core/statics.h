@@ -123,7 +123,8 @@ public:
 
 private:
   Summary newton(State& state, const ActuationValues& u);
-  Summary dampedNewton(State& state, const ActuationValues& u);
+  /// Levenberg-Marquardt from state; at most max_trials factorizations (0: 4 max_iterations).
+  Summary dampedNewton(State& state, const ActuationValues& u, int max_trials = 0);
   /// Factorizes jac_ with the sparse LU of solve() and the damped Newton (timed).
   bool factorizeFull();
   /// r_ (and jac_ when asked) at (q, lambda) under u.
