@@ -32,7 +32,8 @@ std::vector<Constraint> spinLocks(const Model& model)
 
 namespace
 {
-/// The damped Newton's budget (factorizations) after a failed correction while the increment can still be cut.
+/// The damped Newton's budget (factorizations) after a failed correction while the increment can still be cut
+/// (at most its own, 4 max_iterations).
 constexpr int kPathDampedTrials = 15;
 
 /// Turns every strut about its own axis so that its spin lock holds exactly (its nodes, on the axis, do
@@ -799,7 +800,7 @@ Summary StaticSolver::followPath(State& s, const ActuationValues& u_end, int ste
         trial = s;
         trial.q = predicted;
         unspin(system_.model(), trial.q);
-        attempt = dampedNewton(trial, u, last_chance ? 0 : kPathDampedTrials);
+        attempt = dampedNewton(trial, u, last_chance ? 0 : std::min(kPathDampedTrials, 4 * options_.max_iterations));
         total.iterations += attempt.iterations;
         if (!attempt.ok() && last_chance)
         {
