@@ -133,12 +133,15 @@ ContactPairState baseState(int pair, const Closest& c, const StrutAxis& a, const
 }
 }  // namespace
 
-double effectiveModulus(const Body& a, const Body& b)
+double effectiveModulus(const StrutLayer& la, const StrutLayer& lb)
 {
-  const StrutLayer& la = a.layers.back();
-  const StrutLayer& lb = b.layers.back();
   return 1.0 / ((1.0 - la.poisson_ratio * la.poisson_ratio) / la.youngs_modulus +
                 (1.0 - lb.poisson_ratio * lb.poisson_ratio) / lb.youngs_modulus);
+}
+
+double effectiveModulus(const Body& a, const Body& b)
+{
+  return effectiveModulus(a.layers.back(), b.layers.back());
 }
 
 StrutPair makeStrutPair(const Model& model, int body_a, int body_b)
@@ -149,6 +152,14 @@ StrutPair makeStrutPair(const Model& model, int body_a, int body_b)
   const Body& a = model.bodies[body_a];
   const Body& b = model.bodies[body_b];
   p.stiffness90 = 4.0 / 3.0 * effectiveModulus(a, b) * std::pow(a.radius() * b.radius(), 0.25);
+  if (a.layers.size() > 1 || b.layers.size() > 1)
+  {
+    // the innermost layers (a strut without a core: its one layer, of thickness 0 here)
+    const StrutLayer& ca = a.layers.front();
+    const StrutLayer& cb = b.layers.front();
+    p.core_gap = (a.radius() - ca.outer_radius) + (b.radius() - cb.outer_radius);
+    p.core_stiffness90 = 4.0 / 3.0 * effectiveModulus(ca, cb) * std::pow(ca.outer_radius * cb.outer_radius, 0.25);
+  }
   return p;
 }
 
@@ -218,9 +229,21 @@ ContactPairState evaluateContact(const Model& model, int pair, const Eigen::Vect
   const double hysteresis = 1.0 + damping * st.penetration_rate;
   if (hysteresis <= 0.0)
     return st;
+  // the elastic force E(zeta, cos2): the sleeves' Hertz law, plus the cores' once they overlap
   const double zeta = st.penetration;
-  const double z15 = zeta * std::sqrt(zeta);
-  const double fn = kv.k * z15 * hysteresis;
+  double elastic = kv.k * zeta * std::sqrt(zeta);
+  double de_dzeta = 1.5 * kv.k * std::sqrt(zeta), de_dc2 = kv.dk_dc2 * zeta * std::sqrt(zeta);
+  const double zc = zeta - p.core_gap;
+  if (p.core_stiffness90 > 0.0 && zc > 0.0)
+  {
+    const StiffnessValue kc = contactStiffness(p.core_stiffness90, cos2, set.min_crossing_angle);
+    st.core_penetration = zc;
+    st.core_stiffness = kc.k;
+    elastic += kc.k * zc * std::sqrt(zc);
+    de_dzeta += 1.5 * kc.k * std::sqrt(zc);
+    de_dc2 += kc.dk_dc2 * zc * std::sqrt(zc);
+  }
+  const double fn = elastic * hysteresis;
   st.normal_force = fn;
   st.force_on_a = fn * c.n;
 
@@ -316,19 +339,19 @@ ContactPairState evaluateContact(const Model& model, int pair, const Eigen::Vect
   const Row14 jq_rate = -dv.transpose() * jn - c.n.transpose() * (jqv1 - jqv2);
   const Row14 jqd_rate = -c.n.transpose() * (jp1 - jp2);
 
-  // stiffness
-  Row14 jk = Row14::Zero();
-  if (kv.dk_dc2 != 0.0)
+  // the elastic force through the crossing angle (the stiffnesses' dependence on cos2)
+  Row14 je_angle = Row14::Zero();
+  if (de_dc2 != 0.0)
   {
     const Row14 jdot = b.axis.transpose() * ja1 + a.axis.transpose() * ja2;
     const Row14 jm1 = 2.0 * a.axis.transpose() * ja1, jm2 = 2.0 * b.axis.transpose() * ja2;
-    jk = kv.dk_dc2 * (2.0 * dot * jdot - cos2 * (m2 * jm1 + m1 * jm2)) / (m1 * m2);
+    je_angle = de_dc2 * (2.0 * dot * jdot - cos2 * (m2 * jm1 + m1 * jm2)) / (m1 * m2);
   }
 
-  // normal force F_N and the generalized normal force g F_N with g = [n; s1 B1^T n; -n; -s2 B2^T n]
-  const Row14 jq_fn =
-      z15 * hysteresis * jk + 1.5 * kv.k * std::sqrt(zeta) * hysteresis * jzeta + kv.k * z15 * damping * jq_rate;
-  const Row14 jqd_fn = kv.k * z15 * damping * jqd_rate;
+  // normal force F_N = E (1 + D zeta_dot) and the generalized normal force g F_N with
+  // g = [n; s1 B1^T n; -n; -s2 B2^T n]
+  const Row14 jq_fn = hysteresis * (je_angle + de_dzeta * jzeta) + elastic * damping * jq_rate;
+  const Row14 jqd_fn = elastic * damping * jqd_rate;
   Vec14 g;
   g << c.n, c.s1 * a.axis_jac.transpose() * c.n, -c.n, -c.s2 * b.axis_jac.transpose() * c.n;
   Mat14 jg = Mat14::Zero();

@@ -866,6 +866,10 @@ private:
       if (!std::isfinite(p.stiffness90))
         root_.fail("materials", "the contact stiffness of struts " + quoted(model_.bodies[a].name) + " and " +
                                     quoted(model_.bodies[b].name) + " overflows: " + shortestNumber(p.stiffness90));
+      if (!std::isfinite(p.core_stiffness90))
+        root_.fail("materials", "the contact stiffness of the cores of struts " + quoted(model_.bodies[a].name) +
+                                    " and " + quoted(model_.bodies[b].name) +
+                                    " overflows: " + shortestNumber(p.core_stiffness90));
       model_.checked_pairs.push_back(p);
     }
   }

@@ -435,3 +435,128 @@ TEST(ContactForce, ForceWithoutTangentsIsTheSameForce)
   }
   EXPECT_GT(with_friction, 10);
 }
+
+namespace
+{
+// twoStruts with steel cores (radius 1.5 cm, E = 210 GPa) inside the rubber-like sleeves: both struts, or strut
+// A alone
+Model layeredStruts(double mu, double restitution, bool both = true)
+{
+  Model m = twoStruts(mu, restitution);
+  for (size_t i = 0; i < (both ? 2u : 1u); ++i)
+  {
+    Body& b = m.bodies[i];
+    StrutLayer core = b.layers.back();
+    core.material = "steel";
+    core.inner_radius = 0.0;
+    core.outer_radius = 0.015;
+    core.youngs_modulus = 210e9;
+    core.poisson_ratio = 0.3;
+    b.layers.back().inner_radius = 0.015;
+    b.layers.insert(b.layers.begin(), core);
+  }
+  m.checked_pairs[0] = makeStrutPair(m, 0, 1);
+  return m;
+}
+
+// the same crossing (seed) at another overlap
+Eigen::VectorXd crossingAt(const Model& m, double overlap, unsigned seed)
+{
+  std::mt19937 rng(seed);
+  return crossing(m, overlap, rng);
+}
+}  // namespace
+
+TEST(LayeredContact, CoresMeetAtTheSleevesThicknessWithTheirOwnHertzStiffness)
+{
+  const Model plain = twoStruts(0.0, 1.0);
+  const Model both = layeredStruts(0.0, 1.0), one = layeredStruts(0.0, 1.0, false);
+  EXPECT_EQ(plain.checked_pairs[0].core_stiffness90, 0.0);
+  const double steel = 1.0 / (2.0 * (1.0 - 0.09) / 210e9);
+  EXPECT_NEAR(both.checked_pairs[0].core_gap, (0.04 - 0.015) + (0.05 - 0.015), 1e-15);
+  EXPECT_NEAR(both.checked_pairs[0].core_stiffness90, 4.0 / 3.0 * steel * std::sqrt(0.015), 1e-6);
+  // a strut without a core meets the other's core with its one layer
+  const double mixed = 1.0 / ((1.0 - 0.09) / 210e9 + (1.0 - 0.45 * 0.45) / 2.0e7);
+  EXPECT_NEAR(one.checked_pairs[0].core_gap, 0.04 - 0.015, 1e-15);
+  EXPECT_NEAR(one.checked_pairs[0].core_stiffness90, 4.0 / 3.0 * mixed * std::pow(0.015 * 0.05, 0.25), 1e-6);
+  // the sleeves' stiffness is the plain struts'
+  EXPECT_EQ(both.checked_pairs[0].stiffness90, plain.checked_pairs[0].stiffness90);
+  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(plain.nq);
+  for (const Model* m : { &both, &one })
+  {
+    const double t = m->checked_pairs[0].core_gap;
+    for (double overlap : { 0.5 * t, t - 1e-6, t + 1e-6, t + 2e-3 })
+    {
+      const Eigen::VectorXd q = crossingAt(*m, overlap, 21);
+      const ContactPairState s = evaluateContact(*m, 0, q, zero, 0.0, ContactMode::kStatic, nullptr);
+      const ContactPairState p = evaluateContact(plain, 0, q, zero, 0.0, ContactMode::kStatic, nullptr);
+      ASSERT_TRUE(s.active);
+      EXPECT_NEAR(s.penetration, overlap, 1e-12);
+      if (overlap < t)
+      {
+        // below the thickness: the sleeves' law alone, as without cores
+        EXPECT_EQ(s.normal_force, p.normal_force) << overlap;
+        EXPECT_EQ(s.core_penetration, 0.0);
+      }
+      else
+      {
+        const double zc = overlap - t;
+        EXPECT_NEAR(s.core_penetration, zc, 1e-12);
+        // K_c follows the crossing angle as K does: K_c / K = core_stiffness90 / stiffness90
+        EXPECT_NEAR(s.core_stiffness / s.stiffness,
+                    m->checked_pairs[0].core_stiffness90 / m->checked_pairs[0].stiffness90, 1e-12 * s.core_stiffness);
+        EXPECT_NEAR(s.normal_force, p.normal_force + s.core_stiffness * zc * std::sqrt(zc), 1e-9 * s.normal_force)
+            << overlap;
+      }
+    }
+  }
+}
+
+TEST(LayeredContact, TangentsAreExactOnBothSidesOfTheSwitch)
+{
+  std::mt19937 rng(22);
+  for (bool both : { true, false })
+  {
+    const Model m = layeredStruts(0.3, 0.5, both);
+    const double t = m.checked_pairs[0].core_gap;
+    for (int k = 0; k < 8; ++k)
+    {
+      const double overlap = t + (k % 4 == 0 ? -1e-3 : k % 4 == 1 ? -1e-4 : k % 4 == 2 ? 1e-4 : 1e-3);
+      const Eigen::VectorXd q = crossing(m, overlap, rng);
+      const std::string what = std::string(both ? "two cores" : "one core") + ", overlap " + std::to_string(overlap);
+      expectExactTangents(m, q, Eigen::VectorXd::Zero(m.nq), 0.0, ContactMode::kStatic, "static, " + what);
+      const Eigen::VectorXd qd = velocitiesWithSlip(m, q, 0.05, 0.05, rng);
+      expectExactTangents(m, q, qd, 0.05, ContactMode::kDynamic, "dynamic, " + what);
+      EXPECT_EQ(evaluateContact(m, 0, q, qd, 0.05, ContactMode::kDynamic, nullptr).core_penetration > 0.0, overlap > t);
+    }
+  }
+}
+
+TEST(LayeredContact, ForceAndTangentAreContinuousAtTheSwitch)
+{
+  // F = K zeta^1.5 + K_c (zeta - t)^1.5: the core's term and its derivative 1.5 K_c (zeta - t)^0.5 start at zero,
+  // so force and tangent just below and just above the switch differ by O(delta) and O(K_c sqrt(delta))
+  const Model m = layeredStruts(0.0, 1.0);
+  const double t = m.checked_pairs[0].core_gap;
+  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(m.nq);
+  double previous = INFINITY;
+  for (double delta : { 1e-6, 1e-8, 1e-10 })
+  {
+    ContactContribution below, above;
+    evaluateContact(m, 0, crossingAt(m, t - delta, 23), zero, 0.0, ContactMode::kStatic, &below);
+    evaluateContact(m, 0, crossingAt(m, t + delta, 23), zero, 0.0, ContactMode::kStatic, &above);
+    const double scale = below.stiffness.cwiseAbs().maxCoeff();
+    const double jump = (above.stiffness - below.stiffness).cwiseAbs().maxCoeff() / scale;
+    const double kc = m.checked_pairs[0].core_stiffness90;
+    // the core's tangent at delta is about 1.5 K_c sqrt(delta) (times the crossing angle's factor, <= 1.4)
+    EXPECT_LT(jump, 3.0 * kc * std::sqrt(delta) / scale + 1e-9) << delta;
+    // no step: a hundredth of delta, a tenth of the difference (sqrt), not a floor
+    if (std::isfinite(previous))
+    {
+      EXPECT_GT(jump, 0.05 * previous) << delta;
+      EXPECT_LT(jump, 0.2 * previous) << delta;
+    }
+    previous = jump;
+    EXPECT_LT((above.force - below.force).cwiseAbs().maxCoeff(), 1e-3 * below.force.cwiseAbs().maxCoeff());
+  }
+}

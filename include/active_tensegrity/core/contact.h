@@ -11,6 +11,10 @@
 ///                 with F_N >= 0 (no adhesion), v_0 the penetration rate at contact onset;
 ///   stiffness     K = (4/3) E* sqrt(Re), Re = sqrt(r1 r2) / |sin theta| (Johnson, Eq. 30-35 closed),
 ///                 theta the crossing angle, |sin theta| floored at sin(min_crossing_angle);
+///   layered       struts with a core (radius rc, its own material): once zeta exceeds the sleeves'
+///                 thicknesses t = (r1 - rc1) + (r2 - rc2), the cores' Hertz contact adds K_c (zeta - t)^(3/2)
+///                 (K_c from the cores' E* and radii, the same crossing-angle law) to K zeta^(3/2): force and
+///                 tangent are continuous at the switch;
 ///   friction      F_T = mu c_d(|v_T|) F_N against the slip v_T = (I - n n^T)(v_PA - v_PB) of the
 ///                 contact points PA = P1 - r1 n, PB = P2 + r2 n (material points of each strut),
 ///                 c_d = 0 below v0, linear to 1 at v1, 1 above (Ambrosio's modified Coulomb law);
@@ -41,6 +45,8 @@ enum class ContactMode
 
 /// E* = [(1 - nu1^2)/E1 + (1 - nu2^2)/E2]^-1 (Pa) of the outer layers of two struts.
 double effectiveModulus(const Body& a, const Body& b);
+/// The same for two layers.
+double effectiveModulus(const StrutLayer& a, const StrutLayer& b);
 
 /// A checked pair with its constants: K at a right crossing, (4/3) E* (r1 r2)^(1/4) (N/m^1.5).
 StrutPair makeStrutPair(const Model& model, int body_a, int body_b);
@@ -61,7 +67,9 @@ struct ContactPairState
   double gap = 0.0;                   // surface gap h - r1 - r2 (m), negative when overlapping
   double penetration = 0.0;           // zeta (m)
   double penetration_rate = 0.0;      // zeta_dot (m/s)
-  double stiffness = 0.0;             // K (N/m^1.5)
+  double stiffness = 0.0;             // K (N/m^1.5) of the sleeves (the outer layers)
+  double core_penetration = 0.0;      // zeta - t: overlap of the cores of layered struts (m), 0 until they meet
+  double core_stiffness = 0.0;        // K_c (N/m^1.5) of the cores, while they overlap
   double normal_force = 0.0;          // F_N (N)
   double slip_speed = 0.0;            // |v_T| (m/s)
   double friction_force = 0.0;        // F_T (N)

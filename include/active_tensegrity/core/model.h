@@ -146,6 +146,10 @@ struct StrutPair
   int body_a = -1;
   int body_b = -1;
   double stiffness90 = 0.0;  // K at a right crossing, (4/3) E* (r_a r_b)^(1/4), N/m^1.5
+  // layered struts (a `core`): the cores' contact, which adds to the sleeves' once their overlap exceeds the
+  // sleeves' thicknesses; core_stiffness90 = 0 when neither strut has a core
+  double core_stiffness90 = 0.0;  // (4/3) E*_c (rc_a rc_b)^(1/4), N/m^1.5 (a strut without a core: its own layer)
+  double core_gap = 0.0;          // the penetration at which the cores meet, (r_a - rc_a) + (r_b - rc_b), m
 };
 
 /// Contact law parameters (docs/physics.md, "Strut contact"; scene keys under `contact`, docs/scenes.md).
