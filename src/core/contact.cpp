@@ -436,8 +436,8 @@ bool passedThrough(const Model& model, int pair, const Eigen::VectorXd& q0, cons
   const Vec3 r = ca - cb;
   const double sa = (ab * db.dot(r) - bbn * da.dot(r)) / det;  // P_a = ca + sa da
   const double sb = (aa * db.dot(r) - ab * da.dot(r)) / det;   // P_b = cb + sb db
-  const double reach_a = (a0.half_length + b0.radius) / std::sqrt(aa);
-  const double reach_b = (b0.half_length + a0.radius) / std::sqrt(bbn);
+  const double reach_a = a0.half_length / std::sqrt(aa);
+  const double reach_b = b0.half_length / std::sqrt(bbn);
   return std::abs(sa) <= reach_a && std::abs(sb) <= reach_b;
 }
 

@@ -560,3 +560,27 @@ TEST(LayeredContact, ForceAndTangentAreContinuousAtTheSwitch)
     EXPECT_LT((above.force - below.force).cwiseAbs().maxCoeff(), 1e-3 * below.force.cwiseAbs().maxCoeff());
   }
 }
+
+TEST(ContactTunnelling, OnlyAxisSegmentsThatCrossArePassages)
+{
+  // strut A (length 1.2, radius 4 cm) along x about the origin; strut B (radius 5 cm) along y, moved down
+  // through z = 0 at x = x_b. Through A's axis (|x_b| < 0.6): a passage. Beyond A's end but within B's radius
+  // of it (0.6 < |x_b| < 0.65): B's axis passes A's end cap, the closest points run round the end and the
+  // normal turns continuously: not a passage. Far beyond: no contact at all.
+  const Model m = twoStruts(0.0, 1.0);
+  const auto state = [&](double x_b, double z_b)
+  {
+    Eigen::VectorXd q(m.nq);
+    q.segment<3>(0) = Vec3::Zero();
+    q.segment<4>(3) = thetaFromZAxis(Vec3::UnitX());
+    q.segment<3>(7) = Vec3(x_b, 0.0, z_b);
+    q.segment<4>(10) = thetaFromZAxis(Vec3::UnitY());
+    return q;
+  };
+  for (double x_b : { 0.0, 0.3, 0.59 })
+    EXPECT_TRUE(passedThrough(m, 0, state(x_b, 0.01), state(x_b, -0.01))) << x_b;
+  for (double x_b : { 0.61, 0.64, 0.7 })
+    EXPECT_FALSE(passedThrough(m, 0, state(x_b, 0.01), state(x_b, -0.01))) << x_b;
+  // moving apart or staying on one side: no passage
+  EXPECT_FALSE(passedThrough(m, 0, state(0.3, 0.01), state(0.3, 0.02)));
+}

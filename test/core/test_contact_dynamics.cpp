@@ -1,6 +1,7 @@
 // Contact in time integration: the Hertz impact of two crossed free cylinders against its closed-form
 // solution, the Lankarani-Nikravesh rebound against an independent 1-D integration and against c_e,
-// energy kept by frictionless elastic contact and never gained with friction, momentum kept, the
+// energy kept by frictionless elastic contact and never gained with friction, momentum kept, layered struts
+// (cores inside sleeves) stopped at the energy balance's overlap, the
 // full Newton Jacobian with contact against finite differences, and no step that tunnels.
 #include <algorithm>
 #include <cmath>
@@ -258,6 +259,51 @@ TEST(ContactNewton, FullJacobianWithContactMatchesFiniteDifferences)
   const Eigen::MatrixXd analytic = Eigen::MatrixXd(jac.matrix());
   const FdComparison c = compareJacobians(analytic, fdJacobian(f, x, 1e-2), 1e-6, 1.0);
   EXPECT_TRUE(c.ok) << c.message;
+}
+
+TEST(LayeredImpact, CoresStopTheStrutsBeyondTheSleevesAtTheEnergyBalancesOverlap)
+{
+  // The crossed cylinders with steel cores (radius 8 mm) in their sleeves (20 mm, E = 200 MPa): the cores meet
+  // at an overlap t = 24 mm. Elastic, frictionless, contact at both centres (no rotation): the largest
+  // overlap solves 1/2 mu v^2 = 2/5 K z^5/2 + 2/5 K_c (z - t)^5/2 (mu the reduced mass, K and K_c at the right
+  // crossing). At 5 and 10 m/s the sleeves stop the struts; at 25 and 40 m/s the cores do, within a few mm.
+  Model m = crossedCylinders(1.0, 0.0);
+  for (Body& b : m.bodies)
+  {
+    StrutLayer core = b.layers.back();
+    core.inner_radius = 0.0;
+    core.outer_radius = 0.008;
+    core.youngs_modulus = 210e9;
+    b.layers.back().inner_radius = 0.008;
+    b.layers.insert(b.layers.begin(), core);
+  }
+  m.checked_pairs[0] = makeStrutPair(m, 0, 1);
+  const StrutPair& p = m.checked_pairs[0];
+  ASSERT_NEAR(p.core_gap, 0.024, 1e-15);
+  const double mu = 0.5 * m.bodies[0].mass;
+  const auto work = [&](double z)
+  {
+    return 0.4 * p.stiffness90 * std::pow(z, 2.5) +
+           0.4 * p.core_stiffness90 * std::pow(std::max(0.0, z - p.core_gap), 2.5);
+  };
+  for (double v : { 5.0, 10.0, 25.0, 40.0 })
+  {
+    double lo = 0.0, hi = 0.04;
+    for (int k = 0; k < 200; ++k)
+      (work(0.5 * (lo + hi)) < 0.5 * mu * v * v ? lo : hi) = 0.5 * (lo + hi);
+    const double expected = 0.5 * (lo + hi);
+    const ImpactRecord r = simulateImpact(m, 1e-6, 6e-3, Vec3(0.0, 0.0, -v));
+    ASSERT_TRUE(r.ok) << v;
+    EXPECT_NEAR(r.max_penetration, expected, 2e-3 * expected) << v;
+    EXPECT_EQ(r.max_penetration > p.core_gap, v > 20.0) << v;
+    if (v > 20.0)
+    {
+      EXPECT_LT(r.max_penetration - p.core_gap, 5e-3) << v;  // the steel's Hertz overlap: a few mm
+    }
+    EXPECT_LT(r.energy_max_error, 1e-3 * r.energy_start) << v;
+    EXPECT_GT(r.t_end, r.t_start) << v;  // they part again
+    EXPECT_NEAR(r.rebound_ratio, 1.0, 2e-3) << v;
+  }
 }
 
 TEST(ContactTunnelling, AStepThroughAStrutIsCutNotAccepted)
