@@ -329,6 +329,25 @@ TEST(ContactTunnelling, AStepThroughAStrutIsCutNotAccepted)
   EXPECT_GT(s.qd(9), 0.0);    // and moving up after the rebound
 }
 
+TEST(ContactTunnelling, AStepThroughAStrutThatCannotBeCutEndsTheRunNamingThePair)
+{
+  // the same jump with no cut allowed: the step fails with status passed_through, the struts named, and the
+  // state is left where it was (before the struts met)
+  const Model m = crossedCylinders(0.5, 0.0);
+  SolverOptions o = options(5e-3);
+  o.max_step_cuts = 0;
+  DynamicsSolver solver(m, o);
+  State s = initialState(m);
+  s.qd.segment<3>(7) = Vec3(0.0, 0.0, -30.0);
+  ASSERT_TRUE(solver.initialize(s, noActuation()).ok());
+  const Eigen::VectorXd before = s.q;
+  const Summary r = solver.step(s, 5e-3, noActuation());
+  EXPECT_EQ(r.status, SolveStatus::kPassedThrough);
+  EXPECT_NE(r.message.find("'A'"), std::string::npos) << r.message;
+  EXPECT_NE(r.message.find("'B'"), std::string::npos) << r.message;
+  EXPECT_EQ(s.q, before);
+}
+
 TEST(AdaptiveSteps, HertzImpactOnsetLocatedClosedFormKeptAndStepGrowsAfter)
 {
   // the Hertz impact above with variable steps from 1 ms: the step that starts the contact is cut to

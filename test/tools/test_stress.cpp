@@ -66,7 +66,9 @@ TEST(Stress, QuickCasesEndConvergedOrWithAStatusNeverNonFinite)
     }
     std::printf("[ measured ] %s: %s\n", r[0].c_str(), ended.substr(0, 60).c_str());
   }
-  // the table shows both kinds: cases that hold and cases the model cannot hold (reported, not hidden)
+  // cases that hold; any the model cannot hold are reported with their status (above), not hidden. (Since the
+  // cores of layered struts meet, the tower's fast folds hold too; a run that ends passed_through is tested in
+  // test_contact_dynamics, ContactTunnelling.)
   EXPECT_GT(converged, 0);
-  EXPECT_GT(passed_through, 0);
+  std::printf("[ measured ] %d converged, %d passed_through\n", converged, passed_through);
 }
