@@ -9,6 +9,8 @@
 #include "active_tensegrity/core/dynamics.h"
 #include "active_tensegrity/core/broad_phase.h"
 #include "active_tensegrity/core/contact.h"
+#include "active_tensegrity/core/geometry.h"
+#include "active_tensegrity/core/kinematics.h"
 #include "active_tensegrity/core/statics.h"
 #include "active_tensegrity/core/structure_check.h"
 #include "active_tensegrity/core/text.h"
@@ -115,6 +117,109 @@ double minimumGap(const Model& model, const Eigen::VectorXd& q)
   for (size_t i = 0; i < model.checked_pairs.size(); ++i)
     gap = std::min(gap, contactGeometry(model, static_cast<int>(i), q).gap);
   return gap;
+}
+
+namespace
+{
+/// Calls visit(gap) for every checked pair of a cable segment and a strut whose grown boxes overlap.
+void forEachCableStrutGap(const Model& model, const Eigen::VectorXd& q,
+                          const std::function<void(const CableStrutGap&)>& visit)
+{
+  struct Box
+  {
+    int strut;
+    Vec3 a, b;    // axis ends
+    Vec3 lo, hi;  // the capsule's box, grown by the margin
+  };
+  std::vector<Box> boxes;
+  double length_sum = 0.0, widest = 0.0;
+  for (size_t i = 0; i < model.bodies.size(); ++i)
+    if (model.bodies[i].kind == BodyKind::kStrut)
+      length_sum += model.bodies[i].length;
+  const int struts = static_cast<int>(std::count_if(model.bodies.begin(), model.bodies.end(),
+                                                    [](const Body& b) { return b.kind == BodyKind::kStrut; }));
+  if (struts == 0 || model.cables.empty())
+    return;
+  const double margin = length_sum / struts;
+  for (size_t i = 0; i < model.bodies.size(); ++i)
+  {
+    const Body& b = model.bodies[i];
+    if (b.kind != BodyKind::kStrut)
+      continue;
+    Box box;
+    box.strut = static_cast<int>(i);
+    box.a = pointPosition(model, PointRef{ box.strut, Vec3(0.0, 0.0, -0.5 * b.length) }, q);
+    box.b = pointPosition(model, PointRef{ box.strut, Vec3(0.0, 0.0, 0.5 * b.length) }, q);
+    const Vec3 grow = Vec3::Constant(b.radius() + margin);
+    box.lo = box.a.cwiseMin(box.b) - grow;
+    box.hi = box.a.cwiseMax(box.b) + grow;
+    widest = std::max(widest, box.hi.x() - box.lo.x());
+    boxes.push_back(box);
+  }
+  std::sort(boxes.begin(), boxes.end(), [](const Box& x, const Box& y) { return x.lo.x() < y.lo.x(); });
+  for (size_t c = 0; c < model.cables.size(); ++c)
+  {
+    const Cable& cable = model.cables[c];
+    Vec3 p = pointPosition(model, cable.points[0], q);
+    for (size_t k = 0; k + 1 < cable.points.size(); ++k)
+    {
+      const Vec3 next = pointPosition(model, cable.points[k + 1], q);
+      const Vec3 lo = p.cwiseMin(next), hi = p.cwiseMax(next);
+      // boxes whose lower x lies in [lo.x - widest, hi.x] can overlap the segment's
+      auto it = std::lower_bound(boxes.begin(), boxes.end(), lo.x() - widest,
+                                 [](const Box& b, double x) { return b.lo.x() < x; });
+      for (; it != boxes.end() && it->lo.x() <= hi.x(); ++it)
+      {
+        if ((it->hi.array() < lo.array()).any() || (it->lo.array() > hi.array()).any())
+          continue;
+        const auto meets = [&](size_t point)
+        {
+          if (point < cable.point_struts.size())
+            return std::find(cable.point_struts[point].begin(), cable.point_struts[point].end(), it->strut) !=
+                   cable.point_struts[point].end();
+          return cable.points[point].body == it->strut;
+        };
+        if (meets(k) || meets(k + 1))
+          continue;
+        visit({ closestPointsSegments(p, next, it->a, it->b).distance - model.bodies[it->strut].radius(),
+                static_cast<int>(c), static_cast<int>(k), it->strut });
+      }
+      p = next;
+    }
+  }
+}
+}  // namespace
+
+CableStrutGap minimumCableStrutGap(const Model& model, const Eigen::VectorXd& q)
+{
+  CableStrutGap best;
+  forEachCableStrutGap(model, q,
+                       [&](const CableStrutGap& g)
+                       {
+                         if (g.gap < best.gap)
+                           best = g;
+                       });
+  return best;
+}
+
+std::vector<CableStrutGap> cableStrutCrossings(const Model& model, const Eigen::VectorXd& q)
+{
+  std::vector<CableStrutGap> out;
+  forEachCableStrutGap(model, q,
+                       [&](const CableStrutGap& g)
+                       {
+                         if (!(g.gap < 0.0))
+                           return;
+                         for (CableStrutGap& o : out)
+                           if (o.cable == g.cable && o.strut == g.strut)
+                           {
+                             if (g.gap < o.gap)
+                               o = g;
+                             return;
+                           }
+                         out.push_back(g);
+                       });
+  return out;
 }
 
 std::vector<ContactPairState> activeContacts(const Model& model, const State& state)
@@ -270,7 +375,8 @@ std::vector<std::string> csvColumns(const Model& model)
                                     "max_friction_force",
                                     "slack_cables",
                                     "max_strut_bending_stress",
-                                    "max_cable_stress" };
+                                    "max_cable_stress",
+                                    "min_cable_strut_gap" };
   if (hasLoadPath(model))
     cols.push_back("load_factor");
   for (const OutputLayer& layer : model.layers)
@@ -286,22 +392,27 @@ std::vector<std::string> csvColumns(const Model& model)
 
 PeakTracker::PeakTracker(const Model& model) : model_(model)
 {
-  const std::vector<std::string> cols = csvColumns(model);
   for (const char* name :
        { "actuation_force", "max_normal_force", "max_friction_force", "max_strut_bending_stress", "max_cable_stress" })
-  {
-    columns_.push_back(static_cast<int>(std::find(cols.begin(), cols.end(), name) - cols.begin()));
     peaks_.push_back({ name, 0.0, 0.0 });
-  }
 }
 
 void PeakTracker::add(const State& state)
 {
-  const std::vector<double> row = csvRow(model_, state);
-  for (size_t k = 0; k < columns_.size(); ++k)
-    if (std::abs(row[columns_[k]]) > std::abs(peaks_[k].value))
+  // the five columns as csvRow computes them, and nothing else of the row (this runs at every step)
+  double max_normal = 0.0, max_friction = 0.0;
+  const std::vector<ContactPairState> contacts = activeContacts(model_, state);
+  for (const ContactPairState& c : contacts)
+  {
+    max_normal = std::max(max_normal, c.normal_force);
+    max_friction = std::max(max_friction, c.friction_force);
+  }
+  const double values[] = { model_.actuators.empty() ? 0.0 : actuationForce(model_, state, 0), max_normal, max_friction,
+                            maxStrutBendingStress(model_, state.q, contacts), maxCableStress(model_, state) };
+  for (size_t k = 0; k < peaks_.size(); ++k)
+    if (std::abs(values[k]) > std::abs(peaks_[k].value))
     {
-      peaks_[k].value = row[columns_[k]];
+      peaks_[k].value = values[k];
       peaks_[k].t = state.t;
     }
 }
@@ -326,7 +437,8 @@ std::vector<double> csvRow(const Model& model, const State& state)
                               max_friction,
                               static_cast<double>(slackCables(model, state)),
                               maxStrutBendingStress(model, state.q, contacts),
-                              maxCableStress(model, state) };
+                              maxCableStress(model, state),
+                              minimumCableStrutGap(model, state.q).gap };
   if (hasLoadPath(model))
     row.push_back(loadFactor(model, state));
   for (const OutputLayer& layer : model.layers)
@@ -433,9 +545,38 @@ void runAdaptive(const Model& model, DynamicsSolver& solver, const ActuationLaw&
 }
 }  // namespace
 
-RunResult runAnalysis(const Model& model, const std::function<void(const State&)>& on_output,
+RunResult runAnalysis(const Model& model, const std::function<void(const State&)>& user_output,
                       const std::function<void(double)>& on_progress, const std::function<void(const State&)>& on_step)
 {
+  // cables that run through a strut, at the output steps: once per cable and strut, at most kMaxCrossingWarnings
+  constexpr size_t kMaxCrossingWarnings = 20;
+  std::vector<std::pair<int, int>> crossed;
+  std::vector<std::string> crossing_warnings;
+  const std::function<void(const State&)> on_output = [&](const State& s)
+  {
+    for (const CableStrutGap& g : cableStrutCrossings(model, s.q))
+    {
+      if (std::find(crossed.begin(), crossed.end(), std::make_pair(g.cable, g.strut)) != crossed.end())
+        continue;
+      crossed.emplace_back(g.cable, g.strut);
+      if (crossed.size() <= kMaxCrossingWarnings)
+        crossing_warnings.push_back(
+            "cable " + quoted(model.cables[g.cable].name) + " runs through strut " +
+            quoted(model.bodies[g.strut].name) + " (its segment from point " + std::to_string(g.segment + 1) + ", " +
+            roundedNumber(-g.gap * 1e3, 3) + " mm inside the strut's surface) first at " +
+            (model.analysis.type == AnalysisType::kStatic ? "path parameter " + roundedNumber(s.t) :
+                                                            "t = " + roundedNumber(s.t) + " s") +
+            " (min_cable_strut_gap; cables do not touch struts in the model)");
+    }
+    user_output(s);
+  };
+  const auto with_crossing_warnings = [&](Summary& sum)
+  {
+    sum.warnings.insert(sum.warnings.end(), crossing_warnings.begin(), crossing_warnings.end());
+    if (crossed.size() > kMaxCrossingWarnings)
+      sum.warnings.push_back("and " + std::to_string(crossed.size() - kMaxCrossingWarnings) +
+                             " more cable and strut pairs where the cable runs through the strut");
+  };
   const auto start = std::chrono::steady_clock::now();
   RunResult result;
   State state = initialState(model);
@@ -590,6 +731,7 @@ RunResult runAnalysis(const Model& model, const std::function<void(const State&)
     result.timings = solver.timings();
     with_yield_warnings(result.summary);
   }
+  with_crossing_warnings(result.summary);
   result.final_state = state;
   result.wall_time = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return result;

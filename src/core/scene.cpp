@@ -694,6 +694,11 @@ private:
           l += lk;
         }
         c.points.push_back(model_.nodes[node_index_.at(ends[k])].point);
+        std::vector<int> struts_here;
+        for (const PointRef& a : nk.attachments)
+          if (a.body >= 0 && model_.bodies[a.body].kind == BodyKind::kStrut)
+            struts_here.push_back(a.body);
+        c.point_struts.push_back(struts_here);
       }
       if (!std::isfinite(l))
         members.fail(key, "the member's length is not finite (" + shortestNumber(l) + ")");

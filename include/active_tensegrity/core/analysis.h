@@ -3,6 +3,7 @@
 #pragma once
 
 #include <functional>
+#include <limits>
 #include <string>
 #include <utility>
 #include <vector>
@@ -25,6 +26,22 @@ double structureHeight(const Model& model, const Eigen::VectorXd& q);
 /// Smallest surface gap between the checked strut pairs (m, negative when they overlap); +inf when
 /// the scene checks no pair.
 double minimumGap(const Model& model, const Eigen::VectorXd& q);
+
+/// The smallest gap between a cable segment and a strut: the distance of the segment from the strut's axis
+/// segment less the strut's radius (negative: the cable runs through the strut). Every cable and spring segment
+/// against every strut except those that end at the segment's two nodes (the cable meets them there); pairs
+/// whose boxes, grown by the mean strut length, do not overlap are skipped (sorted sweep along x). gap = +inf
+/// when no pair is that close; cable, segment (from point `segment` to the next) and strut name the pair.
+struct CableStrutGap
+{
+  double gap = std::numeric_limits<double>::infinity();
+  int cable = -1;
+  int segment = -1;
+  int strut = -1;
+};
+CableStrutGap minimumCableStrutGap(const Model& model, const Eigen::VectorXd& q);
+/// Every cable that runs through a strut (gap < 0), once per cable and strut, at its deepest segment.
+std::vector<CableStrutGap> cableStrutCrossings(const Model& model, const Eigen::VectorXd& q);
 
 /// The pairs in contact in a state (empty when contact is off), evaluated as the analysis does
 /// (Hertz in statics; Lankarani-Nikravesh and friction with the state's impact speeds in dynamics).
@@ -73,6 +90,7 @@ double loadFactor(const Model& model, const State& state);
 
 /// Column names of the CSV: t, actuation, actuation_force, height, active_contacts, min_gap,
 /// max_normal_force, max_friction_force, slack_cables, max_strut_bending_stress, max_cable_stress,
+/// min_cable_strut_gap (minimumCableStrutGap; empty when no pair is near),
 /// load_factor (static paths that scale their loads), height_<layer> per output layer, then actuation_<name> and
 /// actuation_force_<name> per actuator when there are several.
 std::vector<std::string> csvColumns(const Model& model);
@@ -102,7 +120,6 @@ public:
 
 private:
   const Model& model_;
-  std::vector<int> columns_;  // into csvColumns(model)
   std::vector<Peak> peaks_;
 };
 

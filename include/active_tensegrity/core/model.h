@@ -83,6 +83,9 @@ struct Cable
   double area = 0.0;            // m^2, for stresses (0 when not a material cable)
   double yield_strength = 0.0;  // Pa, the material's (0: none given); runs warn about stresses above it
   int actuator = -1;            // index into Model::actuators that pulls this cable in, or -1
+  // per point: the struts that end at its node (the cable meets them there; its segments from that point are
+  // not checked against them for crossings, analysis.h). Filled by the scene loader; empty: the point's body.
+  std::vector<std::vector<int>> point_struts;
 
   bool sliding() const
   {
