@@ -444,17 +444,7 @@ Model layeredStruts(double mu, double restitution, bool both = true)
 {
   Model m = twoStruts(mu, restitution);
   for (size_t i = 0; i < (both ? 2u : 1u); ++i)
-  {
-    Body& b = m.bodies[i];
-    StrutLayer core = b.layers.back();
-    core.material = "steel";
-    core.inner_radius = 0.0;
-    core.outer_radius = 0.015;
-    core.youngs_modulus = 210e9;
-    core.poisson_ratio = 0.3;
-    b.layers.back().inner_radius = 0.015;
-    b.layers.insert(b.layers.begin(), core);
-  }
+    addSteelCore(m.bodies[i], 0.015);
   m.checked_pairs[0] = makeStrutPair(m, 0, 1);
   return m;
 }

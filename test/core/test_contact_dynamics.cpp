@@ -269,14 +269,7 @@ TEST(LayeredImpact, CoresStopTheStrutsBeyondTheSleevesAtTheEnergyBalancesOverlap
   // crossing). At 5 and 10 m/s the sleeves stop the struts; at 25 and 40 m/s the cores do, within a few mm.
   Model m = crossedCylinders(1.0, 0.0);
   for (Body& b : m.bodies)
-  {
-    StrutLayer core = b.layers.back();
-    core.inner_radius = 0.0;
-    core.outer_radius = 0.008;
-    core.youngs_modulus = 210e9;
-    b.layers.back().inner_radius = 0.008;
-    b.layers.insert(b.layers.begin(), core);
-  }
+    addSteelCore(b, 0.008);
   m.checked_pairs[0] = makeStrutPair(m, 0, 1);
   const StrutPair& p = m.checked_pairs[0];
   ASSERT_NEAR(p.core_gap, 0.024, 1e-15);

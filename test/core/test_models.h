@@ -29,6 +29,20 @@ inline Body makeStrut(const std::string& name, double length, double radius, dou
   return b;
 }
 
+/// Puts a steel core (E = 210 GPa, nu = 0.3) of the given radius inside a strut's one layer, which becomes its
+/// sleeve (the mass and inertia are left as they were: contact tests).
+inline void addSteelCore(Body& b, double radius)
+{
+  StrutLayer core = b.layers.back();
+  core.material = "steel";
+  core.inner_radius = 0.0;
+  core.outer_radius = radius;
+  core.youngs_modulus = 210e9;
+  core.poisson_ratio = 0.3;
+  b.layers.back().inner_radius = radius;
+  b.layers.insert(b.layers.begin(), core);
+}
+
 inline Body makePointMass(const std::string& name, double mass)
 {
   Body b;
