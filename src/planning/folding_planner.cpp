@@ -1131,6 +1131,19 @@ PlanResult planFolding(const core::Model& model, const core::State& given, const
   clock.answering(0.3);
   clock.phase("follow");
   const Equilibrium end = followFromStart(oracle, r, simple, clock, out);
+  if (out.waypoints.size() < 2 && out.status != PlanStatus::kExactSolution && clock.out())
+  {
+    // the best path of a stopped search could not be followed one waypoint from the start: there is nothing to
+    // drive, as when the search had no path at all
+    out.status = PlanStatus::kTimeout;
+    out.message = "no path: " + std::string(clock.cancelled() ? "cancelled" : "the time limit ended the search") +
+                  "; the best path so far, " + out.message;
+    out.waypoints.clear();
+    out.final_height = 0.0;
+    out.min_gap = std::numeric_limits<double>::infinity();
+    out.peak_contact_force = 0.0;
+    return finish();
+  }
   if (clock.cancelled())
     out.message += " (cancelled: the best path found so far)";
   else if (clock.timedOut() && out.status != PlanStatus::kExactSolution)
