@@ -26,14 +26,16 @@ __all__ = ["FormFindingError", "Model", "SceneError", "Result", "Simulation", "c
            "plan_folding", "planners", "run"]
 
 
-def _override_text(key, value):
+def _value_text(value):
+    """A value as an override takes it: booleans as YAML writes them, floats in the shortest text that reads back
+    as the same double."""
     if isinstance(value, bool):
-        text = "true" if value else "false"
-    elif isinstance(value, float):
-        text = repr(value)  # the shortest text that reads back as the same double
-    else:
-        text = str(value)
-    return "%s=%s" % (key, text)
+        return "true" if value else "false"
+    return repr(value) if isinstance(value, float) else str(value)
+
+
+def _override_text(key, value):
+    return "%s=%s" % (key, _value_text(value))
 
 
 def _overrides(overrides):

@@ -66,11 +66,10 @@ def _mapping(study, key, default):
 
 
 def value_text(value):
-    """A value as an override and a file name show it: booleans as YAML writes them, floats in their shortest
-    exact form."""
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    return repr(value) if isinstance(value, float) else str(value)
+    """A value as an override and a file name show it (booleans as YAML writes them, floats in their shortest
+    exact form): the API's own override text."""
+    from active_tensegrity import _value_text
+    return _value_text(value)
 
 
 def file_stem(template, overrides, where):
@@ -336,7 +335,8 @@ def make_plots(study, table, out):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    rows = list(csv.DictReader(open(table)))
+    with open(table, newline="") as f:
+        rows = list(csv.DictReader(f))
 
     def number(text):
         try:

@@ -133,11 +133,13 @@ void forEachCableStrutGap(const Model& model, const Eigen::VectorXd& q,
   };
   std::vector<Box> boxes;
   double length_sum = 0.0, widest = 0.0;
-  for (size_t i = 0; i < model.bodies.size(); ++i)
-    if (model.bodies[i].kind == BodyKind::kStrut)
-      length_sum += model.bodies[i].length;
-  const int struts = static_cast<int>(std::count_if(model.bodies.begin(), model.bodies.end(),
-                                                    [](const Body& b) { return b.kind == BodyKind::kStrut; }));
+  int struts = 0;
+  for (const Body& b : model.bodies)
+    if (b.kind == BodyKind::kStrut)
+    {
+      length_sum += b.length;
+      ++struts;
+    }
   if (struts == 0 || model.cables.empty())
     return;
   const double margin = length_sum / struts;
