@@ -151,8 +151,9 @@ class Result:
     columns, table: tensegrity_run's CSV (names, and an array of steps x columns); result[name] is a column.
     nodes: (steps, nodes, 3) positions, m, in the scene's node order (node_names).
     member_columns, members: tensegrity_run --members (cable tensions, lengths, rest lengths; strut forces).
-    contacts: one row per active contact pair and step: step index, strut a, strut b (body indices), point on
-      a (x, y, z), point on b, normal, penetration, penetration rate, normal force, friction force on a (x, y, z).
+    contacts: one row per active contact and step: step index, strut a, strut b (body indices; b is -1 for the
+      ground), point on a (x, y, z), point on b, normal, penetration, penetration rate, normal force, friction
+      force on a (x, y, z).
     summary: status, message, warnings, newton_iterations, step_cuts, output_steps, solver_steps, wall_time, and
       peaks: {column: {"value", "t"}}, the largest magnitude over every step (not only the output steps) of
       actuation_force, max_normal_force, max_friction_force, max_strut_bending_stress, max_cable_stress.

@@ -55,11 +55,12 @@ double maxStrutBendingStress(const Model& model, const Eigen::VectorXd& q, const
   std::vector<std::vector<std::pair<double, Vec3>>> loads(model.bodies.size());
   for (const ContactPairState& c : contacts)
   {
-    const StrutPair& p = model.checked_pairs[c.pair];
-    const int bodies[2] = { p.body_a, p.body_b };
+    const int bodies[2] = { c.body_a, c.body_b };
     const Vec3 points[2] = { c.point_a, c.point_b };
     for (int k = 0; k < 2; ++k)
     {
+      if (bodies[k] < 0 || model.bodies[bodies[k]].kind != BodyKind::kStrut)
+        continue;  // the ground, a point mass
       const Body& b = model.bodies[bodies[k]];
       const Vec3 axis = bodyZAxis(q.segment<4>(b.offset + 3));
       const double s = std::clamp(axis.dot(points[k] - q.segment<3>(b.offset)) + 0.5 * b.length, 0.0, b.length);
@@ -109,6 +110,14 @@ double maxCableStress(const Model& model, const State& state)
     if (model.cables[i].area > 0.0)
       sigma = std::max(sigma, cables[i].tension / model.cables[i].area);
   return sigma;
+}
+
+double minimumGroundGap(const Model& model, const Eigen::VectorXd& q)
+{
+  double gap = std::numeric_limits<double>::infinity();
+  for (size_t i = 0; i < model.ground_contacts.size(); ++i)
+    gap = std::min(gap, contactGeometry(model, static_cast<int>(model.checked_pairs.size() + i), q).gap);
+  return gap;
 }
 
 double minimumGap(const Model& model, const Eigen::VectorXd& q)
@@ -227,12 +236,16 @@ std::vector<CableStrutGap> cableStrutCrossings(const Model& model, const Eigen::
 std::vector<ContactPairState> activeContacts(const Model& model, const State& state)
 {
   std::vector<ContactPairState> out;
-  if (!model.contact.enabled)
+  if (!model.anyContact())
     return out;
   const ContactMode mode = model.analysis.type == AnalysisType::kStatic ? ContactMode::kStatic : ContactMode::kDynamic;
-  const BroadPhase broad(model);
   std::vector<int> candidates;
-  broad.candidates(state.q, 0.0, candidates);
+  if (model.contact.enabled)
+  {
+    const BroadPhase broad(model);
+    broad.candidates(state.q, 0.0, candidates);
+  }
+  appendGroundCandidates(model, state.q, 0.0, candidates);
   for (int i : candidates)
   {
     const double v0 = i < static_cast<int>(state.contact_speed.size()) ? state.contact_speed[i] : 0.0;
@@ -379,6 +392,9 @@ std::vector<std::string> csvColumns(const Model& model)
                                     "max_strut_bending_stress",
                                     "max_cable_stress",
                                     "min_cable_strut_gap" };
+  if (model.ground.enabled)
+    for (const char* name : { "ground_contacts", "min_ground_gap", "ground_normal_force", "max_ground_friction_force" })
+      cols.push_back(name);
   if (hasLoadPath(model))
     cols.push_back("load_factor");
   for (const OutputLayer& layer : model.layers)
@@ -405,10 +421,11 @@ void PeakTracker::add(const State& state)
   double max_normal = 0.0, max_friction = 0.0;
   const std::vector<ContactPairState> contacts = activeContacts(model_, state);
   for (const ContactPairState& c : contacts)
-  {
-    max_normal = std::max(max_normal, c.normal_force);
-    max_friction = std::max(max_friction, c.friction_force);
-  }
+    if (c.body_b >= 0)
+    {
+      max_normal = std::max(max_normal, c.normal_force);
+      max_friction = std::max(max_friction, c.friction_force);
+    }
   const double values[] = { model_.actuators.empty() ? 0.0 : actuationForce(model_, state, 0), max_normal, max_friction,
                             maxStrutBendingStress(model_, state.q, contacts), maxCableStress(model_, state) };
   for (size_t k = 0; k < peaks_.size(); ++k)
@@ -422,18 +439,27 @@ void PeakTracker::add(const State& state)
 std::vector<double> csvRow(const Model& model, const State& state)
 {
   const bool any = !model.actuators.empty();
-  double max_normal = 0.0, max_friction = 0.0;
+  double max_normal = 0.0, max_friction = 0.0, ground_normal = 0.0, ground_friction = 0.0;
+  int strut_contacts = 0, ground_contacts = 0;
   const std::vector<ContactPairState> contacts = activeContacts(model, state);
   for (const ContactPairState& c : contacts)
-  {
-    max_normal = std::max(max_normal, c.normal_force);
-    max_friction = std::max(max_friction, c.friction_force);
-  }
+    if (c.body_b < 0)
+    {
+      ++ground_contacts;
+      ground_normal += c.normal_force;
+      ground_friction = std::max(ground_friction, c.friction_force);
+    }
+    else
+    {
+      ++strut_contacts;
+      max_normal = std::max(max_normal, c.normal_force);
+      max_friction = std::max(max_friction, c.friction_force);
+    }
   std::vector<double> row = { state.t,
                               any ? state.u[0].value : 0.0,
                               any ? actuationForce(model, state, 0) : 0.0,
                               structureHeight(model, state.q),
-                              static_cast<double>(contacts.size()),
+                              static_cast<double>(strut_contacts),
                               minimumGap(model, state.q),
                               max_normal,
                               max_friction,
@@ -441,6 +467,9 @@ std::vector<double> csvRow(const Model& model, const State& state)
                               maxStrutBendingStress(model, state.q, contacts),
                               maxCableStress(model, state),
                               minimumCableStrutGap(model, state.q).gap };
+  if (model.ground.enabled)
+    row.insert(row.end(), { static_cast<double>(ground_contacts), minimumGroundGap(model, state.q), ground_normal,
+                            ground_friction });
   if (hasLoadPath(model))
     row.push_back(loadFactor(model, state));
   for (const OutputLayer& layer : model.layers)

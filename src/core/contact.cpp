@@ -1,5 +1,7 @@
 #include "active_tensegrity/core/contact.h"
 
+#include "active_tensegrity/core/kinematics.h"
+
 #include <cmath>
 #include <limits>
 
@@ -131,7 +133,204 @@ ContactPairState baseState(int pair, const Closest& c, const StrutAxis& a, const
   st.point_b = c.p2 + b.radius * c.n;
   return st;
 }
+
+// ---- the ground --------------------------------------------------------------------------------------
+
+const GroundContact& groundContact(const Model& model, int slot)
+{
+  return model.ground_contacts[slot - static_cast<int>(model.checked_pairs.size())];
+}
+
+PointRef groundPoint(const Model& model, int slot)
+{
+  const GroundContact& g = groundContact(model, slot);
+  return PointRef{ g.body, g.local };
+}
+
+// the state of a ground slot whose sphere's centre is at c
+ContactPairState groundGeometry(const Model& model, int slot, const Vec3& c)
+{
+  const GroundContact& g = groundContact(model, slot);
+  ContactPairState st;
+  st.pair = slot;
+  st.body_a = g.body;
+  st.body_b = -1;
+  st.normal = Vec3::UnitZ();
+  st.gap = c.z() - g.radius - model.ground.height;
+  st.penetration = -st.gap;
+  st.active = st.penetration > 0.0;
+  st.point_a = c - g.radius * Vec3::UnitZ();
+  st.point_b = Vec3(c.x(), c.y(), model.ground.height);
+  st.region = ClosestRegion::kInterior;
+  return st;
+}
+
+using Row7 = Eigen::Matrix<double, 1, 7>;
+using Mat3x7 = Eigen::Matrix<double, 3, 7>;
+using Mat4x7 = Eigen::Matrix<double, 4, 7>;
+using Mat7 = Eigen::Matrix<double, 7, 7>;
+using Vec7 = Eigen::Matrix<double, 7, 1>;
+
+// A sphere (centre c = R + A(Theta) u, radius r) on the plane z = h: zeta = h + r - c_z, n = z. The normal
+// force acts along z through c; friction acts at the lowest point PA as a material point,
+// u_A = u - r A^T z (moving over the body as it turns), against the slip v_T = P (R_dot + B(Theta, u_A)
+// Theta_dot), P = I - z z^T. The tangents are exact (the point mass is the strut without Theta).
+ContactPairState evaluateGroundContact(const Model& model, int slot, const Eigen::VectorXd& q,
+                                       const Eigen::VectorXd& qd, double impact_speed, ContactMode mode,
+                                       ContactContribution* out)
+{
+  const GroundContact& g = groundContact(model, slot);
+  const GroundSettings& ground = model.ground;
+  const ContactSettings& set = model.contact;
+  const Body& body = model.bodies[g.body];
+  const bool strut = body.kind == BodyKind::kStrut;
+  const bool dynamic = mode == ContactMode::kDynamic;
+  const PointKinematics k = pointKinematics(model, PointRef{ g.body, g.local }, q, qd, true);
+  ContactPairState st = groundGeometry(model, slot, k.p);
+  if (out)
+  {
+    out->force.setZero();
+    if (out->tangents)
+    {
+      out->stiffness.setZero();
+      out->damping.setZero();
+    }
+  }
+  st.penetration_rate = -k.v.z();
+  if (!st.active)
+    return st;
+  st.stiffness = g.stiffness;
+  const double damping = dynamic ? 3.0 * (1.0 - ground.restitution * ground.restitution) /
+                                       (4.0 * std::max(impact_speed, set.min_impact_speed)) :
+                                   0.0;
+  const double hysteresis = 1.0 + damping * st.penetration_rate;
+  if (hysteresis <= 0.0)
+    return st;
+  const double zeta = st.penetration;
+  const double elastic = g.stiffness * zeta * std::sqrt(zeta);
+  const double de_dzeta = 1.5 * g.stiffness * std::sqrt(zeta);
+  const double fn = elastic * hysteresis;
+  st.normal_force = fn;
+  st.force_on_a = fn * Vec3::UnitZ();
+
+  // friction at the lowest point of the sphere
+  const bool friction = dynamic && ground.friction > 0.0;
+  Vec4 theta = Vec4::Zero(), theta_rate = Vec4::Zero(), conj = Vec4::Zero();
+  Vec3 ua = Vec3::Zero(), vtol = Vec3::Zero(), t = Vec3::Zero(), f = Vec3::Zero();
+  Mat34 bua = Mat34::Zero();
+  double cd = 0.0, dcd = 0.0, ft = 0.0;
+  if (friction)
+  {
+    vtol = k.v;
+    if (strut)
+    {
+      theta = thetaOf(q, body);
+      theta_rate = thetaOf(qd, body);
+      conj = kConjugate.cwiseProduct(theta);
+      ua = g.local - g.radius * (rotationMatrix(conj) * Vec3::UnitZ());
+      bua = pointJacobianTheta(theta, ua);
+      vtol = qd.segment<3>(body.offset) + bua * theta_rate;
+    }
+    const Vec3 vt(vtol.x(), vtol.y(), 0.0);
+    st.slip_speed = vt.norm();
+    if (st.slip_speed > set.stick_velocity)
+    {
+      t = vt / st.slip_speed;
+      cd = 1.0;
+      if (st.slip_speed < set.slip_velocity)
+      {
+        dcd = 1.0 / (set.slip_velocity - set.stick_velocity);
+        cd = (st.slip_speed - set.stick_velocity) * dcd;
+      }
+      ft = ground.friction * cd * fn;
+      f = -ft * t;
+      st.friction_force = ft;
+      st.friction_on_a = f;
+      st.force_on_a += f;
+    }
+  }
+  if (!out)
+    return st;
+  const int nq = body.nq;
+  // g = dc_z/dq^T = [z; B_u^T z] (the normal force's generalized direction)
+  Vec7 gvec = Vec7::Zero();
+  gvec.head<3>() = Vec3::UnitZ();
+  if (strut)
+    gvec.tail<4>() = k.jac.rightCols<4>().transpose() * Vec3::UnitZ();
+  Vec7 force = fn * gvec;
+  if (ft > 0.0)
+  {
+    force.head<3>() += f;
+    if (strut)
+      force.tail<4>() += bua.transpose() * f;
+  }
+  out->force.head(nq) = force.head(nq);
+  if (!out->tangents)
+    return st;
+
+  // normal force F_N = E(zeta) (1 + D zeta_dot), zeta = h + r - c_z, zeta_dot = -v_z
+  const Row7 jzeta = -gvec.transpose();
+  const Row7 jq_rate = -k.dv_dq.row(2);
+  const Row7 jqd_rate = -gvec.transpose();
+  const Row7 jq_fn = hysteresis * de_dzeta * jzeta + elastic * damping * jq_rate;
+  const Row7 jqd_fn = elastic * damping * jqd_rate;
+  Mat7 jq_force = gvec * jq_fn;
+  if (strut)
+    jq_force.block<4, 4>(3, 3) += fn * pointHessianTheta(g.local, Vec3::UnitZ());
+  Mat7 jqd_force = gvec * jqd_fn;
+
+  if (ft > 0.0)
+  {
+    Mat3x7 jua = Mat3x7::Zero();  // d u_A / dq
+    Mat3x7 jq_vtol = Mat3x7::Zero(), jqd_vtol = Mat3x7::Zero();
+    jqd_vtol.block<3, 3>(0, 0).setIdentity();
+    if (strut)
+    {
+      jua.block<3, 4>(0, 3) = -g.radius * pointJacobianTheta(conj, Vec3::UnitZ()) * kConjugate.asDiagonal();
+      jq_vtol = rotationRate(theta, theta_rate) * jua;
+      jq_vtol.block<3, 4>(0, 3) += pointJacobianTheta(theta_rate, ua);
+      jqd_vtol.block<3, 4>(0, 3) = bua;
+    }
+    Mat3x7 jq_vt = jq_vtol, jqd_vt = jqd_vtol;
+    jq_vt.row(2).setZero();
+    jqd_vt.row(2).setZero();
+    const Mat3 tproj = (Mat3::Identity() - t * t.transpose()) / st.slip_speed;
+    const Row7 jq_ft = ground.friction * (fn * dcd * t.transpose() * jq_vt + cd * jq_fn);
+    const Row7 jqd_ft = ground.friction * (fn * dcd * t.transpose() * jqd_vt + cd * jqd_fn);
+    const Mat3x7 jq_f = -(t * jq_ft + ft * tproj * jq_vt);
+    const Mat3x7 jqd_f = -(t * jqd_ft + ft * tproj * jqd_vt);
+    jq_force.topRows<3>() += jq_f;
+    jqd_force.topRows<3>() += jqd_f;
+    if (strut)
+    {
+      Mat4x7 jq_rot = bua.transpose() * jq_f + transposedPointJacobianTimes(theta, f) * jua;
+      jq_rot.block<4, 4>(0, 3) += pointHessianTheta(ua, f);
+      jq_force.bottomRows<4>() += jq_rot;
+      jqd_force.bottomRows<4>() += bua.transpose() * jqd_f;
+    }
+  }
+  out->stiffness.topLeftCorner(nq, nq) = -jq_force.topLeftCorner(nq, nq);
+  out->damping.topLeftCorner(nq, nq) = -jqd_force.topLeftCorner(nq, nq);
+  return st;
+}
 }  // namespace
+
+void appendGroundCandidates(const Model& model, const Eigen::VectorXd& q, double margin, std::vector<int>& out)
+{
+  const int first = static_cast<int>(model.checked_pairs.size());
+  for (size_t i = 0; i < model.ground_contacts.size(); ++i)
+  {
+    const GroundContact& g = model.ground_contacts[i];
+    if (pointPosition(model, PointRef{ g.body, g.local }, q).z() - g.radius - model.ground.height <= margin)
+      out.push_back(first + static_cast<int>(i));
+  }
+}
+
+const std::string& contactBodyName(const Model& model, int body)
+{
+  static const std::string ground = "ground";
+  return body < 0 ? ground : model.bodies[body].name;
+}
 
 double effectiveModulus(const StrutLayer& la, const StrutLayer& lb)
 {
@@ -181,15 +380,22 @@ StiffnessValue contactStiffness(double k90, double cos2, double min_crossing_ang
 
 ContactPairState contactGeometry(const Model& model, int pair, const Eigen::VectorXd& q)
 {
+  if (model.isGroundSlot(pair))
+    return groundGeometry(model, pair, pointPosition(model, groundPoint(model, pair), q));
   const StrutPair& p = model.checked_pairs[pair];
   const StrutAxis a = strutAxis(model.bodies[p.body_a], q, nullptr);
   const StrutAxis b = strutAxis(model.bodies[p.body_b], q, nullptr);
-  return baseState(pair, closest(a, b), a, b);
+  ContactPairState st = baseState(pair, closest(a, b), a, b);
+  st.body_a = p.body_a;
+  st.body_b = p.body_b;
+  return st;
 }
 
 ContactPairState evaluateContact(const Model& model, int pair, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
                                  double impact_speed, ContactMode mode, ContactContribution* out)
 {
+  if (model.isGroundSlot(pair))
+    return evaluateGroundContact(model, pair, q, qd, impact_speed, mode, out);
   const StrutPair& p = model.checked_pairs[pair];
   const ContactSettings& set = model.contact;
   const bool dynamic = mode == ContactMode::kDynamic;
@@ -197,6 +403,8 @@ ContactPairState evaluateContact(const Model& model, int pair, const Eigen::Vect
   const StrutAxis b = strutAxis(model.bodies[p.body_b], q, &qd);
   const Closest c = closest(a, b);
   ContactPairState st = baseState(pair, c, a, b);
+  st.body_a = p.body_a;
+  st.body_b = p.body_b;
   if (out)
   {
     out->force.setZero();

@@ -50,8 +50,8 @@ void DynamicsSolver::prepareContact(const State& s, double h)
 {
   const ScopeTimer timer(timings_.contact);
   const Model& model = system_.model();
-  step_speeds_.assign(model.checked_pairs.size(), model.contact.min_impact_speed);
-  if (!model.contact.enabled)
+  step_speeds_.assign(model.contactSlots(), model.contact.min_impact_speed);
+  if (!model.anyContact())
     return;
   // how far any strut point can move in this step, from the speeds at its start (doubled: a margin)
   double reach = 0.0;
@@ -77,11 +77,11 @@ void DynamicsSolver::updateContactMemory(State& s, const Eigen::VectorXd& q_star
   const ScopeTimer timer(timings_.contact);
   const Model& model = system_.model();
   previous_speed_.swap(s.contact_speed);
-  s.contact_speed.assign(model.checked_pairs.size(), 0.0);
+  s.contact_speed.assign(model.contactSlots(), 0.0);
   estimate_.onset_depth = 0.0;
   estimate_.onset_gap = 0.0;
   estimate_.onset_pair = -1;
-  if (!model.contact.enabled)
+  if (!model.anyContact())
     return;
   system_.contactCandidates(s.q, 0.0, candidates_);
   for (int i : candidates_)
@@ -500,8 +500,8 @@ Summary DynamicsSolver::initialize(State& s, const ActuationLaw& law)
   Eigen::VectorXd zero = Eigen::VectorXd::Zero(nq);
   system_.inertialForce(s.q, s.qd, zero, inertial_, nullptr, 0.0, 0.0, 0.0);
   system_.appliedForce(s.q, s.qd, s.u, applied_, nullptr, 0.0, 0.0);
-  if (s.contact_speed.size() != system_.model().checked_pairs.size())
-    s.contact_speed.assign(system_.model().checked_pairs.size(), 0.0);
+  if (s.contact_speed.size() != static_cast<size_t>(system_.model().contactSlots()))
+    s.contact_speed.assign(system_.model().contactSlots(), 0.0);
   system_.contactForce(s.q, s.qd, s.contact_speed, ContactMode::kDynamic, applied_, nullptr, 0.0, 0.0);
   rhs.head(nq) = applied_ - inertial_;
   system_.accelerationRhs(s.q, s.qd, s.u, tmp);

@@ -618,8 +618,7 @@ FormCheck checkWritten(const std::string& scene, const std::string& name, bool s
   }
   for (const ContactPairState& p : activeContacts(model, start))
   {
-    const StrutPair& pair = model.checked_pairs[p.pair];
-    c.overlapping.push_back(model.bodies[pair.body_a].name + "-" + model.bodies[pair.body_b].name + " (gap " +
+    c.overlapping.push_back(contactBodyName(model, p.body_a) + "-" + contactBodyName(model, p.body_b) + " (gap " +
                             roundedNumber(p.gap, 3) + " m)");
   }
   if (supported)  // a static solve needs a support

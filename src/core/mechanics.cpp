@@ -99,15 +99,27 @@ void System::contactForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, c
                           ContactMode mode, Eigen::VectorXd& F, BlockSparseMatrix* jac, double k_weight,
                           double c_weight) const
 {
-  if (!model_.contact.enabled)
+  if (!model_.anyContact())
     return;
-  broad_phase_.candidates(q, 0.0, candidates_);
+  contactCandidates(q, 0.0, candidates_);
   contribution_.tangents = jac != nullptr;
   for (int i : candidates_)
   {
     const double v0 = impact_speeds.empty() ? 0.0 : impact_speeds[i];
     if (evaluateContact(model_, i, q, qd, v0, mode, &contribution_).normal_force <= 0.0)
       continue;
+    if (model_.isGroundSlot(i))
+    {
+      const int body = model_.ground_contacts[i - model_.checked_pairs.size()].body;
+      const Body& b = model_.bodies[body];
+      F.segment(b.offset, b.nq) += contribution_.force.head(b.nq);
+      if (!jac)
+        continue;
+      jac->add(body, body, contribution_.stiffness.topLeftCorner(b.nq, b.nq), k_weight);
+      if (c_weight != 0.0 && mode == ContactMode::kDynamic)
+        jac->add(body, body, contribution_.damping.topLeftCorner(b.nq, b.nq), c_weight);
+      continue;
+    }
     const StrutPair& p = model_.checked_pairs[i];
     const Body& a = model_.bodies[p.body_a];
     const Body& b = model_.bodies[p.body_b];
@@ -125,6 +137,15 @@ void System::contactForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, c
           jac->add(g[x], g[y], contribution_.damping.block<7, 7>(7 * x, 7 * y), c_weight);
       }
   }
+}
+
+void System::contactCandidates(const Eigen::VectorXd& q, double margin, std::vector<int>& out) const
+{
+  if (model_.contact.enabled)
+    broad_phase_.candidates(q, margin, out);
+  else
+    out.clear();
+  appendGroundCandidates(model_, q, margin, out);
 }
 
 int System::firstPassedThrough(const Eigen::VectorXd& q0, const Eigen::VectorXd& q1) const
@@ -290,11 +311,12 @@ double System::potentialEnergy(const Eigen::VectorXd& q, const ActuationValues& 
       e -= b.mass * model_.gravity.dot(q.segment<3>(b.offset));
   for (const PointLoad& load : model_.loads)
     e -= load_factor_ * load.force.dot(pointPosition(model_, load.point, q));
-  if (model_.contact.enabled)
-    for (size_t i = 0; i < model_.checked_pairs.size(); ++i)
+  if (model_.anyContact())
+    for (int i = 0; i < model_.contactSlots(); ++i)
     {
-      const ContactPairState st =
-          evaluateContact(model_, static_cast<int>(i), q, zero, 0.0, ContactMode::kStatic, nullptr);
+      if (!model_.isGroundSlot(i) && !model_.contact.enabled)
+        continue;
+      const ContactPairState st = evaluateContact(model_, i, q, zero, 0.0, ContactMode::kStatic, nullptr);
       if (st.active)
         e += 0.4 *
              (st.stiffness * std::pow(st.penetration, 2.5) + st.core_stiffness * std::pow(st.core_penetration, 2.5));

@@ -329,6 +329,8 @@ struct NodeInfo
   Vec3 position;
   bool fixed = false;
   double mass = 0.0;
+  double radius = 0.0;   // a point mass's sphere (ground contact), m
+  std::string material;  // its material (default: the ground's)
   std::vector<PointRef> attachments;
 };
 
@@ -359,6 +361,7 @@ public:
     readActuators();
     readSwitches();
     readContact();
+    readGround();
     readSolver();
     readAnalysis();
     readOutputs();
@@ -414,6 +417,16 @@ private:
       info.mass = n.nonNegative("mass", 0.0);
       if (info.fixed && info.mass > 0.0)
         n.fail(n.key("mass"), "a fixed node cannot carry a mass");
+      if (n.has("radius") || n.has("material"))
+      {
+        if (!(info.mass > 0.0))
+          n.fail(n.key(n.has("radius") ? "radius" : "material"),
+                 "only a node with a mass (a point mass) has a radius and a material (for the ground)");
+        info.radius = n.positive("radius");
+        info.material = n.string("material", "");
+        if (!info.material.empty() && !materials_.count(info.material))
+          n.fail(n.key("material"), "unknown material " + quoted(info.material));
+      }
       n.finish();
       node_index_[name] = static_cast<int>(nodes_.size());
       nodes_.push_back(info);
@@ -447,6 +460,11 @@ private:
 
   void readStruts()
   {
+    if (!root_.has("struts"))  // point masses alone (a mass-spring net)
+    {
+      root_.optional("struts");
+      return;
+    }
     Reader rs = root_.map("struts");
     const std::string material = rs.string("material");
     const double radius = rs.positive("radius");
@@ -876,6 +894,76 @@ private:
                                     " and " + quoted(model_.bodies[b].name) +
                                     " overflows: " + shortestNumber(p.core_stiffness90));
       model_.checked_pairs.push_back(p);
+    }
+  }
+
+  /// The ground (`ground`): its plane and material; a contact sphere at every strut end and every point mass with
+  /// a radius, except at fixed nodes (held there anyway). A sphere that starts pressed into the ground by more
+  /// than a tenth of its radius is refused (a scene placed with its nodes, not its surfaces, on the ground).
+  void readGround()
+  {
+    GroundSettings& g = model_.ground;
+    section(root_, "ground",
+            [&](Reader& r)
+            {
+              g.enabled = r.boolean("enabled", false);
+              g.height = r.number("height", 0.0);
+              g.material = r.string("material");
+              const auto it = materials_.find(g.material);
+              if (it == materials_.end())
+                r.fail(r.key("material"), "unknown material " + quoted(g.material));
+              g.youngs_modulus = it->second.youngs_modulus;
+              g.poisson_ratio = it->second.poisson_ratio;
+              g.restitution = r.nonNegative("restitution", g.restitution);
+              if (g.restitution > 1.0)
+                r.fail(r.key("restitution"), "must be in [0, 1], got " + show(r.get("restitution")));
+              g.friction = r.nonNegative("friction", g.friction);
+            });
+    if (!g.enabled)
+      return;
+    model_.ground_level = g.height;
+    StrutLayer ground_layer;
+    ground_layer.youngs_modulus = g.youngs_modulus;
+    ground_layer.poisson_ratio = g.poisson_ratio;
+    const Eigen::VectorXd& q0 = model_.q0;
+    for (const NodeInfo& n : nodes_)
+    {
+      if (n.fixed)
+        continue;
+      for (const PointRef& p : n.attachments)
+      {
+        const Body& b = model_.bodies[p.body];
+        GroundContact c;
+        c.body = p.body;
+        c.local = p.local;
+        c.node = n.name;
+        StrutLayer layer;
+        if (b.kind == BodyKind::kStrut)
+        {
+          c.radius = b.radius();
+          layer = b.layers.back();
+        }
+        else
+        {
+          if (!(n.radius > 0.0))
+            continue;  // a point mass without a radius does not touch the ground
+          c.radius = n.radius;
+          layer = n.material.empty() ? ground_layer :
+                                       makeLayer(root_, "nodes." + n.name + ".material", "nodes." + n.name + ".radius",
+                                                 n.material, 0.0, n.radius);
+        }
+        c.stiffness = 4.0 / 3.0 * effectiveModulus(layer, ground_layer) * std::sqrt(c.radius);
+        if (!std::isfinite(c.stiffness))
+          root_.fail("ground.material", "the ground contact stiffness at node " + quoted(n.name) +
+                                            " overflows: " + shortestNumber(c.stiffness));
+        const double depth = g.height + c.radius - pointPosition(model_, PointRef{ c.body, c.local }, q0).z();
+        if (depth > 0.1 * c.radius)
+          root_.fail("nodes." + n.name, "starts " + shortestNumber(depth) +
+                                            " m deep in the ground (its sphere of radius " + shortestNumber(c.radius) +
+                                            " m must rest on ground.height " + shortestNumber(g.height) +
+                                            ": place the node at z >= " + shortestNumber(g.height + c.radius) + ")");
+        model_.ground_contacts.push_back(c);
+      }
     }
   }
 

@@ -107,10 +107,9 @@ py::dict run(const at::Model& model)
           c.members.insert(c.members.end(), m.begin(), m.end());
           for (const at::ContactPairState& k : at::activeContacts(model, s))
           {
-            const at::StrutPair& pair = model.checked_pairs[k.pair];
             c.contacts.insert(c.contacts.end(),
-                              { static_cast<double>(c.steps), static_cast<double>(pair.body_a),
-                                static_cast<double>(pair.body_b), k.point_a.x(), k.point_a.y(), k.point_a.z(),
+                              { static_cast<double>(c.steps), static_cast<double>(k.body_a),
+                                static_cast<double>(k.body_b), k.point_a.x(), k.point_a.y(), k.point_a.z(),
                                 k.point_b.x(), k.point_b.y(), k.point_b.z(), k.normal.x(), k.normal.y(), k.normal.z(),
                                 k.penetration, k.penetration_rate, k.normal_force, k.friction_on_a.x(),
                                 k.friction_on_a.y(), k.friction_on_a.z() });

@@ -88,7 +88,7 @@ std::string bodyFrame(const core::Model& model, int body)
 }
 
 MessageBuilder::MessageBuilder(const core::Model& model, std::string frame_id, MarkerOptions options)
-  : model_(model), frame_id_(std::move(frame_id)), options_(options), arrow_shown_(model.checked_pairs.size(), false)
+  : model_(model), frame_id_(std::move(frame_id)), options_(options), arrow_shown_(model.contactSlots(), false)
 {
 }
 
@@ -121,10 +121,9 @@ Snapshot MessageBuilder::build(const core::State& state, const ros::Time& stamp)
   out.contacts.header.frame_id = frame_id_;
   for (const core::ContactPairState& c : contacts)
   {
-    const core::StrutPair& p = model_.checked_pairs[c.pair];
     active_tensegrity::Contact m;
-    m.strut_a = model_.bodies[p.body_a].name;
-    m.strut_b = model_.bodies[p.body_b].name;
+    m.strut_a = core::contactBodyName(model_, c.body_a);
+    m.strut_b = core::contactBodyName(model_, c.body_b);
     m.point_a = point(c.point_a);
     m.point_b = point(c.point_b);
     m.normal = vector(c.normal);
@@ -209,6 +208,21 @@ void MessageBuilder::addMarkers(const core::State& state, const std::vector<core
     out.markers.push_back(m);
   }
 
+  // the ground: a thin slab whose top is the ground plane, 20 m square under the initial configuration
+  if (model_.ground.enabled)
+  {
+    core::Vec3 centre = core::Vec3::Zero();
+    for (const core::Body& b : model_.bodies)
+      centre += model_.q0.segment<3>(b.offset) / static_cast<double>(model_.bodies.size());
+    Marker m = marker(frame_id_, stamp, "ground", 0, Marker::CUBE);
+    m.pose.position = point(core::Vec3(centre.x(), centre.y(), model_.ground.height - 0.005));
+    m.pose.orientation.w = 1.0;
+    m.scale.x = m.scale.y = 20.0;
+    m.scale.z = 0.01;
+    m.color = rgba(0.35f, 0.4f, 0.35f, 0.8f);
+    out.markers.push_back(m);
+  }
+
   // cables: one line list for the taut ones (coloured by tension), one for the slack ones
   double tension_scale = options_.cable_tension_scale;
   if (tension_scale <= 0.0)
@@ -246,7 +260,7 @@ void MessageBuilder::addMarkers(const core::State& state, const std::vector<core
 
   // contact forces: per pair in contact, the normal force on strut a (from its contact point along n)
   // and on strut b (opposite), and the friction force on strut a; ids 4 * pair + 0..3
-  std::vector<bool> shown(model_.checked_pairs.size(), false);
+  std::vector<bool> shown(model_.contactSlots(), false);
   for (const core::ContactPairState& c : contacts)
   {
     shown[c.pair] = true;

@@ -447,8 +447,8 @@ int main(int argc, char** argv)
           return;
         for (const at::ContactPairState& c : at::activeContacts(model, s))
         {
-          const at::StrutPair& p = model.checked_pairs[c.pair];
-          contacts << csvNumber(s.t) << "," << model.bodies[p.body_a].name << "," << model.bodies[p.body_b].name;
+          contacts << csvNumber(s.t) << "," << at::contactBodyName(model, c.body_a) << ","
+                   << at::contactBodyName(model, c.body_b);
           for (const at::Vec3* v : { &c.point_a, &c.point_b, &c.normal })
             contacts << "," << csvNumber(v->x()) << "," << csvNumber(v->y()) << "," << csvNumber(v->z());
           contacts << "," << csvNumber(c.penetration) << "," << csvNumber(c.penetration_rate) << ","

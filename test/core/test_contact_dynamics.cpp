@@ -129,27 +129,6 @@ ImpactRecord simulateImpact(const Model& m, double dt, double duration, const Ve
   return rec;
 }
 
-// m* zeta'' = -K zeta^1.5 (1 + D zeta'), zeta(0) = 0, zeta'(0) = v: the rebound speed ratio, by RK4
-double reboundOfOneDegreeOfFreedom(double mass, double k, double v, double restitution)
-{
-  const double d = 3.0 * (1.0 - restitution * restitution) / (4.0 * v);
-  const auto acc = [&](double z, double zd)
-  { return z > 0.0 ? -k * std::pow(z, 1.5) * std::max(0.0, 1.0 + d * zd) / mass : 0.0; };
-  double z = 0.0, zd = v;
-  const double h = 1e-7;
-  for (int i = 0; i < 10000000; ++i)
-  {
-    const double k1z = zd, k1v = acc(z, zd);
-    const double k2z = zd + 0.5 * h * k1v, k2v = acc(z + 0.5 * h * k1z, zd + 0.5 * h * k1v);
-    const double k3z = zd + 0.5 * h * k2v, k3v = acc(z + 0.5 * h * k2z, zd + 0.5 * h * k2v);
-    const double k4z = zd + h * k3v, k4v = acc(z + h * k3z, zd + h * k3v);
-    z += h / 6.0 * (k1z + 2 * k2z + 2 * k3z + k4z);
-    zd += h / 6.0 * (k1v + 2 * k2v + 2 * k3v + k4v);
-    if (z < 0.0 && zd < 0.0)
-      return -zd / v;
-  }
-  return std::nan("");
-}
 }  // namespace
 
 TEST(HertzImpact, CrossedCylindersMatchTheClosedFormSolution)

@@ -26,6 +26,9 @@ double structureHeight(const Model& model, const Eigen::VectorXd& q);
 /// Smallest surface gap between the checked strut pairs (m, negative when they overlap); +inf when
 /// the scene checks no pair.
 double minimumGap(const Model& model, const Eigen::VectorXd& q);
+/// Smallest gap (m) between the ground and the spheres that can touch it (negative when one presses into it;
+/// +inf without a ground).
+double minimumGroundGap(const Model& model, const Eigen::VectorXd& q);
 
 /// The smallest gap between a cable segment and a strut: the distance of the segment from the strut's axis
 /// segment less the strut's radius (negative: the cable runs through the strut). Every cable and spring segment
@@ -43,16 +46,17 @@ CableStrutGap minimumCableStrutGap(const Model& model, const Eigen::VectorXd& q)
 /// Every cable that runs through a strut (gap < 0), once per cable and strut, at its deepest segment.
 std::vector<CableStrutGap> cableStrutCrossings(const Model& model, const Eigen::VectorXd& q);
 
-/// The pairs in contact in a state (empty when contact is off), evaluated as the analysis does
-/// (Hertz in statics; Lankarani-Nikravesh and friction with the state's impact speeds in dynamics).
+/// The contacts in a state: touching strut pairs, then spheres touching the ground (body_b = -1), evaluated as the
+/// analysis does (Hertz in statics; Lankarani-Nikravesh and friction with the state's impact speeds in dynamics).
+/// Empty when neither strut contact nor the ground is on.
 std::vector<ContactPairState> activeContacts(const Model& model, const State& state);
 
 /// Highest z of the given nodes above the ground level (m).
 double nodesHeight(const Model& model, const std::vector<int>& nodes, const Eigen::VectorXd& q);
 
-/// Largest bending stress in a strut from its contact forces (Pa): each strut is a beam pinned at its
-/// ends (docs/physics.md, "Derived outputs"), loaded by the components of its contact forces across its axis at the
-/// contact points' axial positions; the bending is carried by the innermost layer (the steel core of a
+/// Largest bending stress in a strut from its contact forces (Pa; strut pairs and the ground): each strut is a beam
+/// pinned at its ends (docs/physics.md, "Derived outputs"), loaded by the components of its contact forces across its
+/// axis at the contact points' axial positions; the bending is carried by the innermost layer (the steel core of a
 /// sleeved strut, the whole section of a solid one): sigma = M r / I = 4 M / (pi r^3). 0 without contact.
 double maxStrutBendingStress(const Model& model, const Eigen::VectorXd& q,
                              const std::vector<ContactPairState>& contacts);
@@ -89,8 +93,9 @@ bool hasLoadPath(const Model& model);
 double loadFactor(const Model& model, const State& state);
 
 /// Column names of the CSV: t, actuation, actuation_force, height, active_contacts, min_gap,
-/// max_normal_force, max_friction_force, slack_cables, max_strut_bending_stress, max_cable_stress,
-/// min_cable_strut_gap (minimumCableStrutGap; empty when no pair is near),
+/// max_normal_force, max_friction_force (these three of strut pairs), slack_cables, max_strut_bending_stress,
+/// max_cable_stress, min_cable_strut_gap (minimumCableStrutGap; empty when no pair is near), with the ground on
+/// ground_contacts, min_ground_gap, ground_normal_force (their sum) and max_ground_friction_force, then
 /// load_factor (static paths that scale their loads), height_<layer> per output layer, then actuation_<name> and
 /// actuation_force_<name> per actuator when there are several.
 std::vector<std::string> csvColumns(const Model& model);

@@ -22,8 +22,15 @@
 /// The tangents K = -dQ/dq and C = -dQ/dqd are exact: they include the motion of the closest points
 /// along the axes (ds/dq from the stationarity conditions), the turning of n, the change of K with
 /// the crossing angle and every term of the friction force that the paper drops (docs/physics.md).
+///
+/// The ground (Model::ground) is a half-space z <= h touched by spheres (Model::ground_contacts: strut ends,
+/// point masses with a radius), each a contact "slot" after the strut pairs: for a sphere of centre c and
+/// radius r, zeta = h + r - c_z, n = +z (from the ground, "body b", towards the body), the same
+/// Lankarani-Nikravesh normal force with K = (4/3) E* sqrt(r) and the ground's restitution, and the same
+/// modified Coulomb friction (the ground's mu) at the sphere's lowest point PA = c - r z as a material point.
 #pragma once
 
+#include <string>
 #include <vector>
 
 #include <Eigen/Core>
@@ -62,7 +69,9 @@ StiffnessValue contactStiffness(double k90, double cos2, double min_crossing_ang
 /// Everything known about one checked pair after evaluation (world frame, SI units).
 struct ContactPairState
 {
-  int pair = -1;                      // index into Model::checked_pairs
+  int pair = -1;                      // contact slot: index into Model::checked_pairs, then the ground contacts
+  int body_a = -1;                    // strut a (or the body touching the ground)
+  int body_b = -1;                    // strut b, -1 for the ground
   bool active = false;                // zeta > 0
   double gap = 0.0;                   // surface gap h - r1 - r2 (m), negative when overlapping
   double penetration = 0.0;           // zeta (m)
@@ -73,16 +82,16 @@ struct ContactPairState
   double normal_force = 0.0;          // F_N (N)
   double slip_speed = 0.0;            // |v_T| (m/s)
   double friction_force = 0.0;        // F_T (N)
-  Vec3 normal = Vec3::Zero();         // n, from strut b towards strut a
+  Vec3 normal = Vec3::Zero();         // n, from strut b (or the ground) towards strut a
   Vec3 point_a = Vec3::Zero();        // PA, contact point on strut a's surface
-  Vec3 point_b = Vec3::Zero();        // PB, contact point on strut b's surface
+  Vec3 point_b = Vec3::Zero();        // PB, contact point on strut b's surface (or the ground's, below PA)
   Vec3 force_on_a = Vec3::Zero();     // F_N n - F_T t: total contact force on strut a (b gets minus it)
   Vec3 friction_on_a = Vec3::Zero();  // -F_T t
   ClosestRegion region = ClosestRegion::kInterior;
 };
 
 /// Local contributions of one pair: Q (14: body a's 7 then body b's 7) and its tangents
-/// K = -dQ/dq, C = -dQ/dqd over [q_a; q_b].
+/// K = -dQ/dq, C = -dQ/dqd over [q_a; q_b]. A ground contact fills the first nq entries (its body's) only.
 struct ContactContribution
 {
   /// false: only `force` is filled (stiffness and damping are left as they were): for residual-only
@@ -93,15 +102,21 @@ struct ContactContribution
   Eigen::Matrix<double, 14, 14> damping = Eigen::Matrix<double, 14, 14>::Zero();
 };
 
-/// Geometry of a pair at q alone (narrow phase, no forces): gap, closest points, normal.
+/// Geometry of a contact slot at q alone (narrow phase, no forces): gap, closest points, normal.
 ContactPairState contactGeometry(const Model& model, int pair, const Eigen::VectorXd& q);
 
-/// Evaluates pair `pair` at (q, qd) with impact speed v_0 (m/s, used in dynamics only). Fills `out`
-/// (when not null) with its force and exact tangents; returns the pair's state.
+/// Evaluates contact slot `pair` (a strut pair or a ground contact) at (q, qd) with impact speed v_0 (m/s,
+/// used in dynamics only). Fills `out` (when not null) with its force and exact tangents; returns its state.
 ContactPairState evaluateContact(const Model& model, int pair, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
                                  double impact_speed, ContactMode mode, ContactContribution* out);
 
-/// True when the axes of pair `pair` passed through each other between q0 and q1: the signed distance
+/// Appends the ground slots whose sphere is within `margin` (m) of the ground at q (none when the ground is off).
+void appendGroundCandidates(const Model& model, const Eigen::VectorXd& q, double margin, std::vector<int>& out);
+
+/// "ground" for body -1, else the body's name (contacts' second body in outputs).
+const std::string& contactBodyName(const Model& model, int body);
+
+/// True when the axes of strut pair `pair` passed through each other between q0 and q1: the signed distance
 /// (c1 - c2) . (a1 x a2) of the axis lines changed sign while the lines' closest points lie inside both
 /// segments at q1 and the struts touched or overlapped at q0 or q1. A common normal a1 x a2 that turned
 /// by more than 90 degrees (motion through a parallel configuration) is not judged.

@@ -22,7 +22,7 @@ struct StepEstimate
   /// per body, translation plus length times the quaternion part, largest over bodies (docs/physics.md).
   double error = 0.0;
   /// Pairs that touch at the end of the step but did not at its start: the deepest penetration among
-  /// them (m, 0 when none), that pair's gap at the start (m) and its index in Model::checked_pairs.
+  /// them (m, 0 when none), that pair's gap at the start (m) and its contact slot (contact.h).
   double onset_depth = 0.0;
   double onset_gap = 0.0;
   int onset_pair = -1;

@@ -70,9 +70,9 @@ public:
   /// C into jac when not null.
   void appliedForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const ActuationValues& u, Eigen::VectorXd& F,
                     BlockSparseMatrix* jac, double k_weight, double c_weight) const;
-  /// Strut contact (contact.h) at (q, qd), when the model's contact is enabled: adds the generalized
+  /// Strut contact and ground contact (contact.h) at (q, qd), when enabled: adds the generalized
   /// contact forces into F (not cleared) and k_weight K + c_weight C into jac (when not null). Only the
-  /// broad phase's candidates reach the narrow phase. impact_speeds: v_0 per checked pair (dynamics;
+  /// broad phase's candidates reach the narrow phase. impact_speeds: v_0 per contact slot (dynamics;
   /// may be empty in statics). The pairs' states for output come from activeContacts() (analysis.h).
   void contactForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const std::vector<double>& impact_speeds,
                     ContactMode mode, Eigen::VectorXd& F, BlockSparseMatrix* jac, double k_weight,
@@ -84,11 +84,9 @@ public:
   int firstPassedThrough(const Eigen::VectorXd& q0, const Eigen::VectorXd& q1) const;
   /// "struts 'A' and 'B' passed through each other": the message of status kPassedThrough.
   std::string passedThroughMessage(int pair) const;
-  /// Checked pairs that can touch at q with boxes grown by margin (m).
-  void contactCandidates(const Eigen::VectorXd& q, double margin, std::vector<int>& out) const
-  {
-    broad_phase_.candidates(q, margin, out);
-  }
+  /// Contact slots that can touch at q with boxes grown by margin (m): checked strut pairs (when strut contact is
+  /// on), then ground contacts within margin of the ground.
+  void contactCandidates(const Eigen::VectorXd& q, double margin, std::vector<int>& out) const;
   /// M(q) qdd + Qv(q, qd). Adds m_weight M + k_weight d(M qdd + Qv)/dq + c_weight dQv/dqd into jac.
   void inertialForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd,
                      Eigen::VectorXd& out, BlockSparseMatrix* jac, double m_weight, double k_weight,

@@ -167,6 +167,33 @@ struct ContactSettings
   double min_impact_speed = 1e-3;         // m/s: floor of the impact speed v_0 in D = 3(1 - c_e^2)/(4 v_0)
 };
 
+/// The ground: an optional half-space z <= height under the structure (scene key `ground`, docs/scenes.md).
+/// Strut ends (the spheres that cap each strut's capsule) and point masses with a radius touch it with
+/// Hertz's sphere-on-plane law, Lankarani-Nikravesh damping and the modified Coulomb friction
+/// (docs/physics.md, "Ground contact").
+struct GroundSettings
+{
+  bool enabled = false;
+  double height = 0.0;          // m, the plane z = height
+  std::string material;         // its elastic constants (from `materials`)
+  double youngs_modulus = 0.0;  // Pa
+  double poisson_ratio = 0.0;   //
+  double restitution = 1.0;     // c_e in [0, 1]
+  double friction = 0.0;        // mu; 0 skips all friction work
+};
+
+/// A sphere that can touch the ground: one end of a strut (centre on the axis at +-L/2, the strut's outer
+/// radius) or a point mass with a radius. K = (4/3) E* sqrt(r), E* from the body's and the ground's
+/// materials.
+struct GroundContact
+{
+  int body = -1;
+  Vec3 local = Vec3::Zero();  // the sphere's centre in the body frame, m
+  double radius = 0.0;        // m
+  double stiffness = 0.0;     // K, N/m^1.5
+  std::string node;           // the node at the sphere's centre
+};
+
 enum class Integrator
 {
   kNewmark,
@@ -242,6 +269,9 @@ struct Model
   std::vector<Constraint> constraints;
   std::vector<Actuator> actuators;
   std::vector<StrutPair> checked_pairs;
+  GroundSettings ground;
+  /// the spheres that can touch the ground (empty when it is off); contact slot checked_pairs.size() + i
+  std::vector<GroundContact> ground_contacts;
   std::vector<int> height_nodes;  // node indices whose highest z gives the height
   std::vector<OutputLayer> layers;
   double ground_level = 0.0;  // z of the ground points, m
@@ -254,6 +284,22 @@ struct Model
   Eigen::VectorXd q0;  // initial configuration
   int nq = 0;          // total coordinates
   int n_lambda = 0;    // total constraint rows (model constraints only)
+
+  /// Contact slots: the checked strut pairs, then the ground contacts (per-slot arrays such as
+  /// State::contact_speed are laid out so).
+  int contactSlots() const
+  {
+    return static_cast<int>(checked_pairs.size() + ground_contacts.size());
+  }
+  bool isGroundSlot(int slot) const
+  {
+    return slot >= static_cast<int>(checked_pairs.size());
+  }
+  /// Whether any contact (strut pairs or the ground) is computed.
+  bool anyContact() const
+  {
+    return contact.enabled || !ground_contacts.empty();
+  }
 
   int findNode(const std::string& name) const;
   int findBody(const std::string& name) const;

@@ -21,8 +21,8 @@ struct State
   Eigen::VectorXd acc;     // generalized-alpha pseudo-accelerations (equal to qdd for Newmark)
   Eigen::VectorXd lambda;  // multipliers of the model's constraints (then any solver-added ones)
   ActuationValues u;       // actuation values at t
-  /// Contact memory per checked pair: the impact speed v_0 (m/s) of a live contact, 0 when the pair
-  /// is apart. Set at contact onset, forgotten at separation (dynamics).
+  /// Contact memory per contact slot (strut pairs, then ground contacts): the impact speed v_0 (m/s) of a
+  /// live contact, 0 when apart. Set at contact onset, forgotten at separation (dynamics).
   std::vector<double> contact_speed;
 };
 

@@ -1,0 +1,342 @@
+// The ground (core/contact, Model::ground): the exact tangents of a sphere's normal and friction forces
+// against central differences (strut ends at random tilts, Theta off the unit sphere, each friction
+// regime; point masses), a strut dropped flat rebounding as the 1-D Lankarani-Nikravesh model and c_e say,
+// a strut sliding on its side slowing at mu g, the six-bar robot at rest carrying its weight, and the
+// loader's refusals.
+#include <cmath>
+#include <cstdio>
+#include <random>
+#include <string>
+
+#include <gtest/gtest.h>
+
+#include "active_tensegrity/core/analysis.h"
+#include "active_tensegrity/core/dynamics.h"
+#include "active_tensegrity/core/scene.h"
+#include "fd_check.h"
+#include "test_models.h"
+
+using namespace active_tensegrity::test;
+
+namespace
+{
+constexpr double kTol = 2e-6;
+
+// one free steel strut (1 m, radius 2 cm) along x at height z, above a concrete ground at 0
+std::string strutScene(double z, double restitution, double friction, const std::string& extra = "")
+{
+  return "name: strut\n"
+         "materials:\n"
+         "  steel: {youngs_modulus: 2.0e11, poisson_ratio: 0.3, density: 7800.0}\n"
+         "  concrete: {youngs_modulus: 3.0e10, poisson_ratio: 0.2, density: 2400.0}\n"
+         "nodes:\n"
+         "  A: {position: [-0.5, 0.0, " +
+         std::to_string(z) +
+         "]}\n"
+         "  B: {position: [0.5, 0.0, " +
+         std::to_string(z) +
+         "]}\n"
+         "struts: {radius: 0.02, material: steel, members: {S: [A, B]}}\n"
+         "ground: {enabled: true, height: 0.0, material: concrete, restitution: " +
+         std::to_string(restitution) + ", friction: " + std::to_string(friction) +
+         "}\n"
+         "contact: {stick_velocity: 0.01, slip_velocity: 0.1}\n"
+         "analysis: {type: dynamic, duration: 1.0}\n" +
+         extra;
+}
+
+Eigen::VectorXd groundForceOf(const Model& m, int slot, const Eigen::VectorXd& q, const Eigen::VectorXd& qd, double v0,
+                              ContactMode mode)
+{
+  ContactContribution c;
+  evaluateContact(m, slot, q, qd, v0, mode, &c);
+  return c.force.head(m.nq);
+}
+
+void expectExactTangents(const Model& m, int slot, const Eigen::VectorXd& q, const Eigen::VectorXd& qd, double v0,
+                         ContactMode mode, const std::string& what)
+{
+  ContactContribution c;
+  const ContactPairState st = evaluateContact(m, slot, q, qd, v0, mode, &c);
+  ASSERT_GT(st.normal_force, 0.0) << what;
+  const auto fq = [&](const Eigen::VectorXd& x) -> Eigen::VectorXd { return -groundForceOf(m, slot, x, qd, v0, mode); };
+  const auto fqd = [&](const Eigen::VectorXd& x) -> Eigen::VectorXd { return -groundForceOf(m, slot, q, x, v0, mode); };
+  const double scale = std::max(1.0, c.force.lpNorm<Eigen::Infinity>());
+  const FdComparison ck = compareJacobians(c.stiffness.topLeftCorner(m.nq, m.nq), fdJacobian(fq, q, 1e-7), kTol, scale);
+  EXPECT_TRUE(ck.ok) << what << ", K: " << ck.message;
+  const FdComparison cc = compareJacobians(c.damping.topLeftCorner(m.nq, m.nq), fdJacobian(fqd, qd, 1e-7), kTol, scale);
+  EXPECT_TRUE(cc.ok) << what << ", C: " << cc.message;
+}
+
+// the strut tilted along a random axis pointing down, its lower end's sphere `depth` into the ground, Theta off
+// the unit sphere by up to 1e-3; returns the lower end's slot
+int tiltedIntoTheGround(const Model& m, double depth, std::mt19937& rng, Eigen::VectorXd& q)
+{
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  const Body& b = m.bodies[0];
+  Vec3 axis;
+  do
+    axis = Vec3(u(rng), u(rng), u(rng));
+  while (axis.norm() < 0.3 || axis.normalized().z() > -0.2);
+  axis.normalize();
+  q = m.q0;
+  // the body z axis points from A (local -L/2) to B (local +L/2): B is the lower end (placed after Theta is
+  // scaled, which moves the ends)
+  q.segment<4>(3) = thetaFromZAxis(axis) * (1.0 + 1e-3 * u(rng));
+  q.segment<3>(0).setZero();
+  const Vec3 end = pointPosition(m, PointRef{ 0, Vec3(0.0, 0.0, 0.5 * b.length) }, q);
+  q.segment<3>(0) = Vec3(0.3 * u(rng), 0.3 * u(rng), b.radius() - depth) - end;
+  for (int slot = 0; slot < m.contactSlots(); ++slot)
+    if (contactGeometry(m, slot, q).active)
+      return slot;
+  return -1;
+}
+
+// random velocities scaled so that the lower end's slip speed is `slip` (m/s), drawn again until the hysteresis
+// factor 1 + D zeta_dot stays within [0.5, 1.5]
+Eigen::VectorXd velocitiesWithSlip(const Model& m, int slot, const Eigen::VectorXd& q, double slip, double v0,
+                                   std::mt19937& rng)
+{
+  Model with_friction = m;
+  with_friction.ground.friction = 1.0;
+  const double d = 3.0 * (1.0 - m.ground.restitution * m.ground.restitution) / (4.0 * v0);
+  for (;;)
+  {
+    Eigen::VectorXd qd = randomVector(m.nq, 1.0, rng);
+    const ContactPairState st = evaluateContact(with_friction, slot, q, qd, 1e9, ContactMode::kDynamic, nullptr);
+    qd *= slip / st.slip_speed;
+    if (std::abs(d * st.penetration_rate * slip / st.slip_speed) <= 0.5)
+      return qd;
+  }
+}
+
+SolverOptions fineOptions(double dt)
+{
+  SolverOptions o;
+  o.dt = dt;
+  o.newmark_gamma = 0.5;
+  o.newmark_beta = 0.25;
+  o.newton_tolerance = 1e-12;
+  o.max_iterations = 30;
+  return o;
+}
+
+ActuationLaw noActuation()
+{
+  return [](double) { return ActuationValues(); };
+}
+}  // namespace
+
+TEST(GroundContact, SpheresOfStrutEndsAndTheirStiffness)
+{
+  const Model m = loadSceneFromString(strutScene(0.5, 0.8, 0.0), "strut");
+  ASSERT_EQ(m.ground_contacts.size(), 2u);
+  EXPECT_EQ(m.contactSlots(), 2);
+  const double estar = 1.0 / ((1.0 - 0.09) / 2.0e11 + (1.0 - 0.04) / 3.0e10);
+  for (const GroundContact& g : m.ground_contacts)
+  {
+    EXPECT_EQ(g.body, 0);
+    EXPECT_DOUBLE_EQ(g.radius, 0.02);
+    EXPECT_NEAR(g.stiffness, 4.0 / 3.0 * estar * std::sqrt(0.02), 1e-9 * g.stiffness);
+    EXPECT_DOUBLE_EQ(std::abs(g.local.z()), 0.5);
+  }
+  EXPECT_EQ(m.ground_contacts[0].node, "A");
+  EXPECT_EQ(m.ground_contacts[1].node, "B");
+  // 0.48 m above the ground: no contact, the gap from the sphere's surface
+  const State s = initialState(m);
+  EXPECT_NEAR(minimumGroundGap(m, s.q), 0.48, 1e-12);
+  EXPECT_TRUE(activeContacts(m, s).empty());
+}
+
+TEST(GroundContact, TangentsAreExactForStrutEndsInEveryRegime)
+{
+  std::mt19937 rng(11);
+  const Model base = loadSceneFromString(strutScene(0.5, 0.7, 0.6), "strut");
+  const double v0 = 0.8;
+  for (int trial = 0; trial < 6; ++trial)
+  {
+    Eigen::VectorXd q;
+    const int slot = tiltedIntoTheGround(base, 1e-4 * (1.0 + trial), rng, q);
+    ASSERT_GE(slot, 0);
+    const std::string what = "trial " + std::to_string(trial);
+    expectExactTangents(base, slot, q, Eigen::VectorXd::Zero(base.nq), 0.0, ContactMode::kStatic, what + " static");
+    Model frictionless = base;
+    frictionless.ground.friction = 0.0;
+    const Eigen::VectorXd qd = randomVector(base.nq, 0.1, rng);
+    expectExactTangents(frictionless, slot, q, qd, v0, ContactMode::kDynamic, what + " frictionless");
+    // the ramp of the modified Coulomb law (between v0 = 0.01 and v1 = 0.1 m/s) and full sliding
+    for (double slip : { 0.04, 0.3 })
+      expectExactTangents(base, slot, q, velocitiesWithSlip(base, slot, q, slip, v0, rng), v0, ContactMode::kDynamic,
+                          what + " slip " + std::to_string(slip));
+  }
+}
+
+TEST(GroundContact, TangentsAreExactForPointMasses)
+{
+  const std::string scene = "name: ball\n"
+                            "materials:\n"
+                            "  rubber: {youngs_modulus: 2.0e7, poisson_ratio: 0.45}\n"
+                            "  concrete: {youngs_modulus: 3.0e10, poisson_ratio: 0.2}\n"
+                            "nodes:\n"
+                            "  P: {position: [0.0, 0.0, 0.1], mass: 2.0, radius: 0.05, material: rubber}\n"
+                            "ground: {enabled: true, material: concrete, restitution: 0.6, friction: 0.5}\n"
+                            "contact: {stick_velocity: 0.01, slip_velocity: 0.1}\n"
+                            "analysis: {type: dynamic, duration: 1.0}\n";
+  const Model m = loadSceneFromString(scene, "ball");
+  ASSERT_EQ(m.ground_contacts.size(), 1u);
+  const double estar = 1.0 / ((1.0 - 0.45 * 0.45) / 2.0e7 + (1.0 - 0.04) / 3.0e10);
+  EXPECT_NEAR(m.ground_contacts[0].stiffness, 4.0 / 3.0 * estar * std::sqrt(0.05), 1e-6);
+  std::mt19937 rng(5);
+  Eigen::VectorXd q = m.q0;
+  q.z() = 0.05 - 2e-3;
+  expectExactTangents(m, 0, q, Eigen::VectorXd::Zero(3), 0.0, ContactMode::kStatic, "static");
+  for (double slip : { 0.05, 0.5 })
+    expectExactTangents(m, 0, q, velocitiesWithSlip(m, 0, q, slip, 0.5, rng), 0.5, ContactMode::kDynamic,
+                        "slip " + std::to_string(slip));
+}
+
+class GroundRestitution : public ::testing::TestWithParam<double>
+{
+};
+
+TEST_P(GroundRestitution, AStrutDroppedFlatReboundsAsTheOneDegreeOfFreedomModel)
+{
+  // flat, both end spheres 0.5 mm above the ground, falling at 1 m/s without gravity: each end is a 1-D
+  // impact of half the strut's mass on its sphere's stiffness
+  const double ce = GetParam(), v = 1.0;
+  const Model m = loadSceneFromString(strutScene(0.0205, ce, 0.0), "strut");
+  DynamicsSolver solver(m, fineOptions(2e-6));
+  State s = initialState(m);
+  s.qd.z() = -v;
+  ASSERT_TRUE(solver.initialize(s, noActuation()).ok());
+  double max_force = 0.0;
+  for (int k = 0; k < 2500; ++k)
+  {
+    ASSERT_TRUE(solver.step(s, 2e-6, noActuation()).ok()) << k;
+    for (const ContactPairState& c : activeContacts(m, s))
+    {
+      EXPECT_EQ(c.body_b, -1);
+      max_force = std::max(max_force, c.normal_force);
+    }
+  }
+  ASSERT_GT(max_force, 0.0);
+  ASSERT_GT(minimumGroundGap(m, s.q), 0.0) << "still in contact";
+  const double rebound = s.qd.z() / v;
+  const double exact = reboundOfOneDegreeOfFreedom(0.5 * m.bodies[0].mass, m.ground_contacts[0].stiffness, v, ce);
+  std::printf("[ measured ] c_e %.2f: rebound %.5f, 1-D model %.5f, peak force per end %.1f N\n", ce, rebound, exact,
+              max_force);
+  EXPECT_NEAR(rebound, exact, 2e-3);
+  EXPECT_NEAR(rebound, ce, ce >= 0.9 ? 0.02 : 0.06);
+  // it falls flat and leaves flat: no spin
+  EXPECT_LT(s.qd.segment<4>(3).norm(), 1e-9);
+}
+
+INSTANTIATE_TEST_SUITE_P(Ground, GroundRestitution, ::testing::Values(1.0, 0.9, 0.8));
+
+TEST(GroundFriction, AStrutSlidingOnItsSideSlowsAtMuG)
+{
+  // resting on the ground under gravity (first settled without friction), then pushed along its axis at 2 m/s
+  const double mu = 0.4, g = 9.81;
+  const std::string gravity = "gravity: {enabled: true}\n";
+  Model m = loadSceneFromString(strutScene(0.02, 0.3, mu, gravity), "strut");
+  SolverOptions o = fineOptions(2e-4);
+  o.newmark_gamma = 0.6;
+  o.newmark_beta = 0.3025;
+  DynamicsSolver solver(m, o);
+  State s = initialState(m);
+  ASSERT_TRUE(solver.initialize(s, noActuation()).ok());
+  for (int k = 0; k < 1000; ++k)
+    ASSERT_TRUE(solver.step(s, 2e-4, noActuation()).ok());
+  s.qd.x() = 2.0;
+  std::vector<std::pair<double, double>> samples;  // (t, vx)
+  for (int k = 0; k < 3000; ++k)
+  {
+    ASSERT_TRUE(solver.step(s, 2e-4, noActuation()).ok());
+    samples.emplace_back(s.t, s.qd.x());
+  }
+  // the speed falls linearly at mu g until it reaches the modified law's ramp (0.1 m/s)
+  const auto at = [&](double t)
+  {
+    for (const auto& [ts, vx] : samples)
+      if (ts >= t)
+        return vx;
+    return samples.back().second;
+  };
+  const double t0 = samples.front().first;
+  const double decel = (at(t0 + 0.05) - at(t0 + 0.35)) / 0.3;
+  std::printf("[ measured ] deceleration %.5f m/s^2 (mu g = %.5f)\n", decel, mu * g);
+  EXPECT_NEAR(decel, mu * g, 2e-3 * mu * g);
+  // and it stops (below the stick speed) rather than reversing
+  EXPECT_LT(std::abs(samples.back().second), 0.011);
+}
+
+TEST(GroundSupport, TheSixBarRobotAtRestCarriesItsWeightOnThreeEnds)
+{
+  // the shipped robot standing on a cable triangle, its cables damped harder to come to rest sooner: once at
+  // rest, the ground's normal forces on the triangle's three strut ends add up to the robot's weight
+  const Model m = loadScene(std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) + "/config/scenes/six_bar.yaml",
+                            { { "springs.cables.damping", "100" } });
+  EXPECT_EQ(m.ground_contacts.size(), 12u);
+  double weight = 0.0;
+  for (const Body& b : m.bodies)
+    weight += b.mass * 9.81;
+  DynamicsSolver solver(m, m.solver);
+  State s = initialState(m);
+  ASSERT_TRUE(solver.initialize(s, noActuation()).ok());
+  // 15 s: the slowest mode, a rocking on the three ends (friction is off below the stick speed), decays by
+  // about a third per second
+  for (int k = 0; k < 15000; ++k)
+    ASSERT_TRUE(solver.step(s, 1e-3, noActuation()).ok()) << k;
+  double sum = 0.0;
+  std::vector<std::string> touching;
+  for (const ContactPairState& c : activeContacts(m, s))
+  {
+    ASSERT_EQ(c.body_b, -1);
+    sum += c.normal_force;
+    EXPECT_DOUBLE_EQ(c.point_b.z(), 0.0);
+    touching.push_back(m.ground_contacts[c.pair - m.checked_pairs.size()].node);
+  }
+  std::printf("[ measured ] ground contacts at %s carry %.9f N of a weight of %.9f N\n",
+              (touching.size() == 3 ? touching[0] + ", " + touching[1] + ", " + touching[2] : std::string("?")).c_str(),
+              sum, weight);
+  EXPECT_EQ(touching, (std::vector<std::string>{ "N4", "N8", "N12" }));
+  EXPECT_NEAR(sum, weight, 1e-6 * weight);
+}
+
+TEST(GroundScene, RefusesAStartInTheGroundAnUnknownMaterialAndARadiusWithoutAMass)
+{
+  const auto refusal = [](const std::string& text)
+  {
+    try
+    {
+      loadSceneFromString(text, "bad");
+    }
+    catch (const SceneError& e)
+    {
+      return std::string(e.what());
+    }
+    return std::string("accepted");
+  };
+  // nodes on the ground plane itself: the spheres start a radius deep
+  const std::string deep = refusal(strutScene(0.0, 0.5, 0.0));
+  EXPECT_NE(deep.find("nodes.A"), std::string::npos) << deep;
+  EXPECT_NE(deep.find("deep in the ground"), std::string::npos) << deep;
+  EXPECT_NE(deep.find("z >= 0.02"), std::string::npos) << deep;
+  std::string text = strutScene(0.5, 0.5, 0.0);
+  text.replace(text.find("material: concrete"), 18, "material: granite");
+  const std::string unknown = refusal(text);
+  EXPECT_NE(unknown.find("ground.material"), std::string::npos) << unknown;
+  EXPECT_NE(unknown.find("granite"), std::string::npos) << unknown;
+  text = strutScene(0.5, 0.5, 0.0);
+  text.replace(text.find("restitution: 0.5"), 16, "restitution: 1.5");
+  const std::string restitution = refusal(text);
+  EXPECT_NE(restitution.find("ground.restitution"), std::string::npos) << restitution;
+  text = strutScene(0.5, 0.5, 0.0);
+  text.replace(text.find("  B: {position"), 0, "  C: {position: [0, 0, 1], fixed: true, radius: 0.1}\n");
+  const std::string radius = refusal(text);
+  EXPECT_NE(radius.find("nodes.C.radius"), std::string::npos) << radius;
+  // the ground off (the default): no spheres
+  text = strutScene(0.5, 0.5, 0.0);
+  text.replace(text.find("enabled: true"), 13, "enabled: false");
+  EXPECT_TRUE(loadSceneFromString(text, "off").ground_contacts.empty());
+}
