@@ -112,6 +112,81 @@ double maxCableStress(const Model& model, const State& state)
   return sigma;
 }
 
+namespace
+{
+/// The ramp of sequence step `k` for actuator `a` starting from value `from` (magnitude |to - from|).
+RampSchedule stepRamp(const AnalysisSettings& an, double time, double from, double to)
+{
+  RampSchedule r = an.schedule;
+  r.start_time = time;
+  r.final_value = std::abs(to - from);
+  return r;
+}
+
+/// Calls f(ramp, from, to) for each ramp of actuator a in the sequence, in time order.
+template <class F>
+void forEachRamp(const AnalysisSettings& an, int a, F&& f)
+{
+  double value = 0.0;
+  for (const ActuationStep& step : an.sequence)
+    for (size_t k = 0; k < step.actuators.size(); ++k)
+      if (step.actuators[k] == a)
+      {
+        f(stepRamp(an, step.time, value, step.targets[k]), value, step.targets[k]);
+        value = step.targets[k];
+      }
+}
+}  // namespace
+
+ActuationValues scheduledActuation(const Model& model, double t)
+{
+  const AnalysisSettings& an = model.analysis;
+  if (an.sequence.empty())
+    return ActuationValues(model.actuators.size(), an.schedule.evaluate(t));
+  ActuationValues out(model.actuators.size());
+  for (size_t a = 0; a < model.actuators.size(); ++a)
+    forEachRamp(an, static_cast<int>(a),
+                [&](const RampSchedule& r, double from, double to)
+                {
+                  if (t < r.start_time)
+                    return;
+                  const ActuationValue v = r.evaluate(t);
+                  const double sign = to >= from ? 1.0 : -1.0;
+                  out[a] = ActuationValue{ from + sign * v.value, sign * v.rate, sign * v.accel };
+                });
+  return out;
+}
+
+double actuationEndTime(const Model& model)
+{
+  const AnalysisSettings& an = model.analysis;
+  if (an.sequence.empty())
+    return an.schedule.endTime();
+  double end = 0.0;
+  for (size_t a = 0; a < model.actuators.size(); ++a)
+    forEachRamp(an, static_cast<int>(a),
+                [&](const RampSchedule& r, double, double) { end = std::max(end, r.endTime()); });
+  return end;
+}
+
+std::vector<double> actuationBreakpoints(const Model& model)
+{
+  const AnalysisSettings& an = model.analysis;
+  if (an.sequence.empty())
+    return an.schedule.breakpoints();
+  std::vector<double> out;
+  for (size_t a = 0; a < model.actuators.size(); ++a)
+    forEachRamp(an, static_cast<int>(a),
+                [&](const RampSchedule& r, double, double)
+                {
+                  const std::vector<double> b = r.breakpoints();
+                  out.insert(out.end(), b.begin(), b.end());
+                });
+  std::sort(out.begin(), out.end());
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+  return out;
+}
+
 double minimumGroundGap(const Model& model, const Eigen::VectorXd& q)
 {
   double gap = std::numeric_limits<double>::infinity();
@@ -511,7 +586,7 @@ void runAdaptive(const Model& model, DynamicsSolver& solver, const ActuationLaw&
   // breakpoint before is left to the step that lands there (the actuation law is evaluated exactly anyway)
   const double gap = model.solver.dt_min;
   std::vector<double> stops;
-  for (double t : an.schedule.breakpoints())
+  for (double t : actuationBreakpoints(model))
   {
     const double to_output = interval > 0.0 ? std::abs(t - interval * std::round(t / interval)) : gap;
     if (t >= gap && t <= an.duration - gap && to_output >= gap && (stops.empty() || t - stops.back() >= gap))
@@ -614,7 +689,12 @@ RunResult runAnalysis(const Model& model, const std::function<void(const State&)
   const AnalysisSettings& an = model.analysis;
   // what the start is: in equilibrium, slack elements, prestress stable (structure_check.h)
   std::vector<std::string> start_warnings = startWarnings(model, state);
-  if (an.type == AnalysisType::kDynamic && !model.actuators.empty() &&
+  if (an.type == AnalysisType::kDynamic && !model.actuators.empty() && !an.sequence.empty() &&
+      an.duration < actuationEndTime(model) - 1e-9 * std::max(1.0, an.duration))
+    start_warnings.push_back("analysis.duration " + shortestNumber(an.duration) +
+                             " s ends before actuation.sequence does (its last ramp ends at " +
+                             roundedNumber(actuationEndTime(model)) + " s)");
+  if (an.type == AnalysisType::kDynamic && !model.actuators.empty() && an.sequence.empty() &&
       an.duration < an.schedule.endTime() - 1e-9 * std::max(1.0, an.duration))
     start_warnings.push_back("analysis.duration " + shortestNumber(an.duration) +
                              " s ends before the actuators reach analysis.max_actuation " +
@@ -706,9 +786,7 @@ RunResult runAnalysis(const Model& model, const std::function<void(const State&)
   else
   {
     DynamicsSolver solver(model, model.solver);
-    const RampSchedule schedule = an.schedule;
-    const size_t n_act = model.actuators.size();
-    const ActuationLaw law = [schedule, n_act](double t) { return ActuationValues(n_act, schedule.evaluate(t)); };
+    const ActuationLaw law = [&model](double t) { return scheduledActuation(model, t); };
     result.summary = solver.initialize(state, law);
     with_start_warnings(result.summary);
     if (!result.summary.ok())

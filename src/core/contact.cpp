@@ -181,7 +181,7 @@ ContactPairState evaluateGroundContact(const Model& model, int slot, const Eigen
 {
   const GroundContact& g = groundContact(model, slot);
   const GroundSettings& ground = model.ground;
-  const ContactSettings& set = model.contact;
+  const double min_impact_speed = model.contact.min_impact_speed;
   const Body& body = model.bodies[g.body];
   const bool strut = body.kind == BodyKind::kStrut;
   const bool dynamic = mode == ContactMode::kDynamic;
@@ -201,7 +201,7 @@ ContactPairState evaluateGroundContact(const Model& model, int slot, const Eigen
     return st;
   st.stiffness = g.stiffness;
   const double damping = dynamic ? 3.0 * (1.0 - ground.restitution * ground.restitution) /
-                                       (4.0 * std::max(impact_speed, set.min_impact_speed)) :
+                                       (4.0 * std::max(impact_speed, min_impact_speed)) :
                                    0.0;
   const double hysteresis = 1.0 + damping * st.penetration_rate;
   if (hysteresis <= 0.0)
@@ -233,14 +233,14 @@ ContactPairState evaluateGroundContact(const Model& model, int slot, const Eigen
     }
     const Vec3 vt(vtol.x(), vtol.y(), 0.0);
     st.slip_speed = vt.norm();
-    if (st.slip_speed > set.stick_velocity)
+    if (st.slip_speed > ground.stick_velocity)
     {
       t = vt / st.slip_speed;
       cd = 1.0;
-      if (st.slip_speed < set.slip_velocity)
+      if (st.slip_speed < ground.slip_velocity)
       {
-        dcd = 1.0 / (set.slip_velocity - set.stick_velocity);
-        cd = (st.slip_speed - set.stick_velocity) * dcd;
+        dcd = 1.0 / (ground.slip_velocity - ground.stick_velocity);
+        cd = (st.slip_speed - ground.stick_velocity) * dcd;
       }
       ft = ground.friction * cd * fn;
       f = -ft * t;

@@ -228,7 +228,22 @@ void DynamicsSolver::rememberStep(const State& start, double t_end, const Eigen:
   last_end_qdd_ = qdd_end;
 }
 
-Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law)
+Summary DynamicsSolver::attemptOrFullNewton(State& s, double h, const ActuationLaw& law)
+{
+  Summary sum = attempt(s, h, law, false);
+  if (sum.ok() || sum.status == SolveStatus::kPassedThrough || !options_.reuse_jacobian)
+    return sum;
+  const int spent = sum.iterations;
+  linear_.allowStaticPivot(false);  // Newton's own matrices, factorized exactly
+  sum = attempt(s, h, law, true);
+  linear_.allowStaticPivot(true);
+  factor_valid_ = false;  // the kept factorization is gone
+  sum.iterations += spent;
+  ++timings_.full_newton_retries;
+  return sum;
+}
+
+Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law, bool full_newton)
 {
   Summary sum;
   const ActuationValues u = law(s.t + h);
@@ -237,7 +252,7 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law)
   firstGuess(s, h, qdd, lambda);
   const double bh2 = coef_.beta * h * h * (1.0 - coef_.alpha_f) / (1.0 - coef_.alpha_m);
   const int nq = system_.nq();
-  const bool reuse = options_.reuse_jacobian;
+  const bool reuse = options_.reuse_jacobian && !full_newton;
   // modified Newton keeps the factorization while it stays a good one (see the option)
   // (h differs in its last bits from step to step: t = k dt; a cut changes it by a factor 2; a variable
   // step keeps it while within 20 %: the matrix is then a little off, which the contraction check sees)
@@ -381,7 +396,7 @@ Summary DynamicsSolver::advance(State& s, double h, const ActuationLaw& law)
   while (depth > 0 || done == 0)
   {
     const double piece = std::ldexp(h, -depth);
-    const Summary sum = attempt(s, piece, law);  // changes s only when it succeeds
+    const Summary sum = attemptOrFullNewton(s, piece, law);  // changes s only when it succeeds
     total.iterations += sum.iterations;
     total.residual = sum.residual;
     if (sum.ok())
@@ -417,7 +432,7 @@ Summary DynamicsSolver::advance(State& s, double h, const ActuationLaw& law)
 Summary DynamicsSolver::tryStep(State& s, double h, const ActuationLaw& law)
 {
   const ScopeTimer timer(timings_.total);
-  return attempt(s, h, law);
+  return attemptOrFullNewton(s, h, law);
 }
 
 Summary DynamicsSolver::step(State& s, double h, const ActuationLaw& law)

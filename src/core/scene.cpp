@@ -13,6 +13,7 @@
 #include <yaml-cpp/eventhandler.h>
 #include <yaml-cpp/yaml.h>
 
+#include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/contact.h"
 #include "active_tensegrity/core/mechanics.h"
 #include "active_tensegrity/core/modal.h"
@@ -918,6 +919,11 @@ private:
               if (g.restitution > 1.0)
                 r.fail(r.key("restitution"), "must be in [0, 1], got " + show(r.get("restitution")));
               g.friction = r.nonNegative("friction", g.friction);
+              g.stick_velocity = r.nonNegative("stick_velocity", g.stick_velocity);
+              g.slip_velocity = r.positive("slip_velocity", g.slip_velocity);
+              if (g.slip_velocity <= g.stick_velocity)
+                r.fail(r.key("slip_velocity"), "must exceed stick_velocity (" + shortestNumber(g.stick_velocity) +
+                                                   " m/s), got " + shortestNumber(g.slip_velocity));
             });
     if (!g.enabled)
       return;
@@ -1109,8 +1115,13 @@ private:
     // a scene without actuators (free motion, e.g. a drop) needs no actuation travel or speed; the modes are
     // about the start unless an actuation is given
     const bool actuated = !model_.actuators.empty();
-    an.max_actuation =
-        actuated && an.type != AnalysisType::kModal ? a.positive("max_actuation") : a.nonNegative("max_actuation", 0.0);
+    // a dynamic run with actuation.sequence moves each actuator on its own: no common max_actuation
+    const bool sequenced = root_.has("actuation") && root_.map("actuation").has("sequence");
+    if (sequenced && a.has("max_actuation"))
+      a.fail(a.key("max_actuation"), "give either analysis.max_actuation (every actuator ramps to it) or "
+                                     "actuation.sequence (each actuator's own ramps), not both");
+    an.max_actuation = actuated && an.type != AnalysisType::kModal && !sequenced ? a.positive("max_actuation") :
+                                                                                   a.nonNegative("max_actuation", 0.0);
     an.steps = a.integer("steps", an.steps, 1, kMaxLoadSteps);
     an.modes = a.integer("modes", an.modes, 1, kMaxModes);
     an.output_interval = a.nonNegative("output_interval", 0.0);
@@ -1121,6 +1132,8 @@ private:
       an.schedule.speed = s.positive("speed");
       an.schedule.start_time = s.nonNegative("start_time", 0.0);
       an.schedule.blend_time = s.nonNegative("blend_time", 0.0);
+      if (sequenced)
+        readSequence(s);
       s.finish();
     }
     else
@@ -1139,7 +1152,7 @@ private:
       an.duration = a.positive("duration");
     else
     {
-      const double ramp_end = actuated && an.type == AnalysisType::kDynamic ? an.schedule.endTime() : 0.0;
+      const double ramp_end = actuated && an.type == AnalysisType::kDynamic ? actuationEndTime(model_) : 0.0;
       an.duration = ramp_end + an.settle_time;
       if (!std::isfinite(an.duration))
         a.fail(a.key("settle_time"), "the derived duration (the ramp's end " + shortestNumber(ramp_end) + " s plus " +
@@ -1162,6 +1175,62 @@ private:
       checkDynamicWork(a);
     readLoadPath(a);
     a.finish();
+  }
+
+  /// actuation.sequence: a list of {time, targets: {actuator: value}}, times ascending; each named actuator ramps
+  /// from its value then (0 at the start) to its target at actuation.speed, blended by actuation.blend_time.
+  void readSequence(Reader& s)
+  {
+    AnalysisSettings& an = model_.analysis;
+    if (an.type != AnalysisType::kDynamic)
+      s.fail(s.key("sequence"), "is for dynamic analyses (a static path ramps every actuator to max_actuation)");
+    if (s.has("start_time"))
+      s.fail(s.key("start_time"), "a sequence gives each step its own time; start_time is for the common ramp");
+    const YAML::Node list = s.raw("sequence");
+    if (!list.IsSequence() || list.size() == 0)
+      s.fail(s.key("sequence"), "expected a list of {time: s, targets: {actuator: m}}, got " + show(list));
+    std::vector<double> busy_until(model_.actuators.size(), 0.0), value(model_.actuators.size(), 0.0);
+    double last_time = -1.0;
+    for (size_t i = 0; i < list.size(); ++i)
+    {
+      const std::string key = s.key("sequence") + "[" + std::to_string(i) + "]";
+      Reader r(list[i], key, source_);
+      ActuationStep step;
+      step.time = r.nonNegative("time", -1.0);
+      if (!r.has("time"))
+        r.fail(key + ".time", "missing required key");
+      if (step.time <= last_time)
+        r.fail(r.key("time"), "steps must come in increasing time, got " + shortestNumber(step.time) + " s after " +
+                                  shortestNumber(last_time) + " s");
+      last_time = step.time;
+      Reader targets = r.map("targets");
+      if (targets.keys().empty())
+        r.fail(r.key("targets"), "names no actuator");
+      for (const std::string& name : targets.keys())
+      {
+        const int a = model_.findActuator(name);
+        if (a < 0)
+          targets.fail(targets.key(name), "unknown actuator " + quoted(name));
+        const double target = targets.number(name);
+        const Actuator& act = model_.actuators[a];
+        if (target < act.min_value || target > act.max_value)
+          targets.fail(targets.key(name), "must lie in the actuator's range [" + shortestNumber(act.min_value) + ", " +
+                                              shortestNumber(act.max_value) + "], got " + shortestNumber(target));
+        if (step.time < busy_until[a])
+          targets.fail(targets.key(name), "actuator " + quoted(name) + " is still moving until " +
+                                              roundedNumber(busy_until[a]) + " s (its ramp before ends there)");
+        RampSchedule ramp = an.schedule;
+        ramp.start_time = step.time;
+        ramp.final_value = std::abs(target - value[a]);
+        busy_until[a] = ramp.endTime();
+        value[a] = target;
+        step.actuators.push_back(a);
+        step.targets.push_back(target);
+      }
+      targets.finish();
+      r.finish();
+      an.sequence.push_back(step);
+    }
   }
 
   /// analysis.load_factor: [start, end] scales the point loads along a static path; analysis.arc_length

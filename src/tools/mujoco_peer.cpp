@@ -10,6 +10,7 @@
 #include <stdexcept>
 #include <utility>
 
+#include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/contact.h"
 #include "active_tensegrity/core/mechanics.h"
 
@@ -246,7 +247,7 @@ struct MujocoPeer::Impl
   {
     if (actuator < 0 || actuator >= static_cast<int>(model.actuators.size()))
       return {};
-    return model.analysis.schedule.evaluate(t);
+    return core::scheduledActuation(model, t)[actuator];
   }
 
   Vec3 drivenPosition(int k, double t) const

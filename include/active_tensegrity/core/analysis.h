@@ -20,6 +20,14 @@ namespace active_tensegrity::core
 /// is -Phi_q^T lambda, so each target contributes -lambda.
 double actuationForce(const Model& model, const State& state, int actuator);
 
+/// The scene's actuation law of a dynamic run at time t, one value per actuator: every actuator on
+/// analysis.schedule's ramp to max_actuation, or each on its own ramps of actuation.sequence.
+ActuationValues scheduledActuation(const Model& model, double t);
+/// When the last ramp of that law ends (s).
+double actuationEndTime(const Model& model);
+/// Where that law is not smooth (s, ascending, distinct): an adaptive run steps onto them.
+std::vector<double> actuationBreakpoints(const Model& model);
+
 /// Highest z of the model's height nodes above the ground level (m).
 double structureHeight(const Model& model, const Eigen::VectorXd& q);
 

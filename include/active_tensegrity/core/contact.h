@@ -27,7 +27,8 @@
 /// point masses with a radius), each a contact "slot" after the strut pairs: for a sphere of centre c and
 /// radius r, zeta = h + r - c_z, n = +z (from the ground, "body b", towards the body), the same
 /// Lankarani-Nikravesh normal force with K = (4/3) E* sqrt(r) and the ground's restitution, and the same
-/// modified Coulomb friction (the ground's mu) at the sphere's lowest point PA = c - r z as a material point.
+/// modified Coulomb friction (the ground's mu, v0 and v1) at the sphere's lowest point PA = c - r z as a material
+/// point.
 #pragma once
 
 #include <string>

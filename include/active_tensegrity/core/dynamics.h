@@ -89,7 +89,13 @@ private:
   void updateContactMemory(State& end, const Eigen::VectorXd& q_start);
   /// The local error estimate of a step of h from algorithmic accelerations a0 to a1 (StepEstimate).
   double errorEstimate(const Eigen::VectorXd& a0, const Eigen::VectorXd& a1, double h) const;
-  Summary attempt(State& state, double h, const ActuationLaw& law);
+  /// One Newton solve of a step of h (modified Newton as options allow, or full Newton).
+  Summary attempt(State& state, double h, const ActuationLaw& law, bool full_newton);
+  /// attempt(), and when modified Newton fails (no convergence, or a matrix built at a diverged iterate that is
+  /// singular), the same step again in full Newton (an exact factorization per iteration) before the caller cuts
+  /// it: a kept matrix can diverge where Newton's own converges (friction as the six-bar robot lands on a face:
+  /// 2689 step cuts on its roll without the retry, 6 with it).
+  Summary attemptOrFullNewton(State& state, double h, const ActuationLaw& law);
   /// A step of h, halved on failure (a loop over the pieces, at most max_step_cuts levels deep, never
   /// below dt_min).
   Summary advance(State& state, double h, const ActuationLaw& law);

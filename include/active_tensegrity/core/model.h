@@ -177,9 +177,14 @@ struct GroundSettings
   double height = 0.0;          // m, the plane z = height
   std::string material;         // its elastic constants (from `materials`)
   double youngs_modulus = 0.0;  // Pa
-  double poisson_ratio = 0.0;   //
-  double restitution = 1.0;     // c_e in [0, 1]
-  double friction = 0.0;        // mu; 0 skips all friction work
+  double poisson_ratio = 0.0;
+  double restitution = 1.0;  // c_e in [0, 1]
+  double friction = 0.0;     // mu; 0 skips all friction work
+  /// the modified Coulomb law's v0 and v1 (m/s): with v0 = 0 (the default) friction grows linearly with the slip
+  /// below v1, so a body at rest on the ground is held (it creeps at a speed proportional to its tangential
+  /// load) and the law has no kink at v0 for Newton to chatter over
+  double stick_velocity = 0.0;
+  double slip_velocity = 0.05;
 };
 
 /// A sphere that can touch the ground: one end of a strut (centre on the axis at +-L/2, the strut's outer
@@ -231,6 +236,15 @@ enum class AnalysisType
   kModal  // natural modes about the equilibrium at max_actuation (core/modal.h)
 };
 
+/// One step of actuation.sequence: from `time`, the listed actuators ramp from where they are to their
+/// targets (the schedule's speed and blend); the loader sees that an actuator's ramps do not overlap.
+struct ActuationStep
+{
+  double time = 0.0;            // s
+  std::vector<int> actuators;   // indices into Model::actuators
+  std::vector<double> targets;  // m, one per actuator
+};
+
 struct AnalysisSettings
 {
   AnalysisType type = AnalysisType::kStatic;
@@ -243,7 +257,10 @@ struct AnalysisSettings
   double settle_time = 1.0;      // s after the ramp's end, for the derived duration
   double output_interval = 0.0;  // s (dynamic, 0 = every step)
   int modes = 10;                // modal: how many of the lowest modes
-  RampSchedule schedule;         // dynamic actuation law for every actuator
+  RampSchedule schedule;         // dynamic actuation law for every actuator (without a sequence)
+  /// dynamic: per-actuator ramps (actuation.sequence) instead of every actuator ramping to max_actuation; the
+  /// schedule then gives the speed and blend only
+  std::vector<ActuationStep> sequence;
   /// static: the point loads' factor runs from start to end along the path (with the actuation)
   double load_factor_start = 1.0;
   double load_factor_end = 1.0;

@@ -52,6 +52,7 @@ struct StepTimings
   long factorizations = 0;
   long analyses = 0;  // symbolic analyses of the Newton matrix (its pattern grows when a new pair touches)
   long static_pivot_factorizations = 0;  // of them, the approximate static-pivot LU (SparseLinearSolver)
+  long full_newton_retries = 0;  // dynamics: steps retried in full Newton after modified Newton ran out of iterations
 
   StepTimings& operator+=(const StepTimings& o)
   {
@@ -65,6 +66,7 @@ struct StepTimings
     factorizations += o.factorizations;
     analyses += o.analyses;
     static_pivot_factorizations += o.static_pivot_factorizations;
+    full_newton_retries += o.full_newton_retries;
     return *this;
   }
 };
