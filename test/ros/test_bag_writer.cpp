@@ -17,6 +17,7 @@
 #include <tf2_msgs/TFMessage.h>
 
 #include "active_tensegrity/core/analysis.h"
+#include "active_tensegrity/core/dynamics.h"
 #include "active_tensegrity/core/scene.h"
 #include "active_tensegrity/ros/messages.h"
 
@@ -220,4 +221,32 @@ TEST(TensegrityRunBag, WritesEveryTopicPerOutputStepInSimulatedTime)
   std::string bad_out;
   EXPECT_EQ(run(scene("tower.yaml") + " --bag /no/such/dir/x.bag", bad_out), 1);
   EXPECT_NE(bad_out.find("cannot write the bag '/no/such/dir/x.bag'"), std::string::npos) << bad_out;
+}
+
+TEST(MessageBuilder, GroundContactsNameTheGroundAndTheGroundIsDrawn)
+{
+  // the six-bar robot after 0.5 s on its triangle: three strut ends on the ground, with their arrows, and the
+  // ground's slab at its height
+  const at::Model model = at::loadScene(scene("six_bar.yaml"));
+  at::State state = at::initialState(model);
+  at::DynamicsSolver solver(model, model.solver);
+  const at::ActuationLaw still = [&](double) { return at::ActuationValues(model.actuators.size()); };
+  ASSERT_TRUE(solver.initialize(state, still).ok());
+  for (int k = 0; k < 500; ++k)
+    ASSERT_TRUE(solver.step(state, model.solver.dt, still).ok());
+  rl::MessageBuilder builder(model, "world", rl::MarkerOptions());
+  const rl::Snapshot snap = builder.build(state, ros::Time(100.0));
+  std::set<std::string> on_ground;
+  for (const auto& c : snap.contacts.contacts)
+  {
+    ASSERT_EQ(c.strut_b, "ground");
+    on_ground.insert(c.strut_a);
+    EXPECT_DOUBLE_EQ(c.point_b.z, 0.0);
+    EXPECT_DOUBLE_EQ(c.normal.z, 1.0);
+    EXPECT_GT(c.normal_force, 0.0);
+  }
+  EXPECT_EQ(on_ground, (std::set<std::string>{ "S2", "S4", "S6" }));
+  EXPECT_EQ(countNs(snap.markers, "ground", visualization_msgs::Marker::ADD), 1);
+  // per contact the normal force on the strut and on the ground (and friction while it is above the drawing floor)
+  EXPECT_GE(countNs(snap.markers, "contact_forces", visualization_msgs::Marker::ADD), 6);
 }
