@@ -225,7 +225,8 @@ struct MujocoPeer::Impl
   std::vector<DrivenMass> driven;
   std::vector<Carrier> carriers;
   std::vector<CableMap> cables;
-  std::vector<int> pair_of_checked;  // checked pair -> MuJoCo pair (-1 without contact)
+  std::vector<int> pair_of_checked;                    // checked pair -> MuJoCo pair (-1 without contact)
+  std::vector<std::pair<double, double>> text_solref;  // each <pair>'s solref, in the text's order
   std::vector<double> pair_stiffness, pair_damping;
   std::vector<std::pair<core::PointRef, std::string>> site_names;  // sites made, by point
   std::vector<int> site_ids;                                       // parallel to site_names after compile
@@ -266,6 +267,29 @@ struct MujocoPeer::Impl
   bool hasFriction() const
   {
     return model.contact.friction > 0.0;
+  }
+  /// The bodies that touch the ground (ascending; empty without a ground), one MuJoCo pair each, after the
+  /// strut pairs.
+  std::vector<int> groundBodies() const
+  {
+    std::vector<int> out;
+    for (const core::GroundContact& g : model.ground_contacts)
+      if ((out.empty() || out.back() != g.body) && driven_of_body[g.body] < 0)
+        out.push_back(g.body);
+    out.erase(std::unique(out.begin(), out.end()), out.end());
+    return out;
+  }
+  /// The ground contact of a body (its first sphere; a strut's two have the same radius and stiffness).
+  const core::GroundContact& groundContactOf(int body) const
+  {
+    for (const core::GroundContact& g : model.ground_contacts)
+      if (g.body == body)
+        return g;
+    throw std::logic_error("no ground contact");
+  }
+  int pairCount() const
+  {
+    return (hasContact() ? static_cast<int>(model.checked_pairs.size()) : 0) + static_cast<int>(groundBodies().size());
   }
 
   std::vector<bool> mapDrivenNodes();
@@ -435,9 +459,10 @@ void MujocoPeer::Impl::writeHeader(std::ostream& x, const Translation& tr) const
 {
   const bool friction = hasFriction();
   const Vec3 gravity = model.gravity_enabled ? model.gravity : Vec3::Zero();
-  const int n_pairs = hasContact() ? static_cast<int>(model.checked_pairs.size()) : 0;
+  const int n_pairs = pairCount();
   const int ncon_max = 2 * n_pairs + 4;
-  const int njmax = 3 * static_cast<int>(tr.connects.size() + carriers.size()) + (friction ? 3 : 1) * ncon_max + 16;
+  const int njmax = 3 * static_cast<int>(tr.connects.size() + carriers.size()) +
+                    (friction || model.ground.friction > 0.0 ? 3 : 1) * ncon_max + 16;
   const char* integrator = options.integrator == MujocoIntegrator::kEuler    ? "Euler" :
                            options.integrator == MujocoIntegrator::kImplicit ? "implicit" :
                                                                                "RK4";
@@ -462,6 +487,9 @@ void MujocoPeer::Impl::writeSites(std::ostream& x, int body, const std::string& 
 void MujocoPeer::Impl::writeBodies(std::ostream& x) const
 {
   writeSites(x, -1, "    ");
+  if (!groundBodies().empty())
+    x << "    <geom name=\"ground\" type=\"plane\" size=\"0 0 1\" pos=\"0 0 " << num(model.ground.height) << "\"/>\n";
+  const std::vector<int> on_ground = groundBodies();
   for (int i = 0; i < static_cast<int>(model.bodies.size()); ++i)
   {
     const core::Body& b = model.bodies[i];
@@ -486,6 +514,9 @@ void MujocoPeer::Impl::writeBodies(std::ostream& x) const
       const double j = 1e-6 * b.mass;
       x << "      <inertial pos=\"0 0 0\" mass=\"" << num(b.mass) << "\" diaginertia=\"" << num(j) << " " << num(j)
         << " " << num(j) << "\"/>\n";
+      if (std::binary_search(on_ground.begin(), on_ground.end(), i))
+        x << "      <geom name=\"geom" << i << "\" type=\"sphere\" size=\"" << num(groundContactOf(i).radius)
+          << "\"/>\n";
     }
     writeSites(x, i, "      ");
     x << "    </body>\n";
@@ -564,14 +595,21 @@ void MujocoPeer::Impl::writeTendons(std::ostream& x, const Translation& tr) cons
 // Capsule pairs for the checked pairs only; their solref is set after compiling (setContactParameters).
 void MujocoPeer::Impl::writeContactPairs(std::ostream& x) const
 {
-  if (!hasContact())
+  if (pairCount() == 0)
     return;
+  const auto pair = [&](const std::string& geom1, int body, double mu)
+  {
+    x << "    <pair geom1=\"" << geom1 << "\" geom2=\"geom" << body << "\" condim=\"" << (mu > 0.0 ? 3 : 1)
+      << "\" friction=\"" << num(mu) << " " << num(mu) << " 0 0 0\" solref=\"-1 -1\" solimp=\""
+      << num(options.contact_impedance) << " " << num(options.contact_impedance)
+      << " 0.001 0.5 2\" margin=\"0\" gap=\"0\"/>\n";
+  };
   x << "  <contact>\n";
-  for (const core::StrutPair& p : model.checked_pairs)
-    x << "    <pair geom1=\"geom" << p.body_a << "\" geom2=\"geom" << p.body_b << "\" condim=\""
-      << (hasFriction() ? 3 : 1) << "\" friction=\"" << num(model.contact.friction) << " "
-      << num(model.contact.friction) << " 0 0 0\" solref=\"-1 -1\" solimp=\"" << num(options.contact_impedance) << " "
-      << num(options.contact_impedance) << " 0.001 0.5 2\" margin=\"0\" gap=\"0\"/>\n";
+  if (hasContact())
+    for (const core::StrutPair& p : model.checked_pairs)
+      pair("geom" + std::to_string(p.body_a), p.body_b, model.contact.friction);
+  for (int body : groundBodies())
+    pair("ground", body, model.ground.friction);
   x << "  </contact>\n";
 }
 
@@ -642,31 +680,62 @@ void MujocoPeer::Impl::setContactParameters(mjModel* m)
   pair_of_checked.assign(model.checked_pairs.size(), -1);
   pair_stiffness.assign(model.checked_pairs.size(), 0.0);
   pair_damping.assign(model.checked_pairs.size(), 0.0);
-  if (!hasContact())
-    return;
-  const int n_pairs = static_cast<int>(model.checked_pairs.size());
-  const double ce = std::clamp(model.contact.restitution, 0.0, 1.0);
   // a linear oscillator rebounds with e = exp(-zeta pi / sqrt(1 - zeta^2))
-  const double zeta = ce <= 0.0 ? 1.0 : -std::log(ce) / std::sqrt(M_PI * M_PI + std::log(ce) * std::log(ce));
-  double impratio = 1.0;
-  for (int i = 0; i < n_pairs; ++i)
+  const auto dampingRatio = [](double restitution)
   {
-    const core::StrutPair& p = model.checked_pairs[i];
-    const double f = options.contact_force;
-    const double k_lin = std::cbrt(p.stiffness90 * p.stiffness90 * f);  // K90^(2/3) F*^(1/3)
-    const double inv_mass = m->body_invweight0[2 * body_id[p.body_a]] + m->body_invweight0[2 * body_id[p.body_b]];
-    const double c_lin = 2.0 * zeta * std::sqrt(k_lin / inv_mass);
-    pair_of_checked[i] = i;
-    pair_stiffness[i] = k_lin;
-    pair_damping[i] = c_lin;
-    m->pair_solref[2 * i] = -k_lin * inv_mass;
-    m->pair_solref[2 * i + 1] = -c_lin * inv_mass;
-    // friction rows damp the slip with impratio * C_lin (elliptic cone, no friction solref in 2.2.2):
-    // our regularized Coulomb reaches mu F_N at v1, so match that slope at F*
-    if (i == 0 && hasFriction() && c_lin > 0.0)
-      impratio =
-          std::max(1.0, model.contact.friction * f /
-                            (std::max(1e-6, model.contact.slip_velocity - model.contact.stick_velocity) * c_lin));
+    const double ce = std::clamp(restitution, 0.0, 1.0);
+    return ce <= 0.0 ? 1.0 : -std::log(ce) / std::sqrt(M_PI * M_PI + std::log(ce) * std::log(ce));
+  };
+  double impratio = 1.0;
+  // one pair's solref for a Hertz stiffness k (N/m^1.5) at the force scale f; returns C_lin. Friction rows damp the
+  // slip with impratio * C_lin (elliptic cone, no friction solref in 2.2.2): our regularized Coulomb reaches
+  // mu F_N at v1, so that slope is matched at F* (the largest impratio any pair needs)
+  // the compiler sorts the pairs (by body): pair k of the text is found by its geoms
+  const auto compiled = [&](const std::string& geom1, int body)
+  {
+    const int g1 = mj_name2id(m, mjOBJ_GEOM, geom1.c_str());
+    const int g2 = mj_name2id(m, mjOBJ_GEOM, ("geom" + std::to_string(body)).c_str());
+    for (int j = 0; j < m->npair; ++j)
+      if ((m->pair_geom1[j] == g1 && m->pair_geom2[j] == g2) || (m->pair_geom1[j] == g2 && m->pair_geom2[j] == g1))
+        return j;
+    throw std::logic_error("MuJoCo has no pair of " + geom1 + " and geom" + std::to_string(body));
+  };
+  text_solref.clear();
+  const auto set = [&](int j, double k, double f, double inv_mass, double restitution, double mu, double v_ramp)
+  {
+    const double k_lin = std::cbrt(k * k * f);  // K^(2/3) F*^(1/3)
+    const double c_lin = 2.0 * dampingRatio(restitution) * std::sqrt(k_lin / inv_mass);
+    m->pair_solref[2 * j] = -k_lin * inv_mass;
+    m->pair_solref[2 * j + 1] = -c_lin * inv_mass;
+    text_solref.emplace_back(-k_lin * inv_mass, -c_lin * inv_mass);
+    if (mu > 0.0 && c_lin > 0.0)
+      impratio = std::max(impratio, mu * f / (std::max(1e-6, v_ramp) * c_lin));
+    return std::make_pair(k_lin, c_lin);
+  };
+  if (hasContact())
+    for (int i = 0; i < static_cast<int>(model.checked_pairs.size()); ++i)
+    {
+      const core::StrutPair& p = model.checked_pairs[i];
+      const int j = compiled("geom" + std::to_string(p.body_a), p.body_b);
+      const double inv_mass = m->body_invweight0[2 * body_id[p.body_a]] + m->body_invweight0[2 * body_id[p.body_b]];
+      const auto [k_lin, c_lin] =
+          set(j, p.stiffness90, options.contact_force, inv_mass, model.contact.restitution, model.contact.friction,
+              model.contact.slip_velocity - model.contact.stick_velocity);
+      pair_of_checked[i] = j;
+      pair_stiffness[i] = k_lin;
+      pair_damping[i] = c_lin;
+    }
+  double weight = 0.0;
+  for (const core::Body& b : model.bodies)
+    weight += b.mass * model.gravity.norm();
+  const double ground_force = options.ground_force > 0.0            ? options.ground_force :
+                              model.gravity_enabled && weight > 0.0 ? weight / 3.0 :
+                                                                      options.contact_force;
+  for (int body : groundBodies())
+  {
+    const core::GroundContact& g = groundContactOf(body);
+    set(compiled("ground", body), g.stiffness, ground_force, m->body_invweight0[2 * body_id[body]],
+        model.ground.restitution, model.ground.friction, model.ground.slip_velocity - model.ground.stick_velocity);
   }
   m->opt.impratio = impratio;
 }
@@ -696,12 +765,12 @@ std::string MujocoPeer::exportXml() const
   std::string out = xml_;
   const std::string placeholder = "solref=\"-1 -1\"";
   size_t at = 0;
-  for (int i = 0; i < m_->npair; ++i)
+  for (const auto& [k, c] : impl_->text_solref)
   {
     at = out.find(placeholder, at);
     if (at == std::string::npos)
       break;
-    const std::string solref = "solref=\"" + num(m_->pair_solref[2 * i]) + " " + num(m_->pair_solref[2 * i + 1]) + "\"";
+    const std::string solref = "solref=\"" + num(k) + " " + num(c) + "\"";
     out.replace(at, placeholder.size(), solref);
     at += solref.size();
   }
@@ -715,7 +784,8 @@ std::string MujocoPeer::exportXml() const
       "<!-- active_tensegrity's MuJoCo translation of the scene '" + name +
       "' (tensegrity_export).\n"
       "  Struts are capsules on free joints with our masses and inertias; pins and ball joints are equality\n"
-      "  connects; contact is a linear spring-dashpot per checked pair (solref in MuJoCo's direct format).\n"
+      "  connects; contact is a linear spring-dashpot per checked pair and per body on the ground plane (solref in\n"
+      "  MuJoCo's direct format).\n"
       "  Cables and springs are spatial tendons, each carrying a motor actuator whose control must be set to\n"
       "  -T every step, T = k (l - l0) + c l_dot when positive (tension only; l0, k and c from the scene).\n"
       "  Driven strut ends ride on carrier bodies whose drive joint follows the actuation; driven point\n"

@@ -21,7 +21,10 @@
 /// - contact: explicit capsule-capsule pairs for model.checked_pairs only (contype/conaffinity 0),
 ///   a linear spring-dashpot set through solref in MuJoCo's direct format with a tiny impedance
 ///   (see MujocoOptions::contact_force and docs/benchmarks.md); friction mu with an elliptic cone
-///   (condim 3), frictionless with condim 1.
+///   (condim 3), frictionless with condim 1;
+/// - the ground (model.ground): a plane at its height and a pair with each body that touches it (a strut's
+///   capsule, whose two end spheres are MuJoCo's capsule-plane contacts as they are ours; a point mass with a
+///   radius gets a sphere), the same linear law through MujocoOptions::ground_force.
 #pragma once
 
 #include <memory>
@@ -55,6 +58,9 @@ struct MujocoOptions
   /// K_lin = K90^(2/3) F*^(1/3) (K90 the pair's stiffness at a right crossing), so that the two laws
   /// give the same overlap at F*. The damping gives a linear oscillator's restitution equal to our c_e.
   double contact_force = 1000.0;  // F*, N
+  /// The same for the ground's contacts (each end sphere on the plane: K = (4/3) E* sqrt(r)); 0: the
+  /// structure's weight shared by three contacts (a robot standing on a triangle), else contact_force.
+  double ground_force = 0.0;  // N
   /// Impedance d of the contacts (constant): small, so that the force is K_lin r + C_lin r_dot to O(d)
   /// whatever the effective mass at the contact point (docs/benchmarks.md).
   double contact_impedance = 1e-4;
