@@ -47,6 +47,8 @@ const char* kUsage =
     "                        [--mujoco-contact-force F]\n"
     "  --mujoco-dts adds the scene in MuJoCo over that ladder (rows mujoco_<integrator>; contact\n"
     "  stiffness from F, default the reference's peak force; only when built with MuJoCo).\n"
+    "                        [--paths FILE]\n"
+    "  --paths writes each run's path: the bodies' mass centre per output step (scheme,dt,t,x,y,z).\n"
     "       tensegrity_bench stress [--quick]\n"
     "  The stability stress cases (docs/benchmarks.md): one row per case; --quick runs the short ones.\n"
     "       tensegrity_bench lattice [--struts a,b,..] [--width W] [--max-struts N] [--duration S] [--repeat N]\n"

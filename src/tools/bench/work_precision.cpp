@@ -9,6 +9,8 @@
 // --mujoco-dts a,b,.. then runs the scene translated into MuJoCo (mujoco_peer.h) over that ladder with each of
 // --mujoco-integrators (default euler,implicit,rk4), rows named mujoco_<integrator>, measured the same way;
 // --mujoco-contact-force F sets its contact stiffness scale (default: the reference's peak contact force).
+// --paths FILE writes, per run and output step, the bodies' mass centre (scheme, dt, t, x, y, z; the
+// reference's rows first).
 // (Only when built with MuJoCo, ACTIVE_TENSEGRITY_HAVE_MUJOCO; without it these options exit with status 2.)
 #include <algorithm>
 #include <cmath>
@@ -120,6 +122,24 @@ struct Errors
   double impulse = 0.0;    // relative error of the contact impulse
 };
 
+/// With --paths: per output step of a run, the mass centre of the bodies (m) and the layer heights.
+void writePath(std::ostream* paths, const at::Model& model, const std::string& name, double dt, const Trace& tr)
+{
+  if (!paths)
+    return;
+  double mass = 0.0;
+  for (const at::Body& b : model.bodies)
+    mass += b.mass;
+  for (size_t k = 0; k < tr.t.size(); ++k)
+  {
+    at::Vec3 c = at::Vec3::Zero();
+    for (const at::Body& b : model.bodies)
+      c += b.mass / mass * tr.q[k].segment<3>(b.offset);
+    *paths << name << "," << dt << "," << tr.t[k] << "," << c.x() << "," << c.y() << "," << c.z() << "\n";
+  }
+  paths->flush();
+}
+
 Errors compare(const at::Model& model, const Trace& tr, const Trace& ref)
 {
   double ref_fmax = 1e-12;
@@ -146,7 +166,7 @@ Errors compare(const at::Model& model, const Trace& tr, const Trace& ref)
 /// ladder `dts`, measured against the same reference as our runs (docs/benchmarks.md); `force` is the
 /// contact force scale F* (0: the reference's peak force).
 void mujocoRows(const at::Model& base, const Trace& ref, const std::vector<std::string>& integrators,
-                const std::vector<double>& dts, double force, std::ostream& out)
+                const std::vector<double>& dts, double force, std::ostream& out, std::ostream* paths)
 {
   for (const std::string& integrator : integrators)
     for (double dt : dts)
@@ -172,6 +192,7 @@ void mujocoRows(const at::Model& base, const Trace& ref, const std::vector<std::
       }
       const Errors e = compare(base, tr, ref);
       const std::string name = "mujoco_" + integrator;
+      writePath(paths, base, name, dt, tr);
       out << name << "," << dt << ",0," << mj.status << "," << mj.steps << "," << mj.solver_iterations << ","
           << mj.wall_time << "," << e.position << "," << e.height << "," << e.force << "," << e.peak << ","
           << e.peak_time << ",nan," << mj.peak << "," << ref.peak << "\n";
@@ -196,6 +217,7 @@ int workPrecision(const std::string& scene, const std::vector<std::string>& args
   std::vector<double> mujoco_dts;  // the MuJoCo peer's ladder (none: not run)
   std::vector<std::string> mujoco_integrators = { "euler", "implicit", "rk4" };
   double mujoco_force = 0.0;  // contact force scale F* (0: the reference's peak)
+  std::string paths_path;
   Args in(args);
   while (in.more())
   {
@@ -214,6 +236,8 @@ int workPrecision(const std::string& scene, const std::vector<std::string>& args
       ref_dt = tools::parsePositive<double>(a, next());
     else if (a == "--csv")
       csv_path = next();
+    else if (a == "--paths")
+      paths_path = next();
 #ifndef ACTIVE_TENSEGRITY_HAVE_MUJOCO
     else if (a == "--mujoco-dts" || a == "--mujoco-integrators" || a == "--mujoco-contact-force")
       throw tools::BadArgument(a + ": tensegrity_bench was built without MuJoCo (libmujoco-dev was not found, or "
@@ -281,6 +305,16 @@ int workPrecision(const std::string& scene, const std::vector<std::string>& args
       throw std::invalid_argument("cannot write '" + csv_path + "'");
   }
   std::ostream& out = csv_path.empty() ? std::cout : file;
+  std::ofstream paths_file;
+  if (!paths_path.empty())
+  {
+    paths_file.open(paths_path);
+    if (!paths_file)
+      throw std::invalid_argument("cannot write '" + paths_path + "'");
+    paths_file << "scheme,dt,t,x,y,z\n";
+  }
+  std::ostream* paths = paths_path.empty() ? nullptr : &paths_file;
+  writePath(paths, base, "reference", ref_dt, ref);
   out << "scheme,dt,tolerance,status,steps,newton_iterations,wall_time,position_error,height_error,force_error,"
          "peak_force_error,peak_time_error,impulse_error,peak_force,reference_peak_force\n";
   const double tol = base.solver.newton_tolerance;
@@ -292,6 +326,7 @@ int workPrecision(const std::string& scene, const std::vector<std::string>& args
       const Errors e = compare(base, tr, ref);
       const double wall = tr.result.wall_time - tr.result.callback_time;
       const double dt = sc.adaptive ? base.analysis.duration / std::max(1, tr.result.solver_steps) : x;
+      writePath(paths, base, sc.name, dt, tr);
       out << sc.name << "," << dt << "," << (sc.adaptive ? x : 0.0) << "," << at::toString(tr.result.summary.status)
           << "," << tr.result.solver_steps << "," << tr.result.summary.iterations << "," << wall << "," << e.position
           << "," << e.height << "," << e.force << "," << e.peak << "," << e.peak_time << "," << e.impulse << ","
@@ -304,7 +339,7 @@ int workPrecision(const std::string& scene, const std::vector<std::string>& args
                    e.force, e.peak, e.impulse);
     }
 #ifdef ACTIVE_TENSEGRITY_HAVE_MUJOCO
-  mujocoRows(base, ref, mujoco_integrators, mujoco_dts, mujoco_force, out);
+  mujocoRows(base, ref, mujoco_integrators, mujoco_dts, mujoco_force, out, paths);
 #else
   static_cast<void>(mujoco_force);  // the options are refused above
 #endif
