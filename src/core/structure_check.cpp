@@ -509,6 +509,20 @@ int freeCoordinates(const Model& model, const Eigen::VectorXd& q)
 std::vector<std::string> startWarnings(const Model& model_in, const State& state)
 {
   std::vector<std::string> warnings;
+  // the ground on: a free point mass without a radius falls through it
+  if (model_in.ground.enabled)
+    for (size_t b = 0; b < model_in.bodies.size(); ++b)
+    {
+      const int body = static_cast<int>(b);
+      const bool touches = std::any_of(model_in.ground_contacts.begin(), model_in.ground_contacts.end(),
+                                       [&](const GroundContact& g) { return g.body == body; });
+      const bool driven = std::any_of(model_in.constraints.begin(), model_in.constraints.end(),
+                                      [&](const Constraint& c) { return c.actuator >= 0 && c.a.body == body; });
+      if (model_in.bodies[b].kind == BodyKind::kPointMass && !touches && !driven)
+        warnings.push_back("point mass " + quoted(model_in.bodies[b].name) +
+                           " has no radius and does not touch the ground (nodes." + model_in.bodies[b].name +
+                           ".radius)");
+    }
   // a static path that scales its loads starts at its first load factor
   Model scaled;
   if (hasLoadPath(model_in))

@@ -13,6 +13,7 @@
 #include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/dynamics.h"
 #include "active_tensegrity/core/scene.h"
+#include "active_tensegrity/core/structure_check.h"
 #include "fd_check.h"
 #include "test_models.h"
 
@@ -344,4 +345,30 @@ TEST(GroundScene, RefusesAStartInTheGroundAnUnknownMaterialAndARadiusWithoutAMas
   text = strutScene(0.5, 0.5, 0.0);
   text.replace(text.find("enabled: true"), 13, "enabled: false");
   EXPECT_TRUE(loadSceneFromString(text, "off").ground_contacts.empty());
+}
+
+TEST(GroundScene, AFreePointMassWithoutARadiusIsWarnedAbout)
+{
+  const std::string scene = "name: hanging\n"
+                            "materials:\n"
+                            "  concrete: {youngs_modulus: 3.0e10, poisson_ratio: 0.2}\n"
+                            "nodes:\n"
+                            "  A: {position: [0, 0, 1], fixed: true}\n"
+                            "  P: {position: [0, 0, 0.5], mass: 1.0}\n"
+                            "  Q: {position: [0.1, 0, 0.5], mass: 1.0, radius: 0.05}\n"
+                            "springs:\n"
+                            "  s: {stiffness: 100, members: {K: [A, P], L: [A, Q]}}\n"
+                            "ground: {enabled: true, material: concrete}\n"
+                            "analysis: {type: dynamic, duration: 0.1}\n";
+  const Model m = loadSceneFromString(scene, "hanging");
+  ASSERT_EQ(m.ground_contacts.size(), 1u);  // Q only
+  const std::vector<std::string> w = startWarnings(m, initialState(m));
+  const auto about = [&](const std::string& node)
+  {
+    return std::count_if(w.begin(), w.end(),
+                         [&](const std::string& x)
+                         { return x.find("'" + node + "' has no radius") != std::string::npos; });
+  };
+  EXPECT_EQ(about("P"), 1);
+  EXPECT_EQ(about("Q"), 0);
 }

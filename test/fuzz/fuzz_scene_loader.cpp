@@ -1,8 +1,8 @@
 // libFuzzer target for the scene loader: the input is a scene's YAML text; lines of the form
 // "#--set key=value" (YAML comments, so the text stays a scene) are applied as command-line overrides.
-// A loaded scene must give a consistent, finite start: its initial state and the first CSV row (min_gap
-// may be +inf: no pair checked). Anything else than a load or a SceneError is a finding (an uncaught
-// exception, an abort, a sanitizer report, a non-finite number).
+// A loaded scene must give a consistent, finite start: its initial state and the first CSV row (min_gap,
+// min_cable_strut_gap and min_ground_gap may be +inf: nothing to measure). Anything else than a load or a SceneError is
+// a finding (an uncaught exception, an abort, a sanitizer report, a non-finite number).
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -65,7 +65,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size)
   const std::vector<std::string> cols = at::csvColumns(model);
   const std::vector<double> row = at::csvRow(model, s);
   for (size_t i = 0; i < row.size(); ++i)
-    if (!std::isfinite(row[i]) && !((cols[i] == "min_gap" || cols[i] == "min_cable_strut_gap") && row[i] > 0.0))
+    if (!std::isfinite(row[i]) &&
+        !((cols[i] == "min_gap" || cols[i] == "min_cable_strut_gap" || cols[i] == "min_ground_gap") && row[i] > 0.0))
     {
       std::fprintf(stderr, "non-finite %s = %g in the first row\n", cols[i].c_str(), row[i]);
       std::abort();

@@ -122,7 +122,8 @@ int freeCoordinates(const Model& model, const Eigen::VectorXd& q);
 /// equilibrium (force residual above 1e-6 of the largest member force, plus 1e-6 N), when tension elements
 /// are slack there (named, the first ten), and when it is not prestress stable (the counts and the smallest
 /// stiffness). Nothing for a state the diagnostics skip (above kMaxStructureCoordinates coordinates). A static
-/// path that scales its loads is checked with them at its first load factor.
+/// path that scales its loads is checked with them at its first load factor. With the ground on, one warning per
+/// free point mass that has no radius (it does not touch the ground).
 std::vector<std::string> startWarnings(const Model& model, const State& state);
 
 }  // namespace active_tensegrity::core
