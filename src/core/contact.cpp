@@ -251,7 +251,6 @@ ContactPairState evaluateGroundContact(const Model& model, int slot, const Eigen
   }
   if (!out)
     return st;
-  const int nq = body.nq;
   // g = dc_z/dq^T = [z; B_u^T z] (the normal force's generalized direction)
   Vec7 gvec = Vec7::Zero();
   gvec.head<3>() = Vec3::UnitZ();
@@ -264,7 +263,11 @@ ContactPairState evaluateGroundContact(const Model& model, int slot, const Eigen
     if (strut)
       force.tail<4>() += bua.transpose() * f;
   }
-  out->force.head(nq) = force.head(nq);
+  // (fixed sizes: a run-time sized block of a 7-vector lets GCC see 8-wide loads past its end)
+  if (strut)
+    out->force.head<7>() = force;
+  else
+    out->force.head<3>() = force.head<3>();
   if (!out->tangents)
     return st;
 
@@ -309,8 +312,16 @@ ContactPairState evaluateGroundContact(const Model& model, int slot, const Eigen
       jqd_force.bottomRows<4>() += bua.transpose() * jqd_f;
     }
   }
-  out->stiffness.topLeftCorner(nq, nq) = -jq_force.topLeftCorner(nq, nq);
-  out->damping.topLeftCorner(nq, nq) = -jqd_force.topLeftCorner(nq, nq);
+  if (strut)
+  {
+    out->stiffness.topLeftCorner<7, 7>() = -jq_force;
+    out->damping.topLeftCorner<7, 7>() = -jqd_force;
+  }
+  else
+  {
+    out->stiffness.topLeftCorner<3, 3>() = -jq_force.topLeftCorner<3, 3>();
+    out->damping.topLeftCorner<3, 3>() = -jqd_force.topLeftCorner<3, 3>();
+  }
   return st;
 }
 }  // namespace

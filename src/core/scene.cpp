@@ -964,10 +964,10 @@ private:
                                             " overflows: " + shortestNumber(c.stiffness));
         const double depth = g.height + c.radius - pointPosition(model_, PointRef{ c.body, c.local }, q0).z();
         if (depth > 0.1 * c.radius)
-          root_.fail("nodes." + n.name, "starts " + shortestNumber(depth) +
+          root_.fail("nodes." + n.name, "starts " + roundedNumber(depth) +
                                             " m deep in the ground (its sphere of radius " + shortestNumber(c.radius) +
                                             " m must rest on ground.height " + shortestNumber(g.height) +
-                                            ": place the node at z >= " + shortestNumber(g.height + c.radius) + ")");
+                                            ": place the node at z >= " + roundedNumber(g.height + c.radius) + ")");
         model_.ground_contacts.push_back(c);
       }
     }
