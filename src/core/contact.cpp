@@ -120,6 +120,22 @@ Mat3 rotationRate(const Vec4& theta, const Vec4& theta_rate)
   return m;
 }
 
+// The modified Coulomb law's factor c_d at slip speed `slip` and its slope: 0 up to v0, linear to 1 at v1, then 1.
+struct CoulombFactor
+{
+  double cd = 0.0;
+  double dcd = 0.0;
+};
+CoulombFactor coulombFactor(double slip, double v0, double v1)
+{
+  if (slip <= v0)
+    return {};
+  if (slip >= v1)
+    return { 1.0, 0.0 };
+  const double slope = 1.0 / (v1 - v0);
+  return { (slip - v0) * slope, slope };
+}
+
 ContactPairState baseState(int pair, const Closest& c, const StrutAxis& a, const StrutAxis& b)
 {
   ContactPairState st;
@@ -233,15 +249,12 @@ ContactPairState evaluateGroundContact(const Model& model, int slot, const Eigen
     }
     const Vec3 vt(vtol.x(), vtol.y(), 0.0);
     st.slip_speed = vt.norm();
-    if (st.slip_speed > ground.stick_velocity)
+    const CoulombFactor law = coulombFactor(st.slip_speed, ground.stick_velocity, ground.slip_velocity);
+    if (law.cd > 0.0)
     {
       t = vt / st.slip_speed;
-      cd = 1.0;
-      if (st.slip_speed < ground.slip_velocity)
-      {
-        dcd = 1.0 / (ground.slip_velocity - ground.stick_velocity);
-        cd = (st.slip_speed - ground.stick_velocity) * dcd;
-      }
+      cd = law.cd;
+      dcd = law.dcd;
       ft = ground.friction * cd * fn;
       f = -ft * t;
       st.friction_force = ft;
@@ -486,15 +499,12 @@ ContactPairState evaluateContact(const Model& model, int pair, const Eigen::Vect
     vtol = a.centre_rate + bua * a.theta_rate - b.centre_rate - bub * b.theta_rate;
     vt = vtol - c.n.dot(vtol) * c.n;
     st.slip_speed = vt.norm();
-    if (st.slip_speed > set.stick_velocity)
+    const CoulombFactor law = coulombFactor(st.slip_speed, set.stick_velocity, set.slip_velocity);
+    if (law.cd > 0.0)
     {
       t = vt / st.slip_speed;
-      cd = 1.0;
-      if (st.slip_speed < set.slip_velocity)
-      {
-        dcd = 1.0 / (set.slip_velocity - set.stick_velocity);
-        cd = (st.slip_speed - set.stick_velocity) * dcd;
-      }
+      cd = law.cd;
+      dcd = law.dcd;
       ft = set.friction * cd * fn;
       f = -ft * t;  // on strut a at PA
       st.friction_force = ft;

@@ -898,6 +898,22 @@ private:
     }
   }
 
+  /// A contact law's restitution ([0, 1]), friction (>= 0) and the modified Coulomb law's v0 < v1 (m/s; v0 may be 0
+  /// for the ground, whose law is then linear from rest), each kept at its default when not given.
+  static void readContactLaw(Reader& r, double& restitution, double& friction, double& stick, double& slip,
+                             bool stick_may_be_zero)
+  {
+    restitution = r.nonNegative("restitution", restitution);
+    if (restitution > 1.0)
+      r.fail(r.key("restitution"), "must be in [0, 1], got " + show(r.get("restitution")));
+    friction = r.nonNegative("friction", friction);
+    stick = stick_may_be_zero ? r.nonNegative("stick_velocity", stick) : r.positive("stick_velocity", stick);
+    slip = r.positive("slip_velocity", slip);
+    if (slip <= stick)
+      r.fail(r.key("slip_velocity"),
+             "must exceed stick_velocity (" + shortestNumber(stick) + " m/s), got " + shortestNumber(slip));
+  }
+
   /// The ground (`ground`): its plane and material; a contact sphere at every strut end and every point mass with
   /// a radius, except at fixed nodes (held there anyway). A sphere that starts pressed into the ground by more
   /// than a tenth of its radius is refused (a scene placed with its nodes, not its surfaces, on the ground).
@@ -915,15 +931,7 @@ private:
                 r.fail(r.key("material"), "unknown material " + quoted(g.material));
               g.youngs_modulus = it->second.youngs_modulus;
               g.poisson_ratio = it->second.poisson_ratio;
-              g.restitution = r.nonNegative("restitution", g.restitution);
-              if (g.restitution > 1.0)
-                r.fail(r.key("restitution"), "must be in [0, 1], got " + show(r.get("restitution")));
-              g.friction = r.nonNegative("friction", g.friction);
-              g.stick_velocity = r.nonNegative("stick_velocity", g.stick_velocity);
-              g.slip_velocity = r.positive("slip_velocity", g.slip_velocity);
-              if (g.slip_velocity <= g.stick_velocity)
-                r.fail(r.key("slip_velocity"), "must exceed stick_velocity (" + shortestNumber(g.stick_velocity) +
-                                                   " m/s), got " + shortestNumber(g.slip_velocity));
+              readContactLaw(r, g.restitution, g.friction, g.stick_velocity, g.slip_velocity, true);
             });
     if (!g.enabled)
       return;
@@ -978,15 +986,7 @@ private:
   {
     ContactSettings& cs = model_.contact;
     cs.enabled = c.boolean("enabled", false);
-    cs.restitution = c.nonNegative("restitution", cs.restitution);
-    if (cs.restitution > 1.0)
-      c.fail(c.key("restitution"), "must be in [0, 1], got " + show(c.get("restitution")));
-    cs.friction = c.nonNegative("friction", cs.friction);
-    cs.stick_velocity = c.positive("stick_velocity", cs.stick_velocity);
-    cs.slip_velocity = c.positive("slip_velocity", cs.slip_velocity);
-    if (cs.slip_velocity <= cs.stick_velocity)
-      c.fail(c.key("slip_velocity"), "must exceed stick_velocity (" + shortestNumber(cs.stick_velocity) +
-                                         " m/s), got " + shortestNumber(cs.slip_velocity));
+    readContactLaw(c, cs.restitution, cs.friction, cs.stick_velocity, cs.slip_velocity, false);
     const double min_angle_deg = c.positive("min_crossing_angle", cs.min_crossing_angle * 180.0 / M_PI);
     if (min_angle_deg >= 90.0)
       c.fail(c.key("min_crossing_angle"), "must be below 90 degrees, got " + show(c.get("min_crossing_angle")));

@@ -274,8 +274,9 @@ struct MujocoPeer::Impl
   {
     std::vector<int> out;
     for (const core::GroundContact& g : model.ground_contacts)
-      if ((out.empty() || out.back() != g.body) && driven_of_body[g.body] < 0)
+      if (driven_of_body[g.body] < 0)
         out.push_back(g.body);
+    std::sort(out.begin(), out.end());  // (a strut's two spheres come at its two nodes, far apart in the list)
     out.erase(std::unique(out.begin(), out.end()), out.end());
     return out;
   }

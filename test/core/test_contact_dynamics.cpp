@@ -24,14 +24,7 @@ constexpr double kSpeed = 1.0;  // m/s, approach speed
 
 SolverOptions options(double dt)
 {
-  SolverOptions o;
-  o.integrator = Integrator::kNewmark;
-  o.dt = dt;
-  o.newmark_gamma = 0.5;
-  o.newmark_beta = 0.25;
-  o.newton_tolerance = 1e-13;
-  o.max_iterations = 30;
-  return o;
+  return trapezoidalOptions(dt, 1e-13);
 }
 
 ActuationLaw noActuation()

@@ -112,13 +112,7 @@ Eigen::VectorXd velocitiesWithSlip(const Model& m, int slot, const Eigen::Vector
 
 SolverOptions fineOptions(double dt)
 {
-  SolverOptions o;
-  o.dt = dt;
-  o.newmark_gamma = 0.5;
-  o.newmark_beta = 0.25;
-  o.newton_tolerance = 1e-12;
-  o.max_iterations = 30;
-  return o;
+  return trapezoidalOptions(dt, 1e-12);
 }
 
 ActuationLaw noActuation()

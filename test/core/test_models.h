@@ -175,4 +175,18 @@ inline double reboundOfOneDegreeOfFreedom(double mass, double k, double v, doubl
   return std::nan("");
 }
 
+/// Newmark's trapezoidal rule (gamma 1/2, beta 1/4: no numerical damping) at step dt with a tight Newton tolerance
+/// (m) and 30 iterations: contact tests that compare with closed forms.
+inline SolverOptions trapezoidalOptions(double dt, double newton_tolerance)
+{
+  SolverOptions o;
+  o.integrator = Integrator::kNewmark;
+  o.dt = dt;
+  o.newmark_gamma = 0.5;
+  o.newmark_beta = 0.25;
+  o.newton_tolerance = newton_tolerance;
+  o.max_iterations = 30;
+  return o;
+}
+
 }  // namespace active_tensegrity::test

@@ -370,3 +370,35 @@ TEST(MujocoPeer, ExportedMjcfLoadsAndRunsAsTheTranslation)
   EXPECT_EQ(unwritable.code, 1);
   EXPECT_NE(unwritable.output.find("cannot write '/nonexistent/q.xml'"), std::string::npos) << unwritable.output;
 }
+
+TEST(MujocoPeer, TheGroundIsAPlaneWithAPairPerStrutAndEachPairHasItsOwnLaw)
+{
+  // the six-bar robot: 15 strut pairs and 6 struts on the ground, whose pairs' constants differ by a factor of
+  // about 370; MuJoCo's compiler sorts pairs, so each pair's solref must be found by its geoms
+  const at::Model model = scene("six_bar.yaml", { "analysis.duration=0.45" });  // before the roll's pull
+  tools::MujocoPeer peer(model, tools::MujocoOptions());
+  const mjModel_* m = peer.mujocoModel();
+  ASSERT_EQ(m->npair, 15 + 6);
+  const int ground = mj_name2id(m, mjOBJ_GEOM, "ground");
+  ASSERT_GE(ground, 0);
+  EXPECT_EQ(m->geom_type[ground], mjGEOM_PLANE);
+  int ground_pairs = 0;
+  for (int j = 0; j < m->npair; ++j)
+  {
+    const bool on_ground = m->pair_geom1[j] == ground || m->pair_geom2[j] == ground;
+    ground_pairs += on_ground ? 1 : 0;
+    // the strut pairs' stiffness (per unit mass) is in the 1e7 range, the ground pairs' in the 1e4 range
+    const double k = -m->pair_solref[2 * j];
+    if (on_ground)
+      EXPECT_LT(k, 1e6) << "pair " << j;
+    else
+      EXPECT_GT(k, 1e6) << "pair " << j;
+  }
+  EXPECT_EQ(ground_pairs, 6);
+  // standing on the ground it sags a few centimetres and stays put (with other pairs' stiffness on its ground pairs
+  // it blew up within 0.13 s)
+  const tools::MujocoTrace tr = tools::runMujoco(model, tools::MujocoOptions());
+  ASSERT_TRUE(tr.ok()) << tr.message;
+  for (const at::Vec3& c : tr.positions.back())
+    EXPECT_LT((c - tr.positions.front()[&c - tr.positions.back().data()]).norm(), 0.1);
+}
