@@ -136,6 +136,31 @@ CoulombFactor coulombFactor(double slip, double v0, double v1)
   return { (slip - v0) * slope, slope };
 }
 
+// The friction force on body a from the slip velocity vt (tangential): t = vt / |vt|, F_T = mu c_d F_N, f = -F_T t.
+// Fills the state's slip speed and friction; all zero below v0.
+struct FrictionValue
+{
+  Vec3 t = Vec3::Zero(), f = Vec3::Zero();
+  double cd = 0.0, dcd = 0.0, ft = 0.0;
+};
+FrictionValue frictionForce(ContactPairState& st, const Vec3& vt, double mu, double fn, double v0, double v1)
+{
+  FrictionValue out;
+  st.slip_speed = vt.norm();
+  const CoulombFactor law = coulombFactor(st.slip_speed, v0, v1);
+  if (law.cd <= 0.0)
+    return out;
+  out.t = vt / st.slip_speed;
+  out.cd = law.cd;
+  out.dcd = law.dcd;
+  out.ft = mu * out.cd * fn;
+  out.f = -out.ft * out.t;
+  st.friction_force = out.ft;
+  st.friction_on_a = out.f;
+  st.force_on_a += out.f;
+  return out;
+}
+
 ContactPairState baseState(int pair, const Closest& c, const StrutAxis& a, const StrutAxis& b)
 {
   ContactPairState st;
@@ -247,20 +272,13 @@ ContactPairState evaluateGroundContact(const Model& model, int slot, const Eigen
       bua = pointJacobianTheta(theta, ua);
       vtol = qd.segment<3>(body.offset) + bua * theta_rate;
     }
-    const Vec3 vt(vtol.x(), vtol.y(), 0.0);
-    st.slip_speed = vt.norm();
-    const CoulombFactor law = coulombFactor(st.slip_speed, ground.stick_velocity, ground.slip_velocity);
-    if (law.cd > 0.0)
-    {
-      t = vt / st.slip_speed;
-      cd = law.cd;
-      dcd = law.dcd;
-      ft = ground.friction * cd * fn;
-      f = -ft * t;
-      st.friction_force = ft;
-      st.friction_on_a = f;
-      st.force_on_a += f;
-    }
+    const FrictionValue fv = frictionForce(st, Vec3(vtol.x(), vtol.y(), 0.0), ground.friction, fn,
+                                           ground.stick_velocity, ground.slip_velocity);
+    t = fv.t;
+    f = fv.f;
+    cd = fv.cd;
+    dcd = fv.dcd;
+    ft = fv.ft;
   }
   if (!out)
     return st;
@@ -498,19 +516,12 @@ ContactPairState evaluateContact(const Model& model, int pair, const Eigen::Vect
     bub = pointJacobianTheta(b.theta, ub);
     vtol = a.centre_rate + bua * a.theta_rate - b.centre_rate - bub * b.theta_rate;
     vt = vtol - c.n.dot(vtol) * c.n;
-    st.slip_speed = vt.norm();
-    const CoulombFactor law = coulombFactor(st.slip_speed, set.stick_velocity, set.slip_velocity);
-    if (law.cd > 0.0)
-    {
-      t = vt / st.slip_speed;
-      cd = law.cd;
-      dcd = law.dcd;
-      ft = set.friction * cd * fn;
-      f = -ft * t;  // on strut a at PA
-      st.friction_force = ft;
-      st.friction_on_a = f;
-      st.force_on_a += f;
-    }
+    const FrictionValue fv = frictionForce(st, vt, set.friction, fn, set.stick_velocity, set.slip_velocity);
+    t = fv.t;
+    f = fv.f;  // on strut a at PA
+    cd = fv.cd;
+    dcd = fv.dcd;
+    ft = fv.ft;
   }
   if (!out)
     return st;
