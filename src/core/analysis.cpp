@@ -114,15 +114,6 @@ double maxCableStress(const Model& model, const State& state)
 
 namespace
 {
-/// The ramp of sequence step `k` for actuator `a` starting from value `from` (magnitude |to - from|).
-RampSchedule stepRamp(const AnalysisSettings& an, double time, double from, double to)
-{
-  RampSchedule r = an.schedule;
-  r.start_time = time;
-  r.final_value = std::abs(to - from);
-  return r;
-}
-
 /// Calls f(ramp, from, to) for each ramp of actuator a in the sequence, in time order.
 template <class F>
 void forEachRamp(const AnalysisSettings& an, int a, F&& f)
@@ -132,7 +123,7 @@ void forEachRamp(const AnalysisSettings& an, int a, F&& f)
     for (size_t k = 0; k < step.actuators.size(); ++k)
       if (step.actuators[k] == a)
       {
-        f(stepRamp(an, step.time, value, step.targets[k]), value, step.targets[k]);
+        f(an.schedule.startingAt(step.time, std::abs(step.targets[k] - value)), value, step.targets[k]);
         value = step.targets[k];
       }
 }
@@ -689,13 +680,14 @@ RunResult runAnalysis(const Model& model, const std::function<void(const State&)
   const AnalysisSettings& an = model.analysis;
   // what the start is: in equilibrium, slack elements, prestress stable (structure_check.h)
   std::vector<std::string> start_warnings = startWarnings(model, state);
-  if (an.type == AnalysisType::kDynamic && !model.actuators.empty() && !an.sequence.empty() &&
-      an.duration < actuationEndTime(model) - 1e-9 * std::max(1.0, an.duration))
+  const double actuation_end = actuationEndTime(model);
+  const bool ends_early = an.type == AnalysisType::kDynamic && !model.actuators.empty() &&
+                          an.duration < actuation_end - 1e-9 * std::max(1.0, an.duration);
+  if (ends_early && !an.sequence.empty())
     start_warnings.push_back("analysis.duration " + shortestNumber(an.duration) +
                              " s ends before actuation.sequence does (its last ramp ends at " +
-                             roundedNumber(actuationEndTime(model)) + " s)");
-  if (an.type == AnalysisType::kDynamic && !model.actuators.empty() && an.sequence.empty() &&
-      an.duration < an.schedule.endTime() - 1e-9 * std::max(1.0, an.duration))
+                             roundedNumber(actuation_end) + " s)");
+  else if (ends_early)
     start_warnings.push_back("analysis.duration " + shortestNumber(an.duration) +
                              " s ends before the actuators reach analysis.max_actuation " +
                              shortestNumber(an.max_actuation) + " m (the ramp ends at " +

@@ -1219,10 +1219,7 @@ private:
         if (step.time < busy_until[a])
           targets.fail(targets.key(name), "actuator " + quoted(name) + " is still moving until " +
                                               roundedNumber(busy_until[a]) + " s (its ramp before ends there)");
-        RampSchedule ramp = an.schedule;
-        ramp.start_time = step.time;
-        ramp.final_value = std::abs(target - value[a]);
-        busy_until[a] = ramp.endTime();
+        busy_until[a] = an.schedule.startingAt(step.time, std::abs(target - value[a])).endTime();
         value[a] = target;
         step.actuators.push_back(a);
         step.targets.push_back(target);

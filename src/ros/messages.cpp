@@ -90,6 +90,10 @@ std::string bodyFrame(const core::Model& model, int body)
 MessageBuilder::MessageBuilder(const core::Model& model, std::string frame_id, MarkerOptions options)
   : model_(model), frame_id_(std::move(frame_id)), options_(options), arrow_shown_(model.contactSlots(), false)
 {
+  core::Vec3 centre = core::Vec3::Zero();
+  for (const core::Body& b : model.bodies)
+    centre += model.q0.segment<3>(b.offset) / static_cast<double>(model.bodies.size());
+  ground_centre_ = core::Vec3(centre.x(), centre.y(), model.ground.height - 0.005);  // the slab is 1 cm thick
 }
 
 void MessageBuilder::clearMarkers()
@@ -211,11 +215,8 @@ void MessageBuilder::addMarkers(const core::State& state, const std::vector<core
   // the ground: a thin slab whose top is the ground plane, 20 m square under the initial configuration
   if (model_.ground.enabled)
   {
-    core::Vec3 centre = core::Vec3::Zero();
-    for (const core::Body& b : model_.bodies)
-      centre += model_.q0.segment<3>(b.offset) / static_cast<double>(model_.bodies.size());
     Marker m = marker(frame_id_, stamp, "ground", 0, Marker::CUBE);
-    m.pose.position = point(core::Vec3(centre.x(), centre.y(), model_.ground.height - 0.005));
+    m.pose.position = point(ground_centre_);
     m.pose.orientation.w = 1.0;
     m.scale.x = m.scale.y = 20.0;
     m.scale.z = 0.01;

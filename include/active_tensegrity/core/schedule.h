@@ -28,6 +28,14 @@ struct RampSchedule
   /// The times where s(t) is not smooth (start, end of the smooth start, start of the smooth stop,
   /// end), ascending and distinct: a variable-step integrator steps exactly onto them.
   std::vector<double> breakpoints() const;
+  /// The same speed and blend, starting at `time` and travelling `travel` (m, >= 0): one move of a sequence.
+  RampSchedule startingAt(double time, double travel) const
+  {
+    RampSchedule r = *this;
+    r.start_time = time;
+    r.final_value = travel;
+    return r;
+  }
 };
 
 }  // namespace active_tensegrity::core
