@@ -51,15 +51,36 @@ void DynamicsSolver::prepareContact(const State& s, double h)
   const ScopeTimer timer(timings_.contact);
   const Model& model = system_.model();
   step_speeds_.assign(model.contactSlots(), model.contact.min_impact_speed);
+  near_.clear();
   if (!model.anyContact())
     return;
-  // how far any strut point can move in this step, from the speeds at its start (doubled: a margin)
+  // how far any body point can move in this step, from the speeds and accelerations at its start
+  // (doubled: a margin; a strut's end moves at most |c'| + (l/2) |a'| with |a'| <= 2 |Theta'|)
   double reach = 0.0;
   for (const Body& b : model.bodies)
+  {
+    double speed = s.qd.segment<3>(b.offset).norm(), acc = s.acc.segment<3>(b.offset).norm();
     if (b.kind == BodyKind::kStrut)
-      reach = std::max(reach, s.qd.segment<3>(b.offset).norm() + b.length * s.qd.segment<4>(b.offset + 3).norm());
-  system_.contactCandidates(s.q, 2.0 * reach * h, candidates_);
+    {
+      speed += b.length * s.qd.segment<4>(b.offset + 3).norm();
+      acc += b.length * s.acc.segment<4>(b.offset + 3).norm();
+    }
+    reach = std::max(reach, speed * h + acc * h * h);
+  }
+  findNearContacts(s, std::max(2.0 * reach, kNearFloor));
+}
+
+void DynamicsSolver::findNearContacts(const State& s, double motion)
+{
+  const Model& model = system_.model();
+  near_motion_ = motion;
+  near_.clear();
+  // two bodies each moving by at most `motion` close their distance by at most twice that
+  system_.contactCandidates(s.q, motion, candidates_);
   for (int i : candidates_)
+    if (contactGeometry(model, i, s.q).gap <= 2.0 * motion)
+      near_.push_back(i);
+  for (int i : near_)
   {
     const double memory = i < static_cast<int>(s.contact_speed.size()) ? s.contact_speed[i] : 0.0;
     if (memory > 0.0)
@@ -83,8 +104,7 @@ void DynamicsSolver::updateContactMemory(State& s, const Eigen::VectorXd& q_star
   estimate_.onset_pair = -1;
   if (!model.anyContact())
     return;
-  system_.contactCandidates(s.q, 0.0, candidates_);
-  for (int i : candidates_)
+  for (int i : near_)  // (every slot touching at the step's end is in it: attempt() checks the motion)
   {
     const double gap = contactGeometry(model, i, s.q).gap;
     if (gap >= 0.0)
@@ -135,7 +155,7 @@ void DynamicsSolver::residual(const State& s, double h, const ActuationValues& u
   }
   {
     const ScopeTimer timer(timings_.contact);
-    system_.contactForce(q_, qd_, step_speeds_, ContactMode::kDynamic, applied_, jac, bh2, gh);
+    system_.contactForce(near_, q_, qd_, step_speeds_, ContactMode::kDynamic, applied_, jac, bh2, gh);
   }
   {
     const ScopeTimer timer(timings_.constraints);
@@ -349,10 +369,20 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law, boo
     {
       predict(s, h, qdd, q_, qd_, acc_);
       int crossed = -1;
-      if (system_.model().contact.enabled)
+      if (system_.model().anyContact())
       {
         const ScopeTimer timer(timings_.contact);
-        crossed = system_.firstPassedThrough(s.q, q_);
+        // the contacts were evaluated for the slots within reach of the step's expected motion; a step
+        // that moved further goes on iterating with the slots within reach of its motion
+        const double motion = system_.largestMotion(s.q, q_);
+        if (motion > near_motion_)
+        {
+          findNearContacts(s, 2.0 * motion);
+          ++timings_.contact_reach_misses;
+          continue;
+        }
+        if (system_.model().contact.enabled)
+          crossed = system_.firstPassedThrough(near_, s.q, q_);
       }
       if (crossed >= 0)
       {

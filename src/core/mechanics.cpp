@@ -102,8 +102,15 @@ void System::contactForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, c
   if (!model_.anyContact())
     return;
   contactCandidates(q, 0.0, candidates_);
+  contactForce(candidates_, q, qd, impact_speeds, mode, F, jac, k_weight, c_weight);
+}
+
+void System::contactForce(const std::vector<int>& slots, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                          const std::vector<double>& impact_speeds, ContactMode mode, Eigen::VectorXd& F,
+                          BlockSparseMatrix* jac, double k_weight, double c_weight) const
+{
   contribution_.tangents = jac != nullptr;
-  for (int i : candidates_)
+  for (int i : slots)
   {
     const double v0 = impact_speeds.empty() ? 0.0 : impact_speeds[i];
     if (evaluateContact(model_, i, q, qd, v0, mode, &contribution_).normal_force <= 0.0)
@@ -148,20 +155,29 @@ void System::contactCandidates(const Eigen::VectorXd& q, double margin, std::vec
   appendGroundCandidates(model_, q, margin, out);
 }
 
-int System::firstPassedThrough(const Eigen::VectorXd& q0, const Eigen::VectorXd& q1) const
+double System::largestMotion(const Eigen::VectorXd& q0, const Eigen::VectorXd& q1) const
 {
   double reach = 0.0;
   for (const Body& b : model_.bodies)
+  {
+    double move = (q1.segment<3>(b.offset) - q0.segment<3>(b.offset)).norm();
     if (b.kind == BodyKind::kStrut)
-    {
-      const Vec3 z0 = bodyZAxis(q0.segment<4>(b.offset + 3));
-      const Vec3 z1 = bodyZAxis(q1.segment<4>(b.offset + 3));
-      reach = std::max(reach,
-                       (q1.segment<3>(b.offset) - q0.segment<3>(b.offset)).norm() + 0.5 * b.length * (z1 - z0).norm());
-    }
-  broad_phase_.candidates(q1, reach, candidates_);
-  for (int i : candidates_)
-    if (passedThrough(model_, i, q0, q1))
+      move += 0.5 * b.length * (bodyZAxis(q1.segment<4>(b.offset + 3)) - bodyZAxis(q0.segment<4>(b.offset + 3))).norm();
+    reach = std::max(reach, move);
+  }
+  return reach;
+}
+
+int System::firstPassedThrough(const Eigen::VectorXd& q0, const Eigen::VectorXd& q1) const
+{
+  broad_phase_.candidates(q1, largestMotion(q0, q1), candidates_);
+  return firstPassedThrough(candidates_, q0, q1);
+}
+
+int System::firstPassedThrough(const std::vector<int>& slots, const Eigen::VectorXd& q0, const Eigen::VectorXd& q1) const
+{
+  for (int i : slots)
+    if (!model_.isGroundSlot(i) && passedThrough(model_, i, q0, q1))
       return i;
   return -1;
 }

@@ -87,6 +87,9 @@ private:
   /// After a converged step from positions q_start: remember v_0 of pairs in contact at `end`, forget
   /// separated ones; records the contact onsets in estimate_.
   void updateContactMemory(State& end, const Eigen::VectorXd& q_start);
+  /// The contact slots of `start` within 2 motion (m) of touching into near_ (the only ones a step in which no
+  /// body point moves further than `motion` evaluates), with their impact speeds into step_speeds_.
+  void findNearContacts(const State& start, double motion);
   /// The local error estimate of a step of h from algorithmic accelerations a0 to a1 (StepEstimate).
   double errorEstimate(const Eigen::VectorXd& a0, const Eigen::VectorXd& a1, double h) const;
   /// One Newton solve of a step of h (modified Newton as options allow, or full Newton).
@@ -110,6 +113,10 @@ private:
   Eigen::VectorXd q_, qd_, acc_, inertial_, applied_, cforce_, phi_, r_, dx_, qdd_iter_, lambda_iter_;
   std::vector<double> step_speeds_;  // v_0 per checked pair for the step being solved
   std::vector<int> candidates_;
+  std::vector<int> near_;     // the step's contact slots within reach (findNearContacts)
+  double near_motion_ = 0.0;  // the motion near_ allows for (m)
+  /// The least motion near_ allows for (m): a body at rest still moves a little in its first step.
+  static constexpr double kNearFloor = 1e-4;
   std::vector<double> previous_speed_;  // contact memory at the start of the step being accepted
   StepTimings timings_;
   StepEstimate estimate_;

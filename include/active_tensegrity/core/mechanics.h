@@ -77,11 +77,21 @@ public:
   void contactForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const std::vector<double>& impact_speeds,
                     ContactMode mode, Eigen::VectorXd& F, BlockSparseMatrix* jac, double k_weight,
                     double c_weight) const;
+  /// The same for the listed contact slots alone (the caller knows no other slot can touch at q).
+  void contactForce(const std::vector<int>& slots, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                    const std::vector<double>& impact_speeds, ContactMode mode, Eigen::VectorXd& F,
+                    BlockSparseMatrix* jac, double k_weight, double c_weight) const;
+  /// The largest distance any point of a body moved between q0 and q1 (m): for a strut, its centre's move
+  /// plus half its length times its axis' turn.
+  double largestMotion(const Eigen::VectorXd& q0, const Eigen::VectorXd& q1) const;
   /// The first checked pair whose struts passed through each other between q0 and q1 (contact.h,
   /// passedThrough), or -1. Only pairs within reach of each other at q1 (the broad phase with boxes grown
   /// by the largest motion of a strut point between q0 and q1) are judged: a pair that crossed was in
   /// touch at the crossing, so it is never further apart than that motion at q1.
   int firstPassedThrough(const Eigen::VectorXd& q0, const Eigen::VectorXd& q1) const;
+  /// The same among the listed contact slots (ground slots skipped): a pair that crossed was in touch at the
+  /// crossing, so a list of every pair within twice the largest motion of q0 holds it.
+  int firstPassedThrough(const std::vector<int>& slots, const Eigen::VectorXd& q0, const Eigen::VectorXd& q1) const;
   /// "struts 'A' and 'B' passed through each other": the message of status kPassedThrough.
   std::string passedThroughMessage(int pair) const;
   /// Contact slots that can touch at q with boxes grown by margin (m): checked strut pairs (when strut contact is

@@ -52,7 +52,8 @@ struct StepTimings
   long factorizations = 0;
   long analyses = 0;  // symbolic analyses of the Newton matrix (its pattern grows when a new pair touches)
   long static_pivot_factorizations = 0;  // of them, the approximate static-pivot LU (SparseLinearSolver)
-  long full_newton_retries = 0;  // dynamics: steps retried in full Newton after modified Newton ran out of iterations
+  long full_newton_retries = 0;   // dynamics: steps retried in full Newton after modified Newton ran out of iterations
+  long contact_reach_misses = 0;  // dynamics: converged iterates that moved beyond the contact slots' reach
 
   StepTimings& operator+=(const StepTimings& o)
   {
@@ -67,6 +68,7 @@ struct StepTimings
     analyses += o.analyses;
     static_pivot_factorizations += o.static_pivot_factorizations;
     full_newton_retries += o.full_newton_retries;
+    contact_reach_misses += o.contact_reach_misses;
     return *this;
   }
 };
