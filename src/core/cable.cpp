@@ -56,6 +56,31 @@ CableState evaluateCable(const Model& model, const Cable& cable, const Eigen::Ve
 {
   // l = sum_k |p_{k+1} - p_k|; dl/dp_j = w_j = n_{j-1} - n_j (n_k the unit vector of segment k)
   const int m = static_cast<int>(cable.points.size());
+  if (!jac)
+  {
+    // forces alone (a residual of modified Newton, an output): no point Jacobians formed
+    std::array<Vec3, Cable::kMaxPoints> p, v, n;
+    for (int j = 0; j < m; ++j)
+      pointMotion(model, cable.points[j], q, qd, p[j], v[j]);
+    double length = 0.0, rate = 0.0;
+    for (int k = 0; k + 1 < m; ++k)
+    {
+      const Vec3 d = p[k + 1] - p[k];
+      const double seg = d.norm();
+      n[k] = seg > 0.0 ? Vec3(d / seg) : Vec3::Zero();
+      length += seg;
+      rate += n[k].dot(v[k + 1] - v[k]);
+    }
+    const CableState s = cableLaw(cable, length, rate, u, damping);
+    if (s.slack || !F)
+      return s;
+    for (int j = 0; j < m; ++j)
+    {
+      const Vec3 w = (j > 0 ? n[j - 1] : Vec3::Zero()) - (j + 1 < m ? n[j] : Vec3::Zero());
+      addPointForce(model, cable.points[j], q, -s.tension * w, *F);
+    }
+    return s;
+  }
   // per-thread scratch: no allocation once a thread has seen its longest cable
   thread_local std::vector<PointKinematics> kin;
   if (static_cast<int>(kin.size()) < m)

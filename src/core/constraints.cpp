@@ -102,12 +102,7 @@ void pointsForce(const Model& model, const Constraint& c, const Eigen::VectorXd&
                  Eigen::VectorXd& out)
 {
   const Vec3 w = combinedDirection(c, lambda);
-  forEachBodyEnd(c,
-                 [&](const PointRef& end, double sign)
-                 {
-                   const PointKinematics k = positionKinematics(model, end, q);
-                   out.segment(model.bodies[k.body].offset, k.nq) += sign * k.jac.leftCols(k.nq).transpose() * w;
-                 });
+  forEachBodyEnd(c, [&](const PointRef& end, double sign) { addPointForce(model, end, q, sign * w, out); });
 }
 
 void pointsLambdaHessian(const Model& model, const Constraint& c, const Eigen::VectorXd& /*q*/,

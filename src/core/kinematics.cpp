@@ -1,5 +1,7 @@
 #include "active_tensegrity/core/kinematics.h"
 
+#include "active_tensegrity/core/rotation.h"
+
 namespace active_tensegrity::core
 {
 void pointKinematics(const Model& model, const PointRef& point, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
@@ -47,6 +49,32 @@ PointKinematics pointKinematics(const Model& model, const PointRef& point, const
   PointKinematics k;
   pointKinematics(model, point, q, qd, rate_jacobian, k);
   return k;
+}
+
+void pointMotion(const Model& model, const PointRef& point, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                 Vec3& p, Vec3& v)
+{
+  p = pointPosition(model, point, q);
+  if (point.body < 0)
+  {
+    v.setZero();
+    return;
+  }
+  const Body& b = model.bodies[point.body];
+  v = qd.segment<3>(b.offset);
+  if (b.kind == BodyKind::kStrut)
+    v += pointJacobianThetaTimes(thetaOf(q, b), point.local, thetaOf(qd, b));
+}
+
+void addPointForce(const Model& model, const PointRef& point, const Eigen::VectorXd& q, const Vec3& f,
+                   Eigen::VectorXd& F)
+{
+  if (point.body < 0)
+    return;
+  const Body& b = model.bodies[point.body];
+  F.segment<3>(b.offset) += f;
+  if (b.kind == BodyKind::kStrut)
+    F.segment<4>(b.offset + 3) += pointJacobianThetaTransposeTimes(thetaOf(q, b), point.local, f);
 }
 
 Vec3 pointPosition(const Model& model, const PointRef& point, const Eigen::VectorXd& q)

@@ -53,6 +53,12 @@ TEST(Rotation, PointJacobianIsExactDerivativeForAnyTheta)
                     .isApprox(-2.0 * at::rotationMatrix(tu) * at::skew(u) * at::lMatrix(tu), 1e-12));
     // homogeneous quadratic: B(Theta) Theta = 2 A(Theta) u
     EXPECT_TRUE((at::pointJacobianTheta(th, u) * th).isApprox(2.0 * at::rotationMatrix(th) * u, 1e-12));
+    // the products without the matrix
+    const at::Vec4 x = randomTheta(rng, false);
+    const at::Vec3 f(0.2 - 0.05 * i, -1.1, 0.6);
+    EXPECT_TRUE(at::pointJacobianThetaTimes(th, u, x).isApprox(at::pointJacobianTheta(th, u) * x, 1e-13));
+    EXPECT_TRUE(
+        at::pointJacobianThetaTransposeTimes(th, u, f).isApprox(at::pointJacobianTheta(th, u).transpose() * f, 1e-13));
     // the body z axis, written out, is the matrix's third column for any Theta
     EXPECT_TRUE(at::bodyZAxis(th).isApprox(at::rotationMatrix(th).col(2), 1e-14));
   }

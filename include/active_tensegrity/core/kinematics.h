@@ -38,6 +38,15 @@ void pointKinematics(const Model& model, const PointRef& point, const Eigen::Vec
 /// The world position of a material point alone (as pointKinematics(...).p, without the Jacobians).
 Vec3 pointPosition(const Model& model, const PointRef& point, const Eigen::VectorXd& q);
 
+/// The world position and velocity of a material point alone (as pointKinematics' p and v, without the
+/// Jacobians).
+void pointMotion(const Model& model, const PointRef& point, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                 Vec3& p, Vec3& v);
+/// Adds the generalized force of the world force f acting at a material point (B_P^T f) into F; nothing for
+/// a point on the ground.
+void addPointForce(const Model& model, const PointRef& point, const Eigen::VectorXd& q, const Vec3& f,
+                   Eigen::VectorXd& F);
+
 /// The Euler parameters Theta of strut b in a vector laid out like q (q, qd or qdd).
 inline Vec4 thetaOf(const Eigen::VectorXd& x, const Body& b)
 {

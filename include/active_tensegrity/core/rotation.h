@@ -31,6 +31,26 @@ Mat34 lMatrix(const Vec4& theta);
 /// B_Theta(Theta, u) = d(A(Theta) u)/dTheta (3x4), linear in Theta; B_Theta(Theta, u) Theta = 2 A(Theta) u.
 Mat34 pointJacobianTheta(const Vec4& theta, const Vec3& u);
 
+/// B_Theta(Theta, u) x without forming the matrix (the velocity of point u for Theta moving at x).
+inline Vec3 pointJacobianThetaTimes(const Vec4& theta, const Vec3& u, const Vec4& x)
+{
+  // B = 2 [e0 u + e x u, (e.u) I + e u^T - u e^T - e0 skew(u)]
+  const double e0 = theta(0);
+  const Vec3 e = theta.tail<3>(), xv = x.tail<3>();
+  return 2.0 * (x(0) * (e0 * u + e.cross(u)) + e.dot(u) * xv + u.dot(xv) * e - e.dot(xv) * u - e0 * u.cross(xv));
+}
+
+/// B_Theta(Theta, u)^T f without forming the matrix (the generalized force of f at point u on Theta).
+inline Vec4 pointJacobianThetaTransposeTimes(const Vec4& theta, const Vec3& u, const Vec3& f)
+{
+  const double e0 = theta(0);
+  const Vec3 e = theta.tail<3>();
+  Vec4 g;
+  g(0) = 2.0 * (e0 * u.dot(f) + e.cross(u).dot(f));
+  g.tail<3>() = 2.0 * (e.dot(u) * f + e.dot(f) * u - u.dot(f) * e + e0 * u.cross(f));
+  return g;
+}
+
 /// N(v) with L(x)^T v = N(v) x for every x (4x4).
 Mat4 lTransposeTimes(const Vec3& v);
 
