@@ -20,15 +20,13 @@ namespace active_tensegrity::core
 double actuationForce(const Model& model, const State& state, int actuator)
 {
   double force = 0.0;
-  int row = 0;
-  std::vector<int> rows(model.constraints.size());
-  for (size_t i = 0; i < model.constraints.size(); ++i)
-  {
-    rows[i] = row;
-    row += model.constraints[i].rows();
-  }
   for (int c : model.actuators[actuator].constraints)
-    force -= state.lambda(rows[c]);
+  {
+    int row = 0;  // (a few constraints per actuator: summed here rather than kept in a table)
+    for (int i = 0; i < c; ++i)
+      row += model.constraints[i].rows();
+    force -= state.lambda(row);
+  }
   for (int c : model.actuators[actuator].cables)
     force += evaluateCable(model, model.cables[c], state.q, state.qd, state.u, model.damping_enabled, nullptr, nullptr,
                            0.0, 0.0)
@@ -51,8 +49,16 @@ double structureHeight(const Model& model, const Eigen::VectorXd& q)
 
 double maxStrutBendingStress(const Model& model, const Eigen::VectorXd& q, const std::vector<ContactPairState>& contacts)
 {
-  // loads per strut: (position along the axis from the lower end, force across the axis)
-  std::vector<std::vector<std::pair<double, Vec3>>> loads(model.bodies.size());
+  // loads on struts: (strut, position along the axis from the lower end, force across the axis), grouped by
+  // strut (a per-thread buffer: this runs at every step of a run's peak tracking)
+  struct Load
+  {
+    int body;
+    double s;
+    Vec3 f;
+  };
+  thread_local std::vector<Load> loads;
+  loads.clear();
   for (const ContactPairState& c : contacts)
   {
     const int bodies[2] = { c.body_a, c.body_b };
@@ -65,26 +71,28 @@ double maxStrutBendingStress(const Model& model, const Eigen::VectorXd& q, const
       const Vec3 axis = bodyZAxis(q.segment<4>(b.offset + 3));
       const double s = std::clamp(axis.dot(points[k] - q.segment<3>(b.offset)) + 0.5 * b.length, 0.0, b.length);
       const Vec3 f = k == 0 ? c.force_on_a : Vec3(-c.force_on_a);
-      loads[bodies[k]].emplace_back(s, f - axis * axis.dot(f));
+      loads.push_back({ bodies[k], s, f - axis * axis.dot(f) });
     }
   }
+  std::stable_sort(loads.begin(), loads.end(), [](const Load& x, const Load& y) { return x.body < y.body; });
   double sigma = 0.0;
-  for (size_t i = 0; i < loads.size(); ++i)
+  for (size_t first = 0, last = 0; first < loads.size(); first = last)
   {
-    if (loads[i].empty())
-      continue;
-    const Body& b = model.bodies[i];
+    while (last < loads.size() && loads[last].body == loads[first].body)
+      ++last;
+    const Body& b = model.bodies[loads[first].body];
     const double len = b.length;
     Vec3 reaction = Vec3::Zero();  // at the lower end
-    for (const auto& [s, f] : loads[i])
-      reaction += f * (len - s) / len;
+    for (size_t i = first; i < last; ++i)
+      reaction += loads[i].f * (len - loads[i].s) / len;
     // the moment is piecewise linear: its largest magnitude is at a load point
-    for (const auto& [x, unused] : loads[i])
+    for (size_t j = first; j < last; ++j)
     {
+      const double x = loads[j].s;
       Vec3 moment = reaction * x;
-      for (const auto& [s, f] : loads[i])
-        if (s < x)
-          moment -= f * (x - s);
+      for (size_t i = first; i < last; ++i)
+        if (loads[i].s < x)
+          moment -= loads[i].f * (x - loads[i].s);
       const double r = b.layers.front().outer_radius;
       sigma = std::max(sigma, 4.0 * moment.norm() / (M_PI * r * r * r));
     }
@@ -105,10 +113,12 @@ std::vector<CableState> cableStates(const Model& model, const State& state)
 double maxCableStress(const Model& model, const State& state)
 {
   double sigma = 0.0;
-  const std::vector<CableState> cables = cableStates(model, state);
-  for (size_t i = 0; i < cables.size(); ++i)
-    if (model.cables[i].area > 0.0)
-      sigma = std::max(sigma, cables[i].tension / model.cables[i].area);
+  for (const Cable& c : model.cables)
+    if (c.area > 0.0)
+      sigma = std::max(
+          sigma,
+          evaluateCable(model, c, state.q, state.qd, state.u, model.damping_enabled, nullptr, nullptr, 0.0, 0.0).tension /
+              c.area);
   return sigma;
 }
 
@@ -314,6 +324,8 @@ std::vector<ContactPairState> activeContacts(const Model& model, const State& st
   appendGroundCandidates(model, state.q, 0.0, candidates);
   for (int i : candidates)
   {
+    if (contactGeometry(model, i, state.q).gap >= 0.0)
+      continue;  // (the geometry alone costs a third of a whole evaluation)
     const double v0 = i < static_cast<int>(state.contact_speed.size()) ? state.contact_speed[i] : 0.0;
     const ContactPairState st = evaluateContact(model, i, state.q, state.qd, v0, mode, nullptr);
     if (st.active)
@@ -474,7 +486,63 @@ std::vector<std::string> csvColumns(const Model& model)
   return cols;
 }
 
-PeakTracker::PeakTracker(const Model& model) : model_(model)
+ContactScan::ContactScan(const Model& model) : model_(model), broad_(model)
+{
+  double smallest = std::numeric_limits<double>::infinity();
+  for (const Body& b : model.bodies)
+    if (b.kind == BodyKind::kStrut)
+      smallest = std::min(smallest, b.radius());
+  for (const GroundContact& g : model.ground_contacts)
+    smallest = std::min(smallest, g.radius);
+  reach_ = std::isfinite(smallest) && smallest > 0.0 ? 0.1 * smallest : 1e-4;
+}
+
+const std::vector<ContactPairState>& ContactScan::active(const State& state)
+{
+  contacts_.clear();
+  if (!model_.anyContact())
+    return contacts_;
+  // the largest move of a body point since the reference (a strut's end: centre plus half its length times
+  // the turn of its axis)
+  double moved = std::numeric_limits<double>::infinity();
+  if (have_reference_ && reference_q_.size() == state.q.size())
+  {
+    moved = 0.0;
+    for (const Body& b : model_.bodies)
+    {
+      double move = (state.q.segment<3>(b.offset) - reference_q_.segment<3>(b.offset)).norm();
+      if (b.kind == BodyKind::kStrut)
+        move += 0.5 * b.length *
+                (bodyZAxis(state.q.segment<4>(b.offset + 3)) - bodyZAxis(reference_q_.segment<4>(b.offset + 3))).norm();
+      moved = std::max(moved, move);
+    }
+  }
+  if (!(moved <= reach_))
+  {
+    // two bodies each within reach of the reference close their distance by at most twice that
+    reference_q_ = state.q;
+    have_reference_ = true;
+    candidates_.clear();
+    if (model_.contact.enabled)
+      broad_.candidates(state.q, reach_, candidates_);
+    appendGroundCandidates(model_, state.q, reach_, candidates_);
+    near_.clear();
+    for (int i : candidates_)
+      if (contactGeometry(model_, i, state.q).gap <= 2.0 * reach_)
+        near_.push_back(i);
+  }
+  const ContactMode mode = model_.analysis.type == AnalysisType::kStatic ? ContactMode::kStatic : ContactMode::kDynamic;
+  for (int i : near_)
+  {
+    if (contactGeometry(model_, i, state.q).gap >= 0.0)
+      continue;
+    const double v0 = i < static_cast<int>(state.contact_speed.size()) ? state.contact_speed[i] : 0.0;
+    contacts_.push_back(evaluateContact(model_, i, state.q, state.qd, v0, mode, nullptr));
+  }
+  return contacts_;
+}
+
+PeakTracker::PeakTracker(const Model& model) : model_(model), contacts_(model)
 {
   for (const char* name :
        { "actuation_force", "max_normal_force", "max_friction_force", "max_strut_bending_stress", "max_cable_stress" })
@@ -485,7 +553,7 @@ void PeakTracker::add(const State& state)
 {
   // the five columns as csvRow computes them, and nothing else of the row (this runs at every step)
   double max_normal = 0.0, max_friction = 0.0;
-  const std::vector<ContactPairState> contacts = activeContacts(model_, state);
+  const std::vector<ContactPairState>& contacts = contacts_.active(state);
   for (const ContactPairState& c : contacts)
     if (c.body_b >= 0)
     {
@@ -703,14 +771,13 @@ RunResult runAnalysis(const Model& model, const std::function<void(const State&)
   std::vector<std::string> yield_warnings;
   const auto watch = [&](const State& s)
   {
-    if (watched.empty())
-      return;
-    const std::vector<CableState> cables = cableStates(model, s);
     for (auto it = watched.begin(); it != watched.end();)
     {
       const size_t i = *it;
       const Cable& c = model.cables[i];
-      const double stress = cables[i].tension / c.area;
+      const CableState cable =
+          evaluateCable(model, c, s.q, s.qd, s.u, model.damping_enabled, nullptr, nullptr, 0.0, 0.0);
+      const double stress = cable.tension / c.area;
       if (!(stress > c.yield_strength))
       {
         ++it;
@@ -719,7 +786,7 @@ RunResult runAnalysis(const Model& model, const std::function<void(const State&)
       it = watched.erase(it);
       yield_warnings.push_back("cable " + quoted(c.name) + " is above its material's yield_strength " +
                                shortestNumber(c.yield_strength) + " Pa: " + roundedNumber(stress, 6) + " Pa (tension " +
-                               roundedNumber(cables[i].tension, 6) + " N) first at " +
+                               roundedNumber(cable.tension, 6) + " N) first at " +
                                (an.type == AnalysisType::kStatic ? "path parameter " + roundedNumber(s.t) :
                                                                    "t = " + roundedNumber(s.t) + " s"));
     }

@@ -18,43 +18,41 @@ using Vec14 = Eigen::Matrix<double, 14, 1>;
 const Vec3 kAxis = Vec3::UnitZ();
 const Vec4 kConjugate(1.0, -1.0, -1.0, -1.0);
 
-// one strut seen by the contact code: centre, Euler parameters, axis a = A(Theta) z and its Jacobian
+// one strut seen by the contact code: centre, Euler parameters, axis a = A(Theta) z, its rate and Jacobian
 struct StrutAxis
 {
   Vec3 centre, centre_rate;
   Vec4 theta, theta_rate;
   Vec3 axis;       // A(Theta) z (unit on the unit sphere)
-  Mat34 axis_jac;  // B_Theta(Theta, z) = d axis / d Theta (only with rates; NaN for a geometry-only axis)
+  Vec3 axis_rate;  // B_Theta(Theta, z) Theta_dot (zero for a geometry-only axis)
+  Mat34 axis_jac;  // B_Theta(Theta, z) = d axis / d Theta (only when asked for; NaN otherwise)
   double half_length = 0.0;
   double radius = 0.0;
 };
 
-StrutAxis strutAxis(const Body& b, const Eigen::VectorXd& q, const Eigen::VectorXd* qd)
+StrutAxis strutAxis(const Body& b, const Eigen::VectorXd& q, const Eigen::VectorXd* qd, bool jacobian = false)
 {
   StrutAxis s;
   s.centre = q.segment<3>(b.offset);
   s.theta = q.segment<4>(b.offset + 3);
-  if (qd)
-  {
+  s.axis = bodyZAxis(s.theta);
+  if (jacobian)
     s.axis_jac = pointJacobianTheta(s.theta, kAxis);
-    s.axis = 0.5 * (s.axis_jac * s.theta);  // A(Theta) z is quadratic in Theta: B_Theta Theta = 2 A z
-  }
   else
-  {
-    s.axis = bodyZAxis(s.theta);
     s.axis_jac.setConstant(std::numeric_limits<double>::quiet_NaN());
-  }
   s.half_length = 0.5 * b.length;
   s.radius = b.radius();
   if (qd)
   {
     s.centre_rate = qd->segment<3>(b.offset);
     s.theta_rate = qd->segment<4>(b.offset + 3);
+    s.axis_rate = pointJacobianThetaTimes(s.theta, kAxis, s.theta_rate);
   }
   else
   {
     s.centre_rate.setZero();
     s.theta_rate.setZero();
+    s.axis_rate.setZero();
   }
   return s;
 }
@@ -441,8 +439,9 @@ ContactPairState evaluateContact(const Model& model, int pair, const Eigen::Vect
   const StrutPair& p = model.checked_pairs[pair];
   const ContactSettings& set = model.contact;
   const bool dynamic = mode == ContactMode::kDynamic;
-  const StrutAxis a = strutAxis(model.bodies[p.body_a], q, &qd);
-  const StrutAxis b = strutAxis(model.bodies[p.body_b], q, &qd);
+  const bool tangents = out && out->tangents;
+  const StrutAxis a = strutAxis(model.bodies[p.body_a], q, &qd, tangents);
+  const StrutAxis b = strutAxis(model.bodies[p.body_b], q, &qd, tangents);
   const Closest c = closest(a, b);
   ContactPairState st = baseState(pair, c, a, b);
   st.body_a = p.body_a;
@@ -459,7 +458,8 @@ ContactPairState evaluateContact(const Model& model, int pair, const Eigen::Vect
 
   // velocities of the axis points at fixed s, and the penetration rate (also outside contact: the
   // dynamics solver takes the impact speed from it)
-  const Vec3 axis_rate1 = a.axis_jac * a.theta_rate, axis_rate2 = b.axis_jac * b.theta_rate;
+  const Vec3& axis_rate1 = a.axis_rate;
+  const Vec3& axis_rate2 = b.axis_rate;
   const Vec3 v1 = a.centre_rate + c.s1 * axis_rate1;
   const Vec3 v2 = b.centre_rate + c.s2 * axis_rate2;
   const Vec3 dv = v1 - v2;
@@ -512,9 +512,13 @@ ContactPairState evaluateContact(const Model& model, int pair, const Eigen::Vect
     at2 = rotationMatrix(conj2);
     ua = c.s1 * kAxis - a.radius * (at1 * c.n);
     ub = c.s2 * kAxis + b.radius * (at2 * c.n);
-    bua = pointJacobianTheta(a.theta, ua);
-    bub = pointJacobianTheta(b.theta, ub);
-    vtol = a.centre_rate + bua * a.theta_rate - b.centre_rate - bub * b.theta_rate;
+    if (tangents)
+    {
+      bua = pointJacobianTheta(a.theta, ua);
+      bub = pointJacobianTheta(b.theta, ub);
+    }
+    vtol = a.centre_rate + pointJacobianThetaTimes(a.theta, ua, a.theta_rate) - b.centre_rate -
+           pointJacobianThetaTimes(b.theta, ub, b.theta_rate);
     vt = vtol - c.n.dot(vtol) * c.n;
     const FrictionValue fv = frictionForce(st, vt, set.friction, fn, set.stick_velocity, set.slip_velocity);
     t = fv.t;
@@ -528,14 +532,14 @@ ContactPairState evaluateContact(const Model& model, int pair, const Eigen::Vect
   if (!out->tangents)
   {
     // the generalized force alone: g F_N (g below) and the friction's [f; B_A^T f; -f; -B_B^T f]
-    out->force << fn * c.n, fn * c.s1 * a.axis_jac.transpose() * c.n, -fn * c.n,
-        -fn * c.s2 * b.axis_jac.transpose() * c.n;
+    out->force << fn * c.n, (fn * c.s1) * pointJacobianThetaTransposeTimes(a.theta, kAxis, c.n), -fn * c.n,
+        (-fn * c.s2) * pointJacobianThetaTransposeTimes(b.theta, kAxis, c.n);
     if (ft > 0.0)
     {
       out->force.segment<3>(0) += f;
-      out->force.segment<4>(3) += bua.transpose() * f;
+      out->force.segment<4>(3) += pointJacobianThetaTransposeTimes(a.theta, ua, f);
       out->force.segment<3>(7) -= f;
-      out->force.segment<4>(10) -= bub.transpose() * f;
+      out->force.segment<4>(10) -= pointJacobianThetaTransposeTimes(b.theta, ub, f);
     }
     return st;
   }

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "active_tensegrity/core/adaptive.h"
+#include "active_tensegrity/core/broad_phase.h"
 #include "active_tensegrity/core/dynamics.h"
 #include "active_tensegrity/core/state.h"
 #include "active_tensegrity/core/summary.h"
@@ -109,6 +110,27 @@ double loadFactor(const Model& model, const State& state);
 std::vector<std::string> csvColumns(const Model& model);
 std::vector<double> csvRow(const Model& model, const State& state);
 
+/// activeContacts() for a sequence of nearby states (every step of a run): it keeps the contact slots within
+/// reach of a reference state, and judges only those while no body point has moved by more than `reach` since;
+/// a state further away makes the reference anew (broad phase and geometry of every candidate). reach is a tenth
+/// of the smallest contact radius (strut or ground sphere).
+class ContactScan
+{
+public:
+  explicit ContactScan(const Model& model);
+  /// The contacts in `state`, as activeContacts(model, state) gives them.
+  const std::vector<ContactPairState>& active(const State& state);
+
+private:
+  const Model& model_;
+  BroadPhase broad_;
+  double reach_ = 0.0;
+  bool have_reference_ = false;
+  Eigen::VectorXd reference_q_;
+  std::vector<int> candidates_, near_;
+  std::vector<ContactPairState> contacts_;
+};
+
 /// A CSV column's largest magnitude over every step of a run (time step or load step, not only the output
 /// steps), with its sign, and the time (or path parameter) at which it was reached.
 struct Peak
@@ -134,6 +156,7 @@ public:
 private:
   const Model& model_;
   std::vector<Peak> peaks_;
+  ContactScan contacts_;
 };
 
 struct RunResult
