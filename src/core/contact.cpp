@@ -406,11 +406,17 @@ StiffnessValue contactStiffness(double k90, double cos2, double min_crossing_ang
 {
   // Re = sqrt(r1 r2) / |sin theta|, so K = k90 (sin^2 theta)^(-1/4)
   StiffnessValue v;
-  const double floor_sin = std::sin(min_crossing_angle);
+  // (the sine of the scene's floor angle, kept: this runs for every pair in contact at every evaluation)
+  thread_local double angle = 0.0, floor_sin = 0.0;
+  if (min_crossing_angle != angle)
+  {
+    angle = min_crossing_angle;
+    floor_sin = std::sin(min_crossing_angle);
+  }
   const double sin2 = 1.0 - cos2;
   if (sin2 > floor_sin * floor_sin)
   {
-    v.k = k90 * std::pow(sin2, -0.25);
+    v.k = k90 / std::sqrt(std::sqrt(sin2));  // (sin^2)^(-1/4), without pow
     v.dk_dc2 = 0.25 * v.k / sin2;
   }
   else
@@ -508,10 +514,13 @@ ContactPairState evaluateContact(const Model& model, int pair, const Eigen::Vect
   double cd = 0.0, dcd = 0.0, ft = 0.0;
   if (friction)
   {
-    at1 = rotationMatrix(conj1);
-    at2 = rotationMatrix(conj2);
-    ua = c.s1 * kAxis - a.radius * (at1 * c.n);
-    ub = c.s2 * kAxis + b.radius * (at2 * c.n);
+    if (tangents)
+    {
+      at1 = rotationMatrix(conj1);
+      at2 = rotationMatrix(conj2);
+    }
+    ua = c.s1 * kAxis - a.radius * rotate(conj1, c.n);
+    ub = c.s2 * kAxis + b.radius * rotate(conj2, c.n);
     if (tangents)
     {
       bua = pointJacobianTheta(a.theta, ua);

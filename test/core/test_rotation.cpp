@@ -54,6 +54,7 @@ TEST(Rotation, PointJacobianIsExactDerivativeForAnyTheta)
     // homogeneous quadratic: B(Theta) Theta = 2 A(Theta) u
     EXPECT_TRUE((at::pointJacobianTheta(th, u) * th).isApprox(2.0 * at::rotationMatrix(th) * u, 1e-12));
     // the products without the matrix
+    EXPECT_TRUE(at::rotate(th, u).isApprox(at::rotationMatrix(th) * u, 1e-13));
     const at::Vec4 x = randomTheta(rng, false);
     const at::Vec3 f(0.2 - 0.05 * i, -1.1, 0.6);
     EXPECT_TRUE(at::pointJacobianThetaTimes(th, u, x).isApprox(at::pointJacobianTheta(th, u) * x, 1e-13));

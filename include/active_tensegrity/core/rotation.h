@@ -31,6 +31,14 @@ Mat34 lMatrix(const Vec4& theta);
 /// B_Theta(Theta, u) = d(A(Theta) u)/dTheta (3x4), linear in Theta; B_Theta(Theta, u) Theta = 2 A(Theta) u.
 Mat34 pointJacobianTheta(const Vec4& theta, const Vec3& u);
 
+/// A(Theta) u without forming the matrix (the same quadratic form as rotationMatrix).
+inline Vec3 rotate(const Vec4& theta, const Vec3& u)
+{
+  const double e0 = theta(0);
+  const Vec3 e = theta.tail<3>();
+  return (e0 * e0 - e.squaredNorm()) * u + 2.0 * e.dot(u) * e + 2.0 * e0 * e.cross(u);
+}
+
 /// B_Theta(Theta, u) x without forming the matrix (the velocity of point u for Theta moving at x).
 inline Vec3 pointJacobianThetaTimes(const Vec4& theta, const Vec3& u, const Vec4& x)
 {
