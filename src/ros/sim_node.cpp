@@ -121,6 +121,8 @@ SimNode::SimNode(ros::NodeHandle& nh, ros::NodeHandle& pnh, SimParams params, co
   state_ = core::initialState(model_);
   controller_.reset(state_.u);
   const core::Summary init = solver_.initialize(state_, [this](double t) { return controller_.values(t); });
+  if (params_.adaptive)
+    stepper_ = std::make_unique<core::AdaptiveStepper>(solver_, model_.solver);
   if (!init.ok() || !finite(state_))
     throw std::runtime_error("the initial state of scene '" + params_.scene + "' is not consistent: " + init.message);
   paused_by_user_ = params_.start_paused;
@@ -219,6 +221,8 @@ bool SimNode::onReset(std_srvs::Trigger::Request& /*req*/, std_srvs::Trigger::Re
     return true;
   }
   state_ = std::move(fresh);
+  if (params_.adaptive)
+    stepper_ = std::make_unique<core::AdaptiveStepper>(solver_, model_.solver);
   failed_ = false;
   solver_status_ = running() ? "running" : "paused";
   message_ = "reset";
@@ -559,13 +563,24 @@ void SimNode::run()
       else
       {
         const core::State before = state_;
-        // t = k dt exactly (no drift from summing steps)
-        const double t_next = static_cast<double>(steps_ + 1) * dt;
-        const core::Summary s = solver_.step(state_, t_next - state_.t, law);
-        ++steps_;
+        core::Summary s;
+        if (stepper_)
+        {
+          // to the next publish time, in the steps the error control allows
+          const long accepted = stepper_->stats().accepted;
+          s = stepper_->advanceTo(state_, next_publish, law);
+          steps_ += static_cast<uint64_t>(stepper_->stats().accepted - accepted);
+        }
+        else
+        {
+          // t = k dt exactly (no drift from summing steps)
+          const double t_next = static_cast<double>(steps_ + 1) * dt;
+          s = solver_.step(state_, t_next - state_.t, law);
+          ++steps_;
+          if (s.ok())
+            state_.t = t_next;
+        }
         step_cuts_ += s.step_cuts;
-        if (s.ok())
-          state_.t = t_next;
         if (!s.ok() || !finite(state_))
         {
           // the solver keeps the last good state when a step fails; never publish a non-finite one

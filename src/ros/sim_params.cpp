@@ -156,6 +156,7 @@ SimParams loadSimParams(const ros::NodeHandle& nh)
     throw ParamError("~default_acceleration must be > 0 m/s^2 (or 0: derived), got " +
                      core::shortestNumber(p.default_acceleration));
   p.start_paused = boolean(nh, "start_paused", p.start_paused);
+  p.adaptive = boolean(nh, "adaptive", p.adaptive);
   p.markers.contact_force_scale = number(nh, "contact_force_scale", p.markers.contact_force_scale);
   if (p.markers.contact_force_scale <= 0.0)
     throw ParamError("~contact_force_scale must be > 0 m/N, got " + core::shortestNumber(p.markers.contact_force_scale));
@@ -185,6 +186,8 @@ std::string SimParams::describe() const
     << "default_speed: " << default_speed << " m/s\n"
     << "default_acceleration: " << default_acceleration << " m/s^2\n"
     << "start_paused: " << (start_paused ? "true" : "false") << "\n"
+    << "adaptive: " << (adaptive ? "true (steps from solver.error_tolerance)" : "false (fixed steps of solver.dt)")
+    << "\n"
     << "contact_force_scale: " << markers.contact_force_scale << " m/N\n"
     << "cable_tension_scale: " << markers.cable_tension_scale << " N\n"
     << "cable_width: " << markers.cable_width << " m\n"

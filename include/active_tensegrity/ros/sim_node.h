@@ -23,6 +23,7 @@
 #include "active_tensegrity/PlanFoldingAction.h"
 #include "active_tensegrity/PlanFolding.h"
 #include "active_tensegrity/SimStatus.h"
+#include "active_tensegrity/core/adaptive.h"
 #include "active_tensegrity/core/actuation_control.h"
 #include "active_tensegrity/core/dynamics.h"
 #include "active_tensegrity/planning/folding_planner.h"
@@ -76,6 +77,7 @@ private:
   SimParams params_;
   core::Model model_;
   core::DynamicsSolver solver_;
+  std::unique_ptr<core::AdaptiveStepper> stepper_;  // with ~adaptive (a new one at every reset)
   core::ActuationController controller_;
   MessageBuilder builder_;
 

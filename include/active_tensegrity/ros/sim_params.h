@@ -31,6 +31,9 @@ struct SimParams
   double default_speed = 0.0;         // m/s for commands without max_speeds (0: the scene's actuation.speed)
   double default_acceleration = 0.0;  // m/s^2 for commands without max_accelerations (0: derived)
   bool start_paused = false;
+  /// steps chosen by the scene's error control (solver.error_tolerance, onset_depth, dt_min, dt_max; the
+  /// steps land on the publish times); false: fixed steps of solver.dt
+  bool adaptive = true;
   MarkerOptions markers;
 
   /// One line per parameter with its effective value.
