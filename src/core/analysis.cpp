@@ -532,12 +532,12 @@ const std::vector<ContactPairState>& ContactScan::active(const State& state)
         near_.push_back(i);
   }
   const ContactMode mode = model_.analysis.type == AnalysisType::kStatic ? ContactMode::kStatic : ContactMode::kDynamic;
-  for (int i : near_)
+  for (int i : near_)  // (mostly touching pairs: evaluated whole, without a geometry check first)
   {
-    if (contactGeometry(model_, i, state.q).gap >= 0.0)
-      continue;
     const double v0 = i < static_cast<int>(state.contact_speed.size()) ? state.contact_speed[i] : 0.0;
-    contacts_.push_back(evaluateContact(model_, i, state.q, state.qd, v0, mode, nullptr));
+    const ContactPairState st = evaluateContact(model_, i, state.q, state.qd, v0, mode, nullptr);
+    if (st.active)
+      contacts_.push_back(st);
   }
   return contacts_;
 }

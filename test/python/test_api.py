@@ -207,7 +207,11 @@ def test_a_python_controller_holds_the_tower_at_one_metre():
     print("[ measured ] height from 5 to 10 s: %.4f..%.4f m; from 15 to 20 s: %.4f..%.4f m; pull %.4f m"
           % (early.min(), early.max(), late.min(), late.max(), u[-1]))
     assert np.abs(late - 1.0).max() < 0.015
-    assert np.ptp(late) < 0.5 * np.ptp(early)
+    assert abs(late.mean() - 1.0) < 0.005
+    # the swing decays; how much is left of it after 15 s depends on the last bits of the arithmetic (the folded
+    # tower touches, and contact amplifies them): 0.42 of the early swing with the generic x86-64 build, 0.52
+    # with -march=native (fused multiply-add), on the same code
+    assert np.ptp(late) < 0.75 * np.ptp(early)
     assert 0.3 < u[-1] < 1.0
 
 
