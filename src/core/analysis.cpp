@@ -309,28 +309,32 @@ std::vector<CableStrutGap> cableStrutCrossings(const Model& model, const Eigen::
   return out;
 }
 
-std::vector<ContactPairState> activeContacts(const Model& model, const State& state)
+namespace
 {
-  std::vector<ContactPairState> out;
-  if (!model.anyContact())
-    return out;
+/// Appends the states of the listed slots that touch in `state`, evaluated as the analysis does (with the
+/// state's impact speeds in dynamics).
+void appendActiveContacts(const Model& model, const std::vector<int>& slots, const State& state,
+                          std::vector<ContactPairState>& out)
+{
   const ContactMode mode = model.analysis.type == AnalysisType::kStatic ? ContactMode::kStatic : ContactMode::kDynamic;
-  std::vector<int> candidates;
-  if (model.contact.enabled)
+  for (int i : slots)
   {
-    const BroadPhase broad(model);
-    broad.candidates(state.q, 0.0, candidates);
-  }
-  appendGroundCandidates(model, state.q, 0.0, candidates);
-  for (int i : candidates)
-  {
-    if (contactGeometry(model, i, state.q).gap >= 0.0)
-      continue;  // (the geometry alone costs a third of a whole evaluation)
     const double v0 = i < static_cast<int>(state.contact_speed.size()) ? state.contact_speed[i] : 0.0;
     const ContactPairState st = evaluateContact(model, i, state.q, state.qd, v0, mode, nullptr);
     if (st.active)
       out.push_back(st);
   }
+}
+}  // namespace
+
+std::vector<ContactPairState> activeContacts(const Model& model, const State& state)
+{
+  std::vector<ContactPairState> out;
+  if (!model.anyContact())
+    return out;
+  std::vector<int> candidates;
+  contactCandidates(model, BroadPhase(model), state.q, 0.0, candidates);
+  appendActiveContacts(model, candidates, state, out);
   return out;
 }
 
@@ -502,43 +506,15 @@ const std::vector<ContactPairState>& ContactScan::active(const State& state)
   contacts_.clear();
   if (!model_.anyContact())
     return contacts_;
-  // the largest move of a body point since the reference (a strut's end: centre plus half its length times
-  // the turn of its axis)
-  double moved = std::numeric_limits<double>::infinity();
-  if (have_reference_ && reference_q_.size() == state.q.size())
+  const bool near_reference = have_reference_ && reference_q_.size() == state.q.size() &&
+                              largestMotion(model_, reference_q_, state.q) <= reach_;
+  if (!near_reference)
   {
-    moved = 0.0;
-    for (const Body& b : model_.bodies)
-    {
-      double move = (state.q.segment<3>(b.offset) - reference_q_.segment<3>(b.offset)).norm();
-      if (b.kind == BodyKind::kStrut)
-        move += 0.5 * b.length *
-                (bodyZAxis(state.q.segment<4>(b.offset + 3)) - bodyZAxis(reference_q_.segment<4>(b.offset + 3))).norm();
-      moved = std::max(moved, move);
-    }
-  }
-  if (!(moved <= reach_))
-  {
-    // two bodies each within reach of the reference close their distance by at most twice that
     reference_q_ = state.q;
     have_reference_ = true;
-    candidates_.clear();
-    if (model_.contact.enabled)
-      broad_.candidates(state.q, reach_, candidates_);
-    appendGroundCandidates(model_, state.q, reach_, candidates_);
-    near_.clear();
-    for (int i : candidates_)
-      if (contactGeometry(model_, i, state.q).gap <= 2.0 * reach_)
-        near_.push_back(i);
+    nearContactSlots(model_, broad_, state.q, reach_, candidates_, near_);
   }
-  const ContactMode mode = model_.analysis.type == AnalysisType::kStatic ? ContactMode::kStatic : ContactMode::kDynamic;
-  for (int i : near_)  // (mostly touching pairs: evaluated whole, without a geometry check first)
-  {
-    const double v0 = i < static_cast<int>(state.contact_speed.size()) ? state.contact_speed[i] : 0.0;
-    const ContactPairState st = evaluateContact(model_, i, state.q, state.qd, v0, mode, nullptr);
-    if (st.active)
-      contacts_.push_back(st);
-  }
+  appendActiveContacts(model_, near_, state, contacts_);
   return contacts_;
 }
 

@@ -402,17 +402,13 @@ StrutPair makeStrutPair(const Model& model, int body_a, int body_b)
   return p;
 }
 
-StiffnessValue contactStiffness(double k90, double cos2, double min_crossing_angle)
+namespace
+{
+// K and dK/dcos2 with the floor sin(min_crossing_angle) given (one sine per pair evaluation)
+StiffnessValue stiffnessAbove(double k90, double cos2, double floor_sin)
 {
   // Re = sqrt(r1 r2) / |sin theta|, so K = k90 (sin^2 theta)^(-1/4)
   StiffnessValue v;
-  // (the sine of the scene's floor angle, kept: this runs for every pair in contact at every evaluation)
-  thread_local double angle = 0.0, floor_sin = 0.0;
-  if (min_crossing_angle != angle)
-  {
-    angle = min_crossing_angle;
-    floor_sin = std::sin(min_crossing_angle);
-  }
   const double sin2 = 1.0 - cos2;
   if (sin2 > floor_sin * floor_sin)
   {
@@ -422,6 +418,12 @@ StiffnessValue contactStiffness(double k90, double cos2, double min_crossing_ang
   else
     v.k = k90 / std::sqrt(floor_sin);
   return v;
+}
+}  // namespace
+
+StiffnessValue contactStiffness(double k90, double cos2, double min_crossing_angle)
+{
+  return stiffnessAbove(k90, cos2, std::sin(min_crossing_angle));
 }
 
 ContactPairState contactGeometry(const Model& model, int pair, const Eigen::VectorXd& q)
@@ -477,7 +479,8 @@ ContactPairState evaluateContact(const Model& model, int pair, const Eigen::Vect
   // (statics), never pulling
   const double dot = a.axis.dot(b.axis), m1 = a.axis.squaredNorm(), m2 = b.axis.squaredNorm();
   const double cos2 = dot * dot / (m1 * m2);
-  const StiffnessValue kv = contactStiffness(p.stiffness90, cos2, set.min_crossing_angle);
+  const double floor_sin = std::sin(set.min_crossing_angle);
+  const StiffnessValue kv = stiffnessAbove(p.stiffness90, cos2, floor_sin);
   st.stiffness = kv.k;
   const double damping =
       dynamic ? 3.0 * (1.0 - set.restitution * set.restitution) / (4.0 * std::max(impact_speed, set.min_impact_speed)) :
@@ -492,7 +495,7 @@ ContactPairState evaluateContact(const Model& model, int pair, const Eigen::Vect
   const double zc = zeta - p.core_gap;
   if (p.core_stiffness90 > 0.0 && zc > 0.0)
   {
-    const StiffnessValue kc = contactStiffness(p.core_stiffness90, cos2, set.min_crossing_angle);
+    const StiffnessValue kc = stiffnessAbove(p.core_stiffness90, cos2, floor_sin);
     st.core_penetration = zc;
     st.core_stiffness = kc.k;
     elastic += kc.k * zc * std::sqrt(zc);

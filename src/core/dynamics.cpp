@@ -74,12 +74,7 @@ void DynamicsSolver::findNearContacts(const State& s, double motion)
 {
   const Model& model = system_.model();
   near_motion_ = motion;
-  near_.clear();
-  // two bodies each moving by at most `motion` close their distance by at most twice that
-  system_.contactCandidates(s.q, motion, candidates_);
-  for (int i : candidates_)
-    if (contactGeometry(model, i, s.q).gap <= 2.0 * motion)
-      near_.push_back(i);
+  system_.nearContacts(s.q, motion, near_);
   for (int i : near_)
   {
     const double memory = i < static_cast<int>(s.contact_speed.size()) ? s.contact_speed[i] : 0.0;
@@ -374,7 +369,7 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law, boo
         const ScopeTimer timer(timings_.contact);
         // the contacts were evaluated for the slots within reach of the step's expected motion; a step
         // that moved further goes on iterating with the slots within reach of its motion
-        const double motion = system_.largestMotion(s.q, q_);
+        const double motion = largestMotion(system_.model(), s.q, q_);
         if (motion > near_motion_)
         {
           findNearContacts(s, 2.0 * motion);

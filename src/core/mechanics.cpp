@@ -146,19 +146,30 @@ void System::contactForce(const std::vector<int>& slots, const Eigen::VectorXd& 
   }
 }
 
-void System::contactCandidates(const Eigen::VectorXd& q, double margin, std::vector<int>& out) const
+void contactCandidates(const Model& model, const BroadPhase& broad, const Eigen::VectorXd& q, double margin,
+                       std::vector<int>& out)
 {
-  if (model_.contact.enabled)
-    broad_phase_.candidates(q, margin, out);
+  if (model.contact.enabled)
+    broad.candidates(q, margin, out);
   else
     out.clear();
-  appendGroundCandidates(model_, q, margin, out);
+  appendGroundCandidates(model, q, margin, out);
 }
 
-double System::largestMotion(const Eigen::VectorXd& q0, const Eigen::VectorXd& q1) const
+void nearContactSlots(const Model& model, const BroadPhase& broad, const Eigen::VectorXd& q, double reach,
+                      std::vector<int>& candidates, std::vector<int>& out)
+{
+  contactCandidates(model, broad, q, reach, candidates);
+  out.clear();
+  for (int i : candidates)
+    if (contactGeometry(model, i, q).gap <= 2.0 * reach)
+      out.push_back(i);
+}
+
+double largestMotion(const Model& model, const Eigen::VectorXd& q0, const Eigen::VectorXd& q1)
 {
   double reach = 0.0;
-  for (const Body& b : model_.bodies)
+  for (const Body& b : model.bodies)
   {
     double move = (q1.segment<3>(b.offset) - q0.segment<3>(b.offset)).norm();
     if (b.kind == BodyKind::kStrut)
@@ -168,9 +179,19 @@ double System::largestMotion(const Eigen::VectorXd& q0, const Eigen::VectorXd& q
   return reach;
 }
 
+void System::contactCandidates(const Eigen::VectorXd& q, double margin, std::vector<int>& out) const
+{
+  core::contactCandidates(model_, broad_phase_, q, margin, out);
+}
+
+void System::nearContacts(const Eigen::VectorXd& q, double reach, std::vector<int>& out) const
+{
+  nearContactSlots(model_, broad_phase_, q, reach, candidates_, out);
+}
+
 int System::firstPassedThrough(const Eigen::VectorXd& q0, const Eigen::VectorXd& q1) const
 {
-  broad_phase_.candidates(q1, largestMotion(q0, q1), candidates_);
+  broad_phase_.candidates(q1, largestMotion(model_, q0, q1), candidates_);
   return firstPassedThrough(candidates_, q0, q1);
 }
 

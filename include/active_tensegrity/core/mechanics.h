@@ -22,6 +22,21 @@
 
 namespace active_tensegrity::core
 {
+/// The largest distance any point of a body moved between q0 and q1 (m): for a strut, its centre's move plus
+/// half its length times its axis' turn.
+double largestMotion(const Model& model, const Eigen::VectorXd& q0, const Eigen::VectorXd& q1);
+
+/// Contact slots that can touch at q with boxes grown by margin (m): the broad phase's strut pairs (when strut
+/// contact is on), then the ground contacts within margin of the ground.
+void contactCandidates(const Model& model, const BroadPhase& broad, const Eigen::VectorXd& q, double margin,
+                       std::vector<int>& out);
+
+/// The contact slots within 2 reach (m) of touching at q: contactCandidates with boxes grown by reach, kept when
+/// their gap is at most 2 reach. While no body point moves by more than reach from q, every slot that touches
+/// is among them (two bodies close their distance by at most twice that). `candidates`: scratch.
+void nearContactSlots(const Model& model, const BroadPhase& broad, const Eigen::VectorXd& q, double reach,
+                      std::vector<int>& candidates, std::vector<int>& out);
+
 /// The equations of one model plus optional extra constraints (e.g. statics' spin locks), with a
 /// sparse Jacobian whose pattern is fixed at construction: rows and columns are [q; lambda], one
 /// group per body then one per constraint. Not thread-safe (contact scratch): one System per thread.
@@ -81,9 +96,6 @@ public:
   void contactForce(const std::vector<int>& slots, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
                     const std::vector<double>& impact_speeds, ContactMode mode, Eigen::VectorXd& F,
                     BlockSparseMatrix* jac, double k_weight, double c_weight) const;
-  /// The largest distance any point of a body moved between q0 and q1 (m): for a strut, its centre's move
-  /// plus half its length times its axis' turn.
-  double largestMotion(const Eigen::VectorXd& q0, const Eigen::VectorXd& q1) const;
   /// The first checked pair whose struts passed through each other between q0 and q1 (contact.h,
   /// passedThrough), or -1. Only pairs within reach of each other at q1 (the broad phase with boxes grown
   /// by the largest motion of a strut point between q0 and q1) are judged: a pair that crossed was in
@@ -97,6 +109,8 @@ public:
   /// Contact slots that can touch at q with boxes grown by margin (m): checked strut pairs (when strut contact is
   /// on), then ground contacts within margin of the ground.
   void contactCandidates(const Eigen::VectorXd& q, double margin, std::vector<int>& out) const;
+  /// The contact slots within 2 reach (m) of touching at q (nearContactSlots below).
+  void nearContacts(const Eigen::VectorXd& q, double reach, std::vector<int>& out) const;
   /// M(q) qdd + Qv(q, qd). Adds m_weight M + k_weight d(M qdd + Qv)/dq + c_weight dQv/dqd into jac.
   void inertialForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd,
                      Eigen::VectorXd& out, BlockSparseMatrix* jac, double m_weight, double k_weight,
