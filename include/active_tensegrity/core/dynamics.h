@@ -112,8 +112,8 @@ private:
   SparseLinearSolver linear_;
   Eigen::VectorXd q_, qd_, acc_, inertial_, applied_, cforce_, phi_, r_, dx_, qdd_iter_, lambda_iter_;
   std::vector<double> step_speeds_;  // v_0 per checked pair for the step being solved
-  std::vector<int> near_;     // the step's contact slots within reach (findNearContacts)
-  double near_motion_ = 0.0;  // the motion near_ allows for (m)
+  std::vector<int> near_;            // the step's contact slots within reach (findNearContacts)
+  double near_motion_ = 0.0;         // the motion near_ allows for (m)
   /// The least motion near_ allows for (m): a body at rest still moves a little in its first step.
   static constexpr double kNearFloor = 1e-4;
   std::vector<double> previous_speed_;  // contact memory at the start of the step being accepted
