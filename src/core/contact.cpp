@@ -266,7 +266,7 @@ ContactPairState evaluateGroundContact(const Model& model, int slot, const Eigen
       theta = thetaOf(q, body);
       theta_rate = thetaOf(qd, body);
       conj = kConjugate.cwiseProduct(theta);
-      ua = g.local - g.radius * (rotationMatrix(conj) * Vec3::UnitZ());
+      ua = g.local - g.radius * rotate(conj, Vec3::UnitZ());
       bua = pointJacobianTheta(theta, ua);
       vtol = qd.segment<3>(body.offset) + bua * theta_rate;
     }
@@ -517,15 +517,12 @@ ContactPairState evaluateContact(const Model& model, int pair, const Eigen::Vect
   double cd = 0.0, dcd = 0.0, ft = 0.0;
   if (friction)
   {
-    if (tangents)
+    ua = c.s1 * kAxis - a.radius * rotate(conj1, c.n);
+    ub = c.s2 * kAxis + b.radius * rotate(conj2, c.n);
+    if (tangents)  // (the matrices only the tangents below use)
     {
       at1 = rotationMatrix(conj1);
       at2 = rotationMatrix(conj2);
-    }
-    ua = c.s1 * kAxis - a.radius * rotate(conj1, c.n);
-    ub = c.s2 * kAxis + b.radius * rotate(conj2, c.n);
-    if (tangents)
-    {
       bua = pointJacobianTheta(a.theta, ua);
       bub = pointJacobianTheta(b.theta, ub);
     }

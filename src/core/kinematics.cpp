@@ -84,12 +84,7 @@ Vec3 pointPosition(const Model& model, const PointRef& point, const Eigen::Vecto
   const Body& b = model.bodies[point.body];
   if (b.kind == BodyKind::kPointMass)
     return q.segment<3>(b.offset) + point.local;
-  // R(Theta) u = (e0^2 - e.e) u + 2 (e.u) e + 2 e0 e x u, the same quadratic form as rotationMatrix
-  const Vec4 th = thetaOf(q, b);
-  const double e0 = th(0);
-  const Vec3 e = th.tail<3>();
-  const Vec3& u = point.local;
-  return q.segment<3>(b.offset) + (e0 * e0 - e.squaredNorm()) * u + 2.0 * e.dot(u) * e + 2.0 * e0 * e.cross(u);
+  return q.segment<3>(b.offset) + rotate(thetaOf(q, b), point.local);
 }
 
 }  // namespace active_tensegrity::core
