@@ -159,6 +159,34 @@ FrictionValue frictionForce(ContactPairState& st, const Vec3& vt, double mu, dou
   return out;
 }
 
+// A normal force law at one penetration: F_N = E (1 + D zeta_dot) + c zeta_dot (E the elastic force, Hertz: D from
+// the restitution, c = 0; linear: E = k zeta, D = 0) with dF_N/dE = elastic_factor, dE/dzeta = de_dzeta and
+// dF_N/dzeta_dot = rate_coefficient. No force unless fn > 0 (contact never pulls).
+struct NormalLaw
+{
+  double fn = 0.0;
+  double de_dzeta = 0.0;
+  double elastic_factor = 0.0;
+  double rate_coefficient = 0.0;
+};
+
+// Lankarani-Nikravesh: D = 3 (1 - c_e^2) / (4 v_0), v_0 floored at min_speed
+double lankaraniNikravesh(double restitution, double impact_speed, double min_speed)
+{
+  return 3.0 * (1.0 - restitution * restitution) / (4.0 * std::max(impact_speed, min_speed));
+}
+
+NormalLaw hertzLaw(double elastic, double de_dzeta, double damping, double rate)
+{
+  const double hysteresis = 1.0 + damping * rate;
+  return { elastic * hysteresis, de_dzeta, hysteresis, elastic * damping };
+}
+
+NormalLaw linearLaw(double stiffness, double damping, double zeta, double rate)
+{
+  return { stiffness * zeta + damping * rate, stiffness, 1.0, damping };
+}
+
 ContactPairState baseState(int pair, const Closest& c, const StrutAxis& a, const StrutAxis& b)
 {
   ContactPairState st;
@@ -238,17 +266,23 @@ ContactPairState evaluateGroundContact(const Model& model, int slot, const Eigen
   st.penetration_rate = -k.v.z();
   if (!st.active)
     return st;
-  st.stiffness = g.stiffness;
-  const double damping = dynamic ? 3.0 * (1.0 - ground.restitution * ground.restitution) /
-                                       (4.0 * std::max(impact_speed, min_impact_speed)) :
-                                   0.0;
-  const double hysteresis = 1.0 + damping * st.penetration_rate;
-  if (hysteresis <= 0.0)
-    return st;
   const double zeta = st.penetration;
-  const double elastic = g.stiffness * zeta * std::sqrt(zeta);
-  const double de_dzeta = 1.5 * g.stiffness * std::sqrt(zeta);
-  const double fn = elastic * hysteresis;
+  NormalLaw law;
+  if (ground.law == ContactLaw::kLinear)
+  {
+    st.stiffness = ground.linear_stiffness;
+    law = linearLaw(ground.linear_stiffness, dynamic ? ground.linear_damping : 0.0, zeta, st.penetration_rate);
+  }
+  else
+  {
+    st.stiffness = g.stiffness;
+    law = hertzLaw(g.stiffness * zeta * std::sqrt(zeta), 1.5 * g.stiffness * std::sqrt(zeta),
+                   dynamic ? lankaraniNikravesh(ground.restitution, impact_speed, min_impact_speed) : 0.0,
+                   st.penetration_rate);
+  }
+  if (!(law.fn > 0.0))
+    return st;
+  const double fn = law.fn;
   st.normal_force = fn;
   st.force_on_a = fn * Vec3::UnitZ();
 
@@ -300,12 +334,12 @@ ContactPairState evaluateGroundContact(const Model& model, int slot, const Eigen
   if (!out->tangents)
     return st;
 
-  // normal force F_N = E(zeta) (1 + D zeta_dot), zeta = h + r - c_z, zeta_dot = -v_z
+  // normal force F_N = E(zeta) (1 + D zeta_dot) + c zeta_dot, zeta = h + r - c_z, zeta_dot = -v_z
   const Row7 jzeta = -gvec.transpose();
   const Row7 jq_rate = -k.dv_dq.row(2);
   const Row7 jqd_rate = -gvec.transpose();
-  const Row7 jq_fn = hysteresis * de_dzeta * jzeta + elastic * damping * jq_rate;
-  const Row7 jqd_fn = elastic * damping * jqd_rate;
+  const Row7 jq_fn = law.elastic_factor * law.de_dzeta * jzeta + law.rate_coefficient * jq_rate;
+  const Row7 jqd_fn = law.rate_coefficient * jqd_rate;
   Mat7 jq_force = gvec * jq_fn;
   if (strut)
     jq_force.block<4, 4>(3, 3) += fn * pointHessianTheta(g.local, Vec3::UnitZ());
@@ -354,6 +388,17 @@ ContactPairState evaluateGroundContact(const Model& model, int slot, const Eigen
   return st;
 }
 }  // namespace
+
+double contactElasticEnergy(const Model& model, const ContactPairState& st)
+{
+  if (!st.active)
+    return 0.0;
+  const bool ground = st.body_b < 0;
+  const ContactLaw law = ground ? model.ground.law : model.contact.law;
+  if (law == ContactLaw::kLinear)
+    return 0.5 * st.stiffness * st.penetration * st.penetration;
+  return 0.4 * (st.stiffness * std::pow(st.penetration, 2.5) + st.core_stiffness * std::pow(st.core_penetration, 2.5));
+}
 
 void appendGroundCandidates(const Model& model, const Eigen::VectorXd& q, double margin, std::vector<int>& out)
 {
@@ -476,33 +521,43 @@ ContactPairState evaluateContact(const Model& model, int pair, const Eigen::Vect
     return st;
 
   // the forces: stiffness from the crossing angle, then Lankarani-Nikravesh (dynamics) or Hertz
-  // (statics), never pulling
+  // (statics), or the linear spring-dashpot; never pulling
   const double dot = a.axis.dot(b.axis), m1 = a.axis.squaredNorm(), m2 = b.axis.squaredNorm();
   const double cos2 = dot * dot / (m1 * m2);
-  const double floor_sin = std::sin(set.min_crossing_angle);
-  const StiffnessValue kv = stiffnessAbove(p.stiffness90, cos2, floor_sin);
-  st.stiffness = kv.k;
-  const double damping =
-      dynamic ? 3.0 * (1.0 - set.restitution * set.restitution) / (4.0 * std::max(impact_speed, set.min_impact_speed)) :
-                0.0;
-  const double hysteresis = 1.0 + damping * st.penetration_rate;
-  if (hysteresis <= 0.0)
-    return st;
-  // the elastic force E(zeta, cos2): the sleeves' Hertz law, plus the cores' once they overlap
   const double zeta = st.penetration;
-  double elastic = kv.k * zeta * std::sqrt(zeta);
-  double de_dzeta = 1.5 * kv.k * std::sqrt(zeta), de_dc2 = kv.dk_dc2 * zeta * std::sqrt(zeta);
-  const double zc = zeta - p.core_gap;
-  if (p.core_stiffness90 > 0.0 && zc > 0.0)
+  NormalLaw law;
+  double de_dc2 = 0.0;
+  if (set.law == ContactLaw::kLinear)
   {
-    const StiffnessValue kc = stiffnessAbove(p.core_stiffness90, cos2, floor_sin);
-    st.core_penetration = zc;
-    st.core_stiffness = kc.k;
-    elastic += kc.k * zc * std::sqrt(zc);
-    de_dzeta += 1.5 * kc.k * std::sqrt(zc);
-    de_dc2 += kc.dk_dc2 * zc * std::sqrt(zc);
+    st.stiffness = set.linear_stiffness;
+    law = linearLaw(set.linear_stiffness, dynamic ? set.linear_damping : 0.0, zeta, st.penetration_rate);
   }
-  const double fn = elastic * hysteresis;
+  else
+  {
+    const double floor_sin = std::sin(set.min_crossing_angle);
+    const StiffnessValue kv = stiffnessAbove(p.stiffness90, cos2, floor_sin);
+    st.stiffness = kv.k;
+    // the elastic force E(zeta, cos2): the sleeves' Hertz law, plus the cores' once they overlap
+    double elastic = kv.k * zeta * std::sqrt(zeta);
+    double de_dzeta = 1.5 * kv.k * std::sqrt(zeta);
+    de_dc2 = kv.dk_dc2 * zeta * std::sqrt(zeta);
+    const double zc = zeta - p.core_gap;
+    if (p.core_stiffness90 > 0.0 && zc > 0.0)
+    {
+      const StiffnessValue kc = stiffnessAbove(p.core_stiffness90, cos2, floor_sin);
+      st.core_penetration = zc;
+      st.core_stiffness = kc.k;
+      elastic += kc.k * zc * std::sqrt(zc);
+      de_dzeta += 1.5 * kc.k * std::sqrt(zc);
+      de_dc2 += kc.dk_dc2 * zc * std::sqrt(zc);
+    }
+    law = hertzLaw(elastic, de_dzeta,
+                   dynamic ? lankaraniNikravesh(set.restitution, impact_speed, set.min_impact_speed) : 0.0,
+                   st.penetration_rate);
+  }
+  if (!(law.fn > 0.0))
+    return st;
+  const double fn = law.fn;
   st.normal_force = fn;
   st.force_on_a = fn * c.n;
 
@@ -601,10 +656,10 @@ ContactPairState evaluateContact(const Model& model, int pair, const Eigen::Vect
     je_angle = de_dc2 * (2.0 * dot * jdot - cos2 * (m2 * jm1 + m1 * jm2)) / (m1 * m2);
   }
 
-  // normal force F_N = E (1 + D zeta_dot) and the generalized normal force g F_N with
+  // normal force F_N = E (1 + D zeta_dot) + c zeta_dot and the generalized normal force g F_N with
   // g = [n; s1 B1^T n; -n; -s2 B2^T n]
-  const Row14 jq_fn = hysteresis * (je_angle + de_dzeta * jzeta) + elastic * damping * jq_rate;
-  const Row14 jqd_fn = elastic * damping * jqd_rate;
+  const Row14 jq_fn = law.elastic_factor * (je_angle + law.de_dzeta * jzeta) + law.rate_coefficient * jq_rate;
+  const Row14 jqd_fn = law.rate_coefficient * jqd_rate;
   Vec14 g;
   g << c.n, c.s1 * a.axis_jac.transpose() * c.n, -c.n, -c.s2 * b.axis_jac.transpose() * c.n;
   Mat14 jg = Mat14::Zero();

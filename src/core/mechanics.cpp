@@ -354,9 +354,7 @@ double System::potentialEnergy(const Eigen::VectorXd& q, const ActuationValues& 
       if (!model_.isGroundSlot(i) && !model_.contact.enabled)
         continue;
       const ContactPairState st = evaluateContact(model_, i, q, zero, 0.0, ContactMode::kStatic, nullptr);
-      if (st.active)
-        e += 0.4 *
-             (st.stiffness * std::pow(st.penetration, 2.5) + st.core_stiffness * std::pow(st.core_penetration, 2.5));
+      e += contactElasticEnergy(model_, st);
     }
   for (const Cable& c : model_.cables)
     e += cablePotentialEnergy(c, evaluateCable(model_, c, q, zero, u, false, nullptr, nullptr, 0.0, 0.0));

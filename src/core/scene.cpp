@@ -387,8 +387,14 @@ private:
     if (!names.insert(name).second)
       r.fail(key, "duplicate " + what + " name " + quoted(name));
   }
+  /// `materials` may be left out by a scene that names none (point masses, springs and a ground on the linear law).
   void readMaterials()
   {
+    if (!root_.has("materials"))
+    {
+      root_.optional("materials");
+      return;
+    }
     Reader mats = root_.map("materials");
     for (const std::string& name : mats.keys())
     {
@@ -890,6 +896,10 @@ private:
       if (!std::isfinite(p.stiffness90))
         root_.fail("materials", "the contact stiffness of struts " + quoted(model_.bodies[a].name) + " and " +
                                     quoted(model_.bodies[b].name) + " overflows: " + shortestNumber(p.stiffness90));
+      if (model_.contact.law == ContactLaw::kLinear && p.core_stiffness90 > 0.0)
+        root_.fail("contact.law", "'linear' has one spring for every pair, but struts " +
+                                      quoted(model_.bodies[a].name) + " and " + quoted(model_.bodies[b].name) +
+                                      " have layers (a core): use law 'hertz' for layered struts");
       if (!std::isfinite(p.core_stiffness90))
         root_.fail("materials", "the contact stiffness of the cores of struts " + quoted(model_.bodies[a].name) +
                                     " and " + quoted(model_.bodies[b].name) +
@@ -898,11 +908,43 @@ private:
     }
   }
 
-  /// A contact law's restitution ([0, 1]), friction (>= 0) and the modified Coulomb law's v0 < v1 (m/s; v0 may be 0
-  /// for the ground, whose law is then linear from rest), each kept at its default when not given.
-  static void readContactLaw(Reader& r, double& restitution, double& friction, double& stick, double& slip,
-                             bool stick_may_be_zero)
+  /// A contact law: `law` (hertz, the default, or linear), the hertz law's restitution ([0, 1]) or the linear law's
+  /// stiffness (N/m, required) and damping (N s/m), friction (>= 0) and the modified Coulomb law's v0 < v1 (m/s; v0
+  /// may be 0 for the ground, whose law is then linear from rest), each kept at its default when not given. A key of
+  /// the other law is refused (it would be ignored).
+  static void readContactLaw(Reader& r, ContactLaw& law, double& stiffness, double& damping, double& restitution,
+                             double& friction, double& stick, double& slip, bool stick_may_be_zero,
+                             const std::vector<std::string>& hertz_only)
   {
+    const std::string name = r.string("law", "hertz");
+    if (name == "hertz")
+      law = ContactLaw::kHertz;
+    else if (name == "linear")
+      law = ContactLaw::kLinear;
+    else
+      r.fail(r.key("law"), "expected 'hertz' or 'linear', got " + quoted(name));
+    if (law == ContactLaw::kLinear)
+    {
+      for (const std::string& k : hertz_only)
+        if (r.has(k))
+          r.fail(r.key(k),
+                 "applies to law 'hertz' only (the linear law is set by stiffness and damping), got " + show(r.get(k)));
+      if (!r.has("stiffness"))
+        r.fail(r.key("stiffness"), "is required by law 'linear' (N/m)");
+      stiffness = r.positive("stiffness");
+      damping = r.nonNegative("damping", 0.0);
+      if (!std::isfinite(stiffness) || !std::isfinite(damping))
+        r.fail(r.key("stiffness"), "stiffness and damping must be finite, got " + show(r.get("stiffness")) + " and " +
+                                       show(r.get("damping")));
+    }
+    else
+    {
+      for (const char* k : { "stiffness", "damping" })
+        if (r.has(k))
+          r.fail(r.key(k), std::string("applies to law 'linear' only (the hertz law's stiffness comes from the "
+                                       "materials and its damping from the restitution), got ") +
+                               show(r.get(k)));
+    }
     restitution = r.nonNegative("restitution", restitution);
     if (restitution > 1.0)
       r.fail(r.key("restitution"), "must be in [0, 1], got " + show(r.get("restitution")));
@@ -925,13 +967,16 @@ private:
             {
               g.enabled = r.boolean("enabled", false);
               g.height = r.number("height", 0.0);
+              readContactLaw(r, g.law, g.linear_stiffness, g.linear_damping, g.restitution, g.friction,
+                             g.stick_velocity, g.slip_velocity, true, { "restitution", "material" });
+              if (g.law == ContactLaw::kLinear)
+                return;
               g.material = r.string("material");
               const auto it = materials_.find(g.material);
               if (it == materials_.end())
                 r.fail(r.key("material"), "unknown material " + quoted(g.material));
               g.youngs_modulus = it->second.youngs_modulus;
               g.poisson_ratio = it->second.poisson_ratio;
-              readContactLaw(r, g.restitution, g.friction, g.stick_velocity, g.slip_velocity, true);
             });
     if (!g.enabled)
       return;
@@ -966,7 +1011,9 @@ private:
                                        makeLayer(root_, "nodes." + n.name + ".material", "nodes." + n.name + ".radius",
                                                  n.material, 0.0, n.radius);
         }
-        c.stiffness = 4.0 / 3.0 * effectiveModulus(layer, ground_layer) * std::sqrt(c.radius);
+        c.stiffness = g.law == ContactLaw::kLinear ?
+                          g.linear_stiffness :
+                          4.0 / 3.0 * effectiveModulus(layer, ground_layer) * std::sqrt(c.radius);
         if (!std::isfinite(c.stiffness))
           root_.fail("ground.material", "the ground contact stiffness at node " + quoted(n.name) +
                                             " overflows: " + shortestNumber(c.stiffness));
@@ -986,7 +1033,8 @@ private:
   {
     ContactSettings& cs = model_.contact;
     cs.enabled = c.boolean("enabled", false);
-    readContactLaw(c, cs.restitution, cs.friction, cs.stick_velocity, cs.slip_velocity, false);
+    readContactLaw(c, cs.law, cs.linear_stiffness, cs.linear_damping, cs.restitution, cs.friction, cs.stick_velocity,
+                   cs.slip_velocity, false, { "restitution", "min_crossing_angle", "min_impact_speed" });
     const double min_angle_deg = c.positive("min_crossing_angle", cs.min_crossing_angle * 180.0 / M_PI);
     if (min_angle_deg >= 90.0)
       c.fail(c.key("min_crossing_angle"), "must be below 90 degrees, got " + show(c.get("min_crossing_angle")));

@@ -688,9 +688,6 @@ void MujocoPeer::Impl::setContactParameters(mjModel* m)
     return ce <= 0.0 ? 1.0 : -std::log(ce) / std::sqrt(M_PI * M_PI + std::log(ce) * std::log(ce));
   };
   double impratio = 1.0;
-  // one pair's solref for a Hertz stiffness k (N/m^1.5) at the force scale f; returns C_lin. Friction rows damp the
-  // slip with impratio * C_lin (elliptic cone, no friction solref in 2.2.2): our regularized Coulomb reaches
-  // mu F_N at v1, so that slope is matched at F* (the largest impratio any pair needs)
   // the compiler sorts the pairs (by body): pair k of the text is found by its geoms
   const auto compiled = [&](const std::string& geom1, int body)
   {
@@ -702,10 +699,22 @@ void MujocoPeer::Impl::setContactParameters(mjModel* m)
     throw std::logic_error("MuJoCo has no pair of " + geom1 + " and geom" + std::to_string(body));
   };
   text_solref.clear();
-  const auto set = [&](int j, double k, double f, double inv_mass, double restitution, double mu, double v_ramp)
+  // a pair's linear spring-dashpot (K_lin, C_lin): our linear law's own k and c (MuJoCo's contact is then ours,
+  // friction aside), or the secant of a Hertz stiffness k (N/m^1.5) at the force scale f with our restitution
+  const auto linearOf = [&](core::ContactLaw law, double k, double f, double inv_mass, double restitution,
+                            double linear_k, double linear_c)
   {
+    if (law == core::ContactLaw::kLinear)
+      return std::make_pair(linear_k, linear_c);
     const double k_lin = std::cbrt(k * k * f);  // K^(2/3) F*^(1/3)
-    const double c_lin = 2.0 * dampingRatio(restitution) * std::sqrt(k_lin / inv_mass);
+    return std::make_pair(k_lin, 2.0 * dampingRatio(restitution) * std::sqrt(k_lin / inv_mass));
+  };
+  // one pair's solref for (K_lin, C_lin). Friction rows damp the slip with impratio * C_lin (elliptic cone, no
+  // friction solref in 2.2.2): our regularized Coulomb reaches mu F_N at v1, so that slope is matched at the force
+  // scale f (the largest impratio any pair needs)
+  const auto set = [&](int j, std::pair<double, double> linear, double f, double inv_mass, double mu, double v_ramp)
+  {
+    const auto [k_lin, c_lin] = linear;
     m->pair_solref[2 * j] = -k_lin * inv_mass;
     m->pair_solref[2 * j + 1] = -c_lin * inv_mass;
     text_solref.emplace_back(-k_lin * inv_mass, -c_lin * inv_mass);
@@ -719,9 +728,11 @@ void MujocoPeer::Impl::setContactParameters(mjModel* m)
       const core::StrutPair& p = model.checked_pairs[i];
       const int j = compiled("geom" + std::to_string(p.body_a), p.body_b);
       const double inv_mass = m->body_invweight0[2 * body_id[p.body_a]] + m->body_invweight0[2 * body_id[p.body_b]];
-      const auto [k_lin, c_lin] =
-          set(j, p.stiffness90, options.contact_force, inv_mass, model.contact.restitution, model.contact.friction,
-              model.contact.slip_velocity - model.contact.stick_velocity);
+      const core::ContactSettings& c = model.contact;
+      const auto [k_lin, c_lin] = set(j,
+                                      linearOf(c.law, p.stiffness90, options.contact_force, inv_mass, c.restitution,
+                                               c.linear_stiffness, c.linear_damping),
+                                      options.contact_force, inv_mass, c.friction, c.slip_velocity - c.stick_velocity);
       pair_of_checked[i] = j;
       pair_stiffness[i] = k_lin;
       pair_damping[i] = c_lin;
@@ -735,8 +746,11 @@ void MujocoPeer::Impl::setContactParameters(mjModel* m)
   for (int body : groundBodies())
   {
     const core::GroundContact& g = groundContactOf(body);
-    set(compiled("ground", body), g.stiffness, ground_force, m->body_invweight0[2 * body_id[body]],
-        model.ground.restitution, model.ground.friction, model.ground.slip_velocity - model.ground.stick_velocity);
+    const core::GroundSettings& gs = model.ground;
+    const double inv_mass = m->body_invweight0[2 * body_id[body]];
+    set(compiled("ground", body),
+        linearOf(gs.law, g.stiffness, ground_force, inv_mass, gs.restitution, gs.linear_stiffness, gs.linear_damping),
+        ground_force, inv_mass, gs.friction, gs.slip_velocity - gs.stick_velocity);
   }
   m->opt.impratio = impratio;
 }

@@ -574,3 +574,81 @@ TEST(ContactTunnelling, OnlyAxisSegmentsThatCrossArePassages)
   // moving apart or staying on one side: no passage
   EXPECT_FALSE(passedThrough(m, 0, state(0.3, 0.01), state(0.3, 0.02)));
 }
+
+namespace
+{
+// the pair of twoStruts() on the linear law: k = 2e5 N/m, c = 40 N s/m
+Model twoStrutsLinear(double mu)
+{
+  Model m = twoStruts(mu, 1.0);
+  m.contact.law = ContactLaw::kLinear;
+  m.contact.linear_stiffness = 2e5;
+  m.contact.linear_damping = 40.0;
+  return m;
+}
+}  // namespace
+
+TEST(LinearLaw, NormalForceIsTheSpringDashpotAtEveryCrossingAngle)
+{
+  std::mt19937 rng(21);
+  const Model m = twoStrutsLinear(0.0);
+  for (int k = 0; k < 10; ++k)
+  {
+    const Eigen::VectorXd q = crossing(m, 1e-3 * (1 + k), rng, false);
+    const Eigen::VectorXd qd = randomVector(m.nq, 0.05, rng);
+    const ContactPairState st = evaluateContact(m, 0, q, qd, 0.0, ContactMode::kDynamic, nullptr);
+    ASSERT_TRUE(st.active);
+    // no crossing-angle factor, no restitution: k zeta + c zeta_dot
+    EXPECT_NEAR(st.normal_force, std::max(0.0, 2e5 * st.penetration + 40.0 * st.penetration_rate), 1e-9);
+    EXPECT_EQ(st.stiffness, 2e5);
+    // statics: the spring alone; the stored energy is k zeta^2 / 2
+    const ContactPairState s0 = evaluateContact(m, 0, q, qd, 0.0, ContactMode::kStatic, nullptr);
+    EXPECT_NEAR(s0.normal_force, 2e5 * s0.penetration, 1e-9);
+    EXPECT_NEAR(contactElasticEnergy(m, s0), 0.5 * 2e5 * s0.penetration * s0.penetration, 1e-12);
+  }
+}
+
+TEST(LinearLaw, TangentsAreExactStaticDampedAndWithFriction)
+{
+  std::mt19937 rng(22);
+  const Model m = twoStrutsLinear(0.3);
+  Model frictionless = m;
+  frictionless.contact.friction = 0.0;
+  for (int k = 0; k < 10; ++k)
+  {
+    const Eigen::VectorXd q = crossing(m, 2e-3, rng);
+    const std::string what = "linear " + std::to_string(k);
+    expectExactTangents(m, q, Eigen::VectorXd::Zero(m.nq), 0.0, ContactMode::kStatic, what + " static");
+    // slips below v0, between v0 and v1 and above v1, the damper within half the spring's force
+    for (double slip : { 0.005, 0.05, 0.4 })
+    {
+      Eigen::VectorXd qd;
+      ContactPairState st;
+      do
+      {
+        qd = velocitiesWithSlip(frictionless, q, slip, 1e9, rng);
+        st = evaluateContact(m, 0, q, qd, 0.0, ContactMode::kDynamic, nullptr);
+      } while (std::abs(40.0 * st.penetration_rate) > 0.5 * 2e5 * st.penetration);
+      ASSERT_GT(st.normal_force, 0.0);
+      expectExactTangents(m, q, qd, 0.0, ContactMode::kDynamic, what + " slip " + std::to_string(slip));
+      expectExactTangents(frictionless, q, qd, 0.0, ContactMode::kDynamic, what + " frictionless");
+    }
+  }
+}
+
+TEST(LinearLaw, SeparatingFasterThanTheSpringHoldsNeverPulls)
+{
+  // k zeta + c zeta_dot < 0 while the surfaces still overlap: no force and no tangent
+  std::mt19937 rng(23);
+  const Model m = twoStrutsLinear(0.3);
+  const Eigen::VectorXd q = crossing(m, 2e-3, rng, false);
+  Eigen::VectorXd qd = Eigen::VectorXd::Zero(m.nq);
+  qd.segment<3>(0) = 20.0 * contactGeometry(m, 0, q).normal;  // c zeta_dot = -800 N against k zeta = 400 N
+  ContactContribution c;
+  const ContactPairState st = evaluateContact(m, 0, q, qd, 0.0, ContactMode::kDynamic, &c);
+  EXPECT_TRUE(st.active);
+  EXPECT_EQ(st.normal_force, 0.0);
+  EXPECT_EQ(c.force.norm(), 0.0);
+  EXPECT_EQ(c.stiffness.norm(), 0.0);
+  EXPECT_EQ(c.damping.norm(), 0.0);
+}

@@ -173,6 +173,43 @@ TEST_P(LankaraniNikravesh, ReboundMatchesTheOneDegreeOfFreedomModelAndRestitutio
 
 INSTANTIATE_TEST_SUITE_P(Contact, LankaraniNikravesh, ::testing::Values(0.95, 0.9, 0.8));
 
+class LinearImpactTest : public ::testing::TestWithParam<double>
+{
+};
+
+TEST_P(LinearImpactTest, CrossedCylindersMatchTheClosedFormSpringDashpot)
+{
+  // the linear law (MuJoCo's contact) at damping ratio xi: penetration, peak force, how long the force acts and
+  // the rebound against the closed form of a mass on a spring-dashpot that never pulls
+  const double xi = GetParam();
+  Model m = crossedCylinders(1.0, 0.0);
+  const double mstar = 0.5 * m.bodies[0].mass, k = 1e6;
+  m.contact.law = ContactLaw::kLinear;
+  m.contact.linear_stiffness = k;
+  m.contact.linear_damping = 2.0 * xi * std::sqrt(k * mstar);
+  m.analysis.type = AnalysisType::kDynamic;  // (activeContacts reports the damped force)
+  // (2 us: the damper's force jumps to c v at the onset, a first-order error of about c dt / m in the speed)
+  const ImpactRecord r = simulateImpact(m, 2e-6, 0.012, Vec3(0.0, 0.0, -kSpeed));
+  ASSERT_TRUE(r.ok);
+  const LinearImpact exact = linearImpact(mstar, k, m.contact.linear_damping, kSpeed);
+  std::printf("[ measured ] xi %.2f: penetration %.6g m (closed form %.6g), force %.6g N (%.6g), rebound %.5f "
+              "(%.5f)\n",
+              xi, r.max_penetration, exact.max_penetration, r.max_force, exact.max_force, r.rebound_ratio,
+              exact.rebound);
+  EXPECT_NEAR(r.max_penetration, exact.max_penetration, 2e-3 * exact.max_penetration);
+  EXPECT_NEAR(r.max_force, exact.max_force, 2e-3 * exact.max_force);
+  EXPECT_NEAR(r.rebound_ratio, exact.rebound, 2e-3);
+  ASSERT_GT(r.t_start, 0.0);
+  if (xi == 0.0)  // elastic: the overlap ends when the force does, after half a period
+  {
+    EXPECT_NEAR(r.t_end - r.t_start, exact.force_time, 2e-3 * exact.force_time);
+    EXPECT_NEAR(r.energy_end, r.energy_start, 1e-4 * r.energy_start);
+  }
+  EXPECT_LT((r.momentum_end - r.momentum_start).norm(), 1e-9 * r.momentum_start.norm());
+}
+
+INSTANTIATE_TEST_SUITE_P(Contact, LinearImpactTest, ::testing::Values(0.0, 0.1, 0.4));
+
 TEST(ContactEnergy, FrictionlessElasticObliqueImpactKeepsEnergy)
 {
   // crossing at 60 degrees, off the centres and with sideways motion: the struts turn and slide

@@ -366,3 +366,133 @@ TEST(GroundScene, AFreePointMassWithoutARadiusIsWarnedAbout)
   EXPECT_EQ(about("P"), 1);
   EXPECT_EQ(about("Q"), 0);
 }
+
+namespace
+{
+// strutScene's strut on a ground with the linear law (k N/m, c N s/m at each end sphere)
+std::string linearGroundScene(double z, double k, double c, double friction)
+{
+  std::string text = strutScene(z, 0.5, friction);
+  const size_t at = text.find("material: concrete, restitution: ");
+  const size_t end = text.find(',', at + 20);
+  text.replace(at, end - at, "law: linear, stiffness: " + std::to_string(k) + ", damping: " + std::to_string(c));
+  return text;
+}
+}  // namespace
+
+TEST(GroundLinearLaw, TangentsAreExactForStrutEndsAndPointMasses)
+{
+  std::mt19937 rng(31);
+  const Model base = loadSceneFromString(linearGroundScene(0.5, 3e5, 200.0, 0.6), "strut");
+  ASSERT_EQ(base.ground.law, ContactLaw::kLinear);
+  ASSERT_EQ(base.ground_contacts.size(), 2u);
+  EXPECT_EQ(base.ground_contacts[0].stiffness, 3e5);
+  for (int trial = 0; trial < 4; ++trial)
+  {
+    Eigen::VectorXd q;
+    const int slot = tiltedIntoTheGround(base, 1e-3 * (1.0 + trial), rng, q);
+    ASSERT_GE(slot, 0);
+    const std::string what = "trial " + std::to_string(trial);
+    expectExactTangents(base, slot, q, Eigen::VectorXd::Zero(base.nq), 0.0, ContactMode::kStatic, what + " static");
+    for (double slip : { 0.005, 0.04, 0.3 })
+    {
+      // the damper within half the spring's force
+      Eigen::VectorXd qd;
+      ContactPairState st;
+      do
+      {
+        qd = velocitiesWithSlip(base, slot, q, slip, 1e9, rng);
+        st = evaluateContact(base, slot, q, qd, 0.0, ContactMode::kDynamic, nullptr);
+      } while (std::abs(200.0 * st.penetration_rate) > 0.5 * 3e5 * st.penetration);
+      EXPECT_NEAR(st.normal_force, 3e5 * st.penetration + 200.0 * st.penetration_rate, 1e-9 * st.normal_force);
+      expectExactTangents(base, slot, q, qd, 0.0, ContactMode::kDynamic, what + " slip " + std::to_string(slip));
+    }
+  }
+  const std::string ball = "name: ball\n"
+                           "nodes:\n"
+                           "  P: {position: [0.0, 0.0, 0.1], mass: 2.0, radius: 0.05}\n"
+                           "ground: {enabled: true, law: linear, stiffness: 1e4, damping: 20, friction: 0.5,\n"
+                           "         stick_velocity: 0.01, slip_velocity: 0.1}\n"
+                           "analysis: {type: dynamic, duration: 1.0}\n";
+  const Model m = loadSceneFromString(ball, "ball");
+  ASSERT_EQ(m.ground_contacts.size(), 1u);
+  Eigen::VectorXd q = m.q0;
+  q.z() = 0.05 - 2e-3;
+  expectExactTangents(m, 0, q, Eigen::VectorXd::Zero(3), 0.0, ContactMode::kStatic, "point mass static");
+  expectExactTangents(m, 0, q, Eigen::VectorXd((Eigen::VectorXd(3) << 0.3, -0.1, -0.2).finished()), 0.0,
+                      ContactMode::kDynamic, "point mass sliding");
+}
+
+TEST(GroundLinearLaw, AStrutDroppedFlatReboundsAsTheClosedFormSpringDashpot)
+{
+  // each end: half the strut's mass on k, c (damping ratio 0.2), no gravity, 1 m/s
+  const double v = 1.0, k = 2e6;
+  const Model probe = loadSceneFromString(linearGroundScene(0.0205, k, 0.0, 0.0), "strut");
+  const double mstar = 0.5 * probe.bodies[0].mass, c = 2.0 * 0.2 * std::sqrt(k * mstar);
+  const Model m = loadSceneFromString(linearGroundScene(0.0205, k, c, 0.0), "strut");
+  DynamicsSolver solver(m, fineOptions(2e-6));
+  State s = initialState(m);
+  s.qd.z() = -v;
+  ASSERT_TRUE(solver.initialize(s, noActuation()).ok());
+  double max_force = 0.0, max_depth = 0.0;
+  for (int k_step = 0; k_step < 6000; ++k_step)
+  {
+    ASSERT_TRUE(solver.step(s, 2e-6, noActuation()).ok()) << k_step;
+    for (const ContactPairState& st : activeContacts(m, s))
+      max_force = std::max(max_force, st.normal_force);
+    max_depth = std::max(max_depth, -minimumGroundGap(m, s.q));
+  }
+  ASSERT_GT(minimumGroundGap(m, s.q), 0.0) << "still in contact";
+  const LinearImpact exact = linearImpact(mstar, k, c, v);
+  std::printf("[ measured ] rebound %.5f (closed form %.5f), depth %.6g m (%.6g), force per end %.2f N (%.2f)\n",
+              s.qd.z() / v, exact.rebound, max_depth, exact.max_penetration, max_force, exact.max_force);
+  EXPECT_NEAR(s.qd.z() / v, exact.rebound, 2e-3);
+  EXPECT_NEAR(max_depth, exact.max_penetration, 2e-3 * exact.max_penetration);
+  EXPECT_NEAR(max_force, exact.max_force, 2e-3 * exact.max_force);
+  EXPECT_LT(s.qd.segment<4>(3).norm(), 1e-9);
+}
+
+TEST(GroundLinearLaw, TheLoaderRefusesKeysOfTheOtherLawAndAMissingStiffness)
+{
+  const auto refusal = [](const std::string& text)
+  {
+    try
+    {
+      loadSceneFromString(text, "bad");
+    }
+    catch (const SceneError& e)
+    {
+      return std::string(e.what());
+    }
+    return std::string("accepted");
+  };
+  const auto expectRefused = [&](const std::string& text, const std::string& key, const std::string& words)
+  {
+    const std::string e = refusal(text);
+    EXPECT_NE(e.find(key), std::string::npos) << e;
+    EXPECT_NE(e.find(words), std::string::npos) << e;
+  };
+  const std::string good = linearGroundScene(0.5, 1e5, 10.0, 0.2);
+  EXPECT_EQ(refusal(good), "accepted");
+  std::string t = good;
+  t.replace(t.find("law: linear"), 11, "law: kelvin");
+  expectRefused(t, "ground.law", "'kelvin'");
+  t = good;
+  t.replace(t.find("stiffness: "), 11, "stiff: ");
+  expectRefused(t, "ground.stiffness", "required by law 'linear'");
+  t = good;
+  t.replace(t.find("law: linear, "), 13, "");  // stiffness and damping under the hertz law (and no material)
+  expectRefused(t, "ground.stiffness", "applies to law 'linear' only");
+  t = good;
+  t.replace(t.find("law: linear"), 11, "law: linear, restitution: 0.5");
+  expectRefused(t, "ground.restitution", "applies to law 'hertz' only");
+  t = good;
+  t.replace(t.find("law: linear"), 11, "law: linear, material: concrete");
+  expectRefused(t, "ground.material", "applies to law 'hertz' only");
+  t = good;
+  t.replace(t.find("damping: "), 9, "damping: -");
+  expectRefused(t, "ground.damping", "must not be negative");
+  t = good;
+  t.replace(t.find("stiffness: 100000.000000"), 24, "stiffness: .nan");
+  expectRefused(t, "ground.stiffness", "nan");
+}

@@ -9,6 +9,8 @@
 ///   normal force  F_N = K zeta^(3/2) (1 + D zeta_dot),  D = 3 (1 - c_e^2) / (4 v_0)   (dynamics)
 ///                 F_N = K zeta^(3/2)                                                  (statics)
 ///                 with F_N >= 0 (no adhesion), v_0 the penetration rate at contact onset;
+///                 or, with the linear law (ContactLaw::kLinear), F_N = k zeta + c zeta_dot (c = 0 in statics),
+///                 k and c the scene's, no crossing-angle factor and no cores;
 ///   stiffness     K = (4/3) E* sqrt(Re), Re = sqrt(r1 r2) / |sin theta| (Johnson, Eq. 30-35 closed),
 ///                 theta the crossing angle, |sin theta| floored at sin(min_crossing_angle);
 ///   layered       struts with a core (radius rc, its own material): once zeta exceeds the sleeves'
@@ -77,7 +79,7 @@ struct ContactPairState
   double gap = 0.0;                   // surface gap h - r1 - r2 (m), negative when overlapping
   double penetration = 0.0;           // zeta (m)
   double penetration_rate = 0.0;      // zeta_dot (m/s)
-  double stiffness = 0.0;             // K (N/m^1.5) of the sleeves (the outer layers)
+  double stiffness = 0.0;             // K (N/m^1.5) of the sleeves (the outer layers); k (N/m) under the linear law
   double core_penetration = 0.0;      // zeta - t: overlap of the cores of layered struts (m), 0 until they meet
   double core_stiffness = 0.0;        // K_c (N/m^1.5) of the cores, while they overlap
   double normal_force = 0.0;          // F_N (N)
@@ -110,6 +112,10 @@ ContactPairState contactGeometry(const Model& model, int pair, const Eigen::Vect
 /// used in dynamics only). Fills `out` (when not null) with its force and exact tangents; returns its state.
 ContactPairState evaluateContact(const Model& model, int pair, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
                                  double impact_speed, ContactMode mode, ContactContribution* out);
+
+/// The elastic energy (J) stored in contact state `st` (from evaluateContact): Hertz's (2/5) K zeta^(5/2), plus the
+/// cores', or (1/2) k zeta^2 under the linear law; 0 when not active.
+double contactElasticEnergy(const Model& model, const ContactPairState& st);
 
 /// Appends the ground slots whose sphere is within `margin` (m) of the ground at q (none when the ground is off).
 void appendGroundCandidates(const Model& model, const Eigen::VectorXd& q, double margin, std::vector<int>& out);

@@ -136,8 +136,8 @@ public:
   /// Phi_q as a dense matrix (tests and small checks only).
   Eigen::MatrixXd constraintJacobianDense(const Eigen::VectorXd& q) const;
 
-  /// Kinetic and potential energy (J). The potential includes Hertz's (2/5) K zeta^(5/2) of every
-  /// contact when contact is enabled (exact while the crossing angle, hence K, stays put).
+  /// Kinetic and potential energy (J). The potential includes every contact's elastic energy when contact is
+  /// enabled (contactElasticEnergy: Hertz's is exact while the crossing angle, hence K, stays put).
   double kineticEnergy(const Eigen::VectorXd& q, const Eigen::VectorXd& qd) const;
   double potentialEnergy(const Eigen::VectorXd& q, const ActuationValues& u = {}) const;
 

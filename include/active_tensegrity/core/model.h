@@ -155,10 +155,23 @@ struct StrutPair
   double core_gap = 0.0;          // the penetration at which the cores meet, (r_a - rc_a) + (r_b - rc_b), m
 };
 
+/// The normal force law of a contact (docs/physics.md, "Contact laws"): Hertz's with Lankarani-Nikravesh damping,
+/// F_N = K zeta^(3/2) (1 + D zeta_dot) with K from the materials and D from the restitution, or a linear
+/// spring-dashpot, F_N = k zeta + c zeta_dot with k and c given (MuJoCo's soft contact with a direct solref); both
+/// never pull (F_N >= 0).
+enum class ContactLaw
+{
+  kHertz,
+  kLinear
+};
+
 /// Contact law parameters (docs/physics.md, "Strut contact"; scene keys under `contact`, docs/scenes.md).
 struct ContactSettings
 {
   bool enabled = false;
+  ContactLaw law = ContactLaw::kHertz;
+  double linear_stiffness = 0.0;          // k of the linear law, N/m (the same for every pair)
+  double linear_damping = 0.0;            // c of the linear law, N s/m
   double restitution = 1.0;               // c_e in [0, 1]; 1 = elastic (no hysteresis damping)
   double friction = 0.0;                  // mu; 0 skips all friction work
   double stick_velocity = 1e-3;           // v0 of the modified Coulomb law, m/s
@@ -174,9 +187,12 @@ struct ContactSettings
 struct GroundSettings
 {
   bool enabled = false;
-  double height = 0.0;          // m, the plane z = height
-  std::string material;         // its elastic constants (from `materials`)
-  double youngs_modulus = 0.0;  // Pa
+  ContactLaw law = ContactLaw::kHertz;
+  double linear_stiffness = 0.0;  // k of the linear law, N/m (the same for every sphere)
+  double linear_damping = 0.0;    // c of the linear law, N s/m
+  double height = 0.0;            // m, the plane z = height
+  std::string material;           // its elastic constants (from `materials`)
+  double youngs_modulus = 0.0;    // Pa
   double poisson_ratio = 0.0;
   double restitution = 1.0;  // c_e in [0, 1]
   double friction = 0.0;     // mu; 0 skips all friction work
@@ -195,7 +211,7 @@ struct GroundContact
   int body = -1;
   Vec3 local = Vec3::Zero();  // the sphere's centre in the body frame, m
   double radius = 0.0;        // m
-  double stiffness = 0.0;     // K, N/m^1.5
+  double stiffness = 0.0;     // K, N/m^1.5 (under the linear law its k, N/m)
   std::string node;           // the node at the sphere's centre
 };
 
