@@ -1038,18 +1038,33 @@ double MujocoPeer::actuationForce(int actuator) const
   return force;
 }
 
-double MujocoPeer::maxContactForce() const
+namespace
+{
+// the normal forces of the current contacts (N), combined by `fold`
+template <typename Fold>
+double foldContactForces(const mjModel* m, mjData* d, Fold fold)
 {
   double f = 0.0;
-  for (int i = 0; i < d_->ncon; ++i)
+  for (int i = 0; i < d->ncon; ++i)
   {
-    if (d_->contact[i].efc_address < 0)
+    if (d->contact[i].efc_address < 0)
       continue;
     mjtNum r[6];
-    mj_contactForce(m_, d_, i, r);
-    f = std::max(f, r[0]);
+    mj_contactForce(m, d, i, r);
+    f = fold(f, r[0]);
   }
   return f;
+}
+}  // namespace
+
+double MujocoPeer::maxContactForce() const
+{
+  return foldContactForces(m_, d_, [](double a, double b) { return std::max(a, b); });
+}
+
+double MujocoPeer::contactForceSum() const
+{
+  return foldContactForces(m_, d_, [](double a, double b) { return a + b; });
 }
 
 double MujocoPeer::totalMass() const
@@ -1155,6 +1170,7 @@ MujocoTrace runMujoco(const core::Model& model, const MujocoOptions& options)
       tr.peak = f;
       tr.peak_t = before;
     }
+    tr.impulse += peer.contactForceSum() * (peer.time() - before);
     if (k * dt >= next_output - 1e-9 * dt || k == n_steps)
     {
       output();

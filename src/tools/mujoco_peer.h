@@ -133,6 +133,8 @@ public:
   double actuationForce(int actuator) const;
   /// Largest normal force among the current contacts (N), 0 without contact.
   double maxContactForce() const;
+  /// Sum of the normal forces of the current contacts (N).
+  double contactForceSum() const;
   /// Sum of the masses of MuJoCo's moving bodies (kg), carriers included.
   double totalMass() const;
   /// Mass of the carriers alone (kg).
@@ -166,7 +168,8 @@ struct MujocoTrace
   std::vector<std::vector<double>> heights;        // per output: the layer heights (or the height)
   std::vector<std::vector<core::Vec3>> positions;  // per output: every body's centre, our body order
   double peak = 0.0, peak_t = 0.0;                 // largest contact normal force over every step, and when
-  double wall_time = 0.0;                          // s, mj_step calls and the drives only
+  double impulse = 0.0;    // N s: each step's summed normal contact forces times the step (what Euler applies)
+  double wall_time = 0.0;  // s, mj_step calls and the drives only
   long steps = 0;
   long solver_iterations = 0;  // MuJoCo's constraint solver iterations, summed over steps
   std::string status = "converged";

@@ -176,13 +176,14 @@ void mujocoRows(const at::Model& base, const Trace& ref, const std::vector<std::
       mo.timestep = dt;
       mo.contact_force = force > 0.0 ? force : (ref.peak > 0.0 ? ref.peak : 1000.0);
       const tools::MujocoTrace mj = tools::runMujoco(base, mo);
-      // as our trace (body centres into q; the peer measures no contact impulse: written as nan)
+      // as our trace (body centres into q)
       Trace tr;
       tr.t = mj.t;
       tr.force = mj.force;
       tr.heights = mj.heights;
       tr.peak = mj.peak;
       tr.peak_t = mj.peak_t;
+      tr.impulse = mj.impulse;
       for (const std::vector<at::Vec3>& centres : mj.positions)
       {
         Eigen::VectorXd q = Eigen::VectorXd::Zero(base.nq);
@@ -195,11 +196,12 @@ void mujocoRows(const at::Model& base, const Trace& ref, const std::vector<std::
       writePath(paths, base, name, dt, tr);
       out << name << "," << dt << ",0," << mj.status << "," << mj.steps << "," << mj.solver_iterations << ","
           << mj.wall_time << "," << e.position << "," << e.height << "," << e.force << "," << e.peak << ","
-          << e.peak_time << ",nan," << mj.peak << "," << ref.peak << "\n";
+          << e.peak_time << "," << e.impulse << "," << mj.peak << "," << ref.peak << "\n";
       out.flush();
       std::fprintf(stderr,
-                   "  %-30s dt  %-8g %-10s wall %7.2f s  position err %.3e m  force err %.3e  peak err %.3e%s\n",
-                   name.c_str(), dt, mj.status.c_str(), mj.wall_time, e.position, e.force, e.peak,
+                   "  %-30s dt  %-8g %-10s wall %7.2f s  position err %.3e m  force err %.3e  peak err %.3e  "
+                   "impulse err %.3e%s\n",
+                   name.c_str(), dt, mj.status.c_str(), mj.wall_time, e.position, e.force, e.peak, e.impulse,
                    mj.ok() ? "" : ("  (" + mj.message + ")").c_str());
     }
 }
