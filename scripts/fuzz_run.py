@@ -45,6 +45,7 @@ KEYS_EXTRA = [
     "solver.newton_tolerance", "solver.max_jacobian_age", "solver.error_tolerance", "solver.integrator",
     "solver.newmark.gamma", "solver.newmark.beta", "solver.rho_infinity", "analysis.output_interval",
     "analysis.type", "analysis.max_actuation", "contact.enabled", "contact.friction", "contact.restitution",
+    "contact.law", "contact.stiffness", "contact.damping", "ground.law", "ground.stiffness", "ground.damping",
     "contact.pairs", "contact.min_crossing_angle", "gravity.enabled", "gravity.vector", "damping.enabled",
     "actuation.speed", "actuation.blend_time", "actuation.start_time", "outputs.height_nodes", "struts.radius",
     "struts.core.radius", "struts.material", "analysis.duration.", ".analysis", "a..b", "analysis", "nodes",
