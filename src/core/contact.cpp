@@ -252,12 +252,18 @@ ContactPairState evaluateGroundContact(const Model& model, int slot, const Eigen
   const Body& body = model.bodies[g.body];
   const bool strut = body.kind == BodyKind::kStrut;
   const bool dynamic = mode == ContactMode::kDynamic;
-  const PointKinematics k = pointKinematics(model, PointRef{ g.body, g.local }, q, qd, true);
+  const bool tangents = out && out->tangents;
+  // the point's Jacobians only for the tangents; a force or a state needs its position and velocity alone
+  PointKinematics k;
+  if (tangents)
+    pointKinematics(model, PointRef{ g.body, g.local }, q, qd, true, k);
+  else
+    pointMotion(model, PointRef{ g.body, g.local }, q, qd, k.p, k.v);
   ContactPairState st = groundGeometry(model, slot, k.p);
   if (out)
   {
     out->force.setZero();
-    if (out->tangents)
+    if (tangents)
     {
       out->stiffness.setZero();
       out->damping.setZero();
@@ -301,8 +307,9 @@ ContactPairState evaluateGroundContact(const Model& model, int slot, const Eigen
       theta_rate = thetaOf(qd, body);
       conj = kConjugate.cwiseProduct(theta);
       ua = g.local - g.radius * rotate(conj, Vec3::UnitZ());
-      bua = pointJacobianTheta(theta, ua);
-      vtol = qd.segment<3>(body.offset) + bua * theta_rate;
+      if (tangents)
+        bua = pointJacobianTheta(theta, ua);
+      vtol = qd.segment<3>(body.offset) + pointJacobianThetaTimes(theta, ua, theta_rate);
     }
     const FrictionValue fv = frictionForce(st, Vec3(vtol.x(), vtol.y(), 0.0), ground.friction, fn,
                                            ground.stick_velocity, ground.slip_velocity);
@@ -318,13 +325,13 @@ ContactPairState evaluateGroundContact(const Model& model, int slot, const Eigen
   Vec7 gvec = Vec7::Zero();
   gvec.head<3>() = Vec3::UnitZ();
   if (strut)
-    gvec.tail<4>() = k.jac.rightCols<4>().transpose() * Vec3::UnitZ();
+    gvec.tail<4>() = pointJacobianThetaTransposeTimes(thetaOf(q, body), g.local, Vec3::UnitZ());
   Vec7 force = fn * gvec;
   if (ft > 0.0)
   {
     force.head<3>() += f;
     if (strut)
-      force.tail<4>() += bua.transpose() * f;
+      force.tail<4>() += pointJacobianThetaTransposeTimes(theta, ua, f);
   }
   // (fixed sizes: a run-time sized block of a 7-vector lets GCC see 8-wide loads past its end)
   if (strut)

@@ -496,3 +496,29 @@ TEST(GroundLinearLaw, TheLoaderRefusesKeysOfTheOtherLawAndAMissingStiffness)
   t.replace(t.find("stiffness: 100000.000000"), 24, "stiffness: .nan");
   expectRefused(t, "ground.stiffness", "nan");
 }
+
+TEST(GroundContact, ForceWithoutTangentsIsTheSameForce)
+{
+  // the residual-only evaluation (no point Jacobians) gives the force of the full one, for strut ends with and
+  // without friction and for both laws
+  std::mt19937 rng(41);
+  for (const std::string& text : { strutScene(0.5, 0.7, 0.6), linearGroundScene(0.5, 3e5, 200.0, 0.6) })
+  {
+    const Model m = loadSceneFromString(text, "strut");
+    for (int trial = 0; trial < 6; ++trial)
+    {
+      Eigen::VectorXd q;
+      const int slot = tiltedIntoTheGround(m, 1e-3 * (1.0 + trial), rng, q);
+      ASSERT_GE(slot, 0);
+      const Eigen::VectorXd qd = randomVector(m.nq, 0.3, rng);
+      ContactContribution full, alone;
+      alone.tangents = false;
+      const ContactPairState a = evaluateContact(m, slot, q, qd, 0.8, ContactMode::kDynamic, &full);
+      const ContactPairState b = evaluateContact(m, slot, q, qd, 0.8, ContactMode::kDynamic, &alone);
+      ASSERT_GT(a.normal_force, 0.0);
+      EXPECT_NEAR(a.normal_force, b.normal_force, 1e-12 * a.normal_force);
+      EXPECT_NEAR(a.friction_force, b.friction_force, 1e-12 * a.normal_force);
+      EXPECT_LT((full.force - alone.force).norm(), 1e-12 * full.force.norm()) << trial;
+    }
+  }
+}
