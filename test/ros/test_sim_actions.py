@@ -126,10 +126,10 @@ class TestSimActions(unittest.TestCase):
             for d, a, e in zip(m.desired, m.actual, m.error):
                 self.assertAlmostEqual(e, d - a, places=12)
                 self.assertLessEqual(abs(e), 1e-6)  # nothing else drives them: the simulation follows exactly
-        # within the goal tolerance at the result, and there once the published values catch up
-        for v, e in zip(self.values(PULLS), end):
-            self.assertAlmostEqual(v, e, delta=1e-3)
-        self.assertTrue(wait_for(lambda: all(abs(v - e) < 1e-9 for v, e in zip(self.values(PULLS), end)), 60))
+        # at the end once the published values catch up (the result can arrive before the joint states of its
+        # last step: reading them at once raced, 0.0473 of 0.05 m seen under load)
+        self.assertTrue(wait_for(lambda: all(abs(v - e) < 1e-9 for v, e in zip(self.values(PULLS), end)), 60),
+                        "joint states %s, expected %s" % (self.values(PULLS), end))
 
     def test_4_an_invalid_goal_is_refused_and_the_simulation_runs_on(self):
         self.follower.send_goal(FollowTrajectoryGoal(trajectory=trajectory(["pull1", "nope"], [(1.0, [0.1, 0.1])])))
