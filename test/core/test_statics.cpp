@@ -532,3 +532,41 @@ TEST(Statics, NewtonFarFromConvergenceHandsOverEarly)
   for (const auto& [solved, state] : { std::make_pair(&solver, &s), std::make_pair(&fine_solver, &fine) })
     EXPECT_LT(solved->forceResidual(*state), 10.0 * model.solver.newton_tolerance * k_max);
 }
+
+TEST(QuadruplexContact, OnTheLinearLawTheActuationWorkIsTheStoredEnergy)
+{
+  // the static path into contact on the linear law (k = 1 MN/m): every contact's force is k zeta, and the
+  // actuator's work along the path (trapezoid over 1 mm steps) is the rise of the potential energy, cables'
+  // and contacts' k zeta^2 / 2 (a contact energy inconsistent with its force would break the balance)
+  const Model model = quadruplex({ { "contact.enabled", "true" },
+                                   { "contact.law", "linear" },
+                                   { "contact.stiffness", "1e6" },
+                                   { "analysis.max_actuation", "0.4" },
+                                   { "analysis.steps", "400" } });
+  const System sys(model);
+  std::vector<double> v, force, energy;
+  double contact_energy = 0.0;
+  const RunResult r = runAnalysis(model,
+                                  [&](const State& s)
+                                  {
+                                    v.push_back(s.u[0].value);
+                                    force.push_back(actuationForce(model, s, 0));
+                                    energy.push_back(sys.potentialEnergy(s.q, s.u));
+                                    double e = 0.0;
+                                    for (const ContactPairState& c : activeContacts(model, s))
+                                    {
+                                      EXPECT_NEAR(c.normal_force, 1e6 * c.penetration, 1e-9 * c.normal_force);
+                                      e += contactElasticEnergy(model, c);
+                                    }
+                                    contact_energy = e;
+                                  });
+  ASSERT_TRUE(r.summary.ok()) << r.summary.message;
+  ASSERT_GT(contact_energy, 1.0);  // the struts press each other at the end
+  double work = 0.0;
+  for (size_t i = 1; i < v.size(); ++i)
+    work += 0.5 * (force[i] + force[i - 1]) * (v[i] - v[i - 1]);
+  const double rise = energy.back() - energy.front();
+  std::printf("[ measured ] actuation work %.6f J, potential energy rise %.6f J (contact %.6f J)\n", work, rise,
+              contact_energy);
+  EXPECT_NEAR(work, rise, 5e-4 * std::abs(rise));
+}
