@@ -126,7 +126,11 @@ private:
   std::vector<bool> factor_contacts_;  // pairs touching when it was built
   double theta_ = 0.0;                 // largest contraction rate seen with it
   bool theta_known_ = false;           // whether theta_ was measured (two increments above round-off)
-  double mass_scale_ = 0.0;            // largest body mass (kg): the multipliers' round-off scale
+  // after a kept matrix diverged (theta > 0.5): steps still to start with a new matrix, and how many the next
+  // divergence orders (doubling while kept matrices keep failing, back to the least once one serves a step)
+  int fresh_starts_ = 0;
+  int fresh_streak_ = 0;
+  double mass_scale_ = 0.0;  // largest body mass (kg): the multipliers' round-off scale
   // the first guess of a step: accelerations and multipliers extrapolated by the polynomial through the
   // ends of the last accepted steps; history_[0] is where the last step started, history_[1] where the one
   // before started; history_count_ of them belong to the chain ending at last_end_ (0: no extrapolation)
