@@ -280,7 +280,12 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law, boo
   // 4, 8 ... 64 steps while kept matrices go on failing; back to 2 once one serves a whole step): where a kept
   // matrix fails it fails step after step (a robot resting on the ground), and each try wastes two residuals.
   bool rebuild = !reuse || !factor_valid_ || std::abs(h - factor_h_) > kReuseStepChange * h ||
-                 factor_age_ >= options_.max_jacobian_age || !sameTouching(factor_contacts_, s) || fresh_starts_ > 0;
+                 factor_age_ >= options_.max_jacobian_age || !sameTouching(factor_contacts_, s);
+  if (!rebuild && fresh_starts_ > 0)
+  {
+    rebuild = true;
+    ++timings_.fresh_starts;
+  }
   bool diverged = false;
   double previous = -1.0;  // last scaled increment with this factorization
   bool built_this_step = false;

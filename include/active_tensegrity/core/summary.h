@@ -54,6 +54,7 @@ struct StepTimings
   long static_pivot_factorizations = 0;  // of them, the approximate static-pivot LU (SparseLinearSolver)
   long full_newton_retries = 0;   // dynamics: steps retried in full Newton after modified Newton ran out of iterations
   long contact_reach_misses = 0;  // dynamics: converged iterates that moved beyond the contact slots' reach
+  long fresh_starts = 0;  // dynamics: steps begun with a new matrix because kept ones had diverged (modified Newton)
 
   StepTimings& operator+=(const StepTimings& o)
   {
@@ -69,6 +70,7 @@ struct StepTimings
     static_pivot_factorizations += o.static_pivot_factorizations;
     full_newton_retries += o.full_newton_retries;
     contact_reach_misses += o.contact_reach_misses;
+    fresh_starts += o.fresh_starts;
     return *this;
   }
 };

@@ -69,8 +69,8 @@ int steps(const std::string& scene, const std::vector<at::Override>& overrides, 
   std::printf("factorizations per step: %.3f, symbolic analyses: %ld\n",
               static_cast<double>(last.timings.factorizations) / std::max(1, last.solver_steps), last.timings.analyses);
   if (dynamic)
-    std::printf("full-Newton retries: %ld, iterates beyond the contact reach: %ld\n", last.timings.full_newton_retries,
-                last.timings.contact_reach_misses);
+    std::printf("full-Newton retries: %ld, iterates beyond the contact reach: %ld, fresh starts: %ld\n",
+                last.timings.full_newton_retries, last.timings.contact_reach_misses, last.timings.fresh_starts);
   std::printf("where the time goes (last run, us per step, share of its wall time):\n");
   const int n = std::max(1, last.solver_steps);
   for (const auto& [part, seconds] : at::timeBreakdown(last))
