@@ -121,6 +121,23 @@ ActuationLaw noActuation()
 }
 }  // namespace
 
+namespace
+{
+// the loader's message for a scene text, or "accepted"
+std::string refusalOf(const std::string& text)
+{
+  try
+  {
+    loadSceneFromString(text, "bad");
+  }
+  catch (const SceneError& e)
+  {
+    return std::string(e.what());
+  }
+  return std::string("accepted");
+}
+}  // namespace
+
 TEST(GroundContact, SpheresOfStrutEndsAndTheirStiffness)
 {
   const Model m = loadSceneFromString(strutScene(0.5, 0.8, 0.0), "strut");
@@ -305,35 +322,23 @@ TEST(GroundSupport, TheSixBarRobotAtRestCarriesItsWeightOnThreeEnds)
 
 TEST(GroundScene, RefusesAStartInTheGroundAnUnknownMaterialAndARadiusWithoutAMass)
 {
-  const auto refusal = [](const std::string& text)
-  {
-    try
-    {
-      loadSceneFromString(text, "bad");
-    }
-    catch (const SceneError& e)
-    {
-      return std::string(e.what());
-    }
-    return std::string("accepted");
-  };
   // nodes on the ground plane itself: the spheres start a radius deep
-  const std::string deep = refusal(strutScene(0.0, 0.5, 0.0));
+  const std::string deep = refusalOf(strutScene(0.0, 0.5, 0.0));
   EXPECT_NE(deep.find("nodes.A"), std::string::npos) << deep;
   EXPECT_NE(deep.find("deep in the ground"), std::string::npos) << deep;
   EXPECT_NE(deep.find("z >= 0.02"), std::string::npos) << deep;
   std::string text = strutScene(0.5, 0.5, 0.0);
   text.replace(text.find("material: concrete"), 18, "material: granite");
-  const std::string unknown = refusal(text);
+  const std::string unknown = refusalOf(text);
   EXPECT_NE(unknown.find("ground.material"), std::string::npos) << unknown;
   EXPECT_NE(unknown.find("granite"), std::string::npos) << unknown;
   text = strutScene(0.5, 0.5, 0.0);
   text.replace(text.find("restitution: 0.5"), 16, "restitution: 1.5");
-  const std::string restitution = refusal(text);
+  const std::string restitution = refusalOf(text);
   EXPECT_NE(restitution.find("ground.restitution"), std::string::npos) << restitution;
   text = strutScene(0.5, 0.5, 0.0);
   text.replace(text.find("  B: {position"), 0, "  C: {position: [0, 0, 1], fixed: true, radius: 0.1}\n");
-  const std::string radius = refusal(text);
+  const std::string radius = refusalOf(text);
   EXPECT_NE(radius.find("nodes.C.radius"), std::string::npos) << radius;
   // the ground off (the default): no spheres
   text = strutScene(0.5, 0.5, 0.0);
@@ -454,26 +459,14 @@ TEST(GroundLinearLaw, AStrutDroppedFlatReboundsAsTheClosedFormSpringDashpot)
 
 TEST(GroundLinearLaw, TheLoaderRefusesKeysOfTheOtherLawAndAMissingStiffness)
 {
-  const auto refusal = [](const std::string& text)
-  {
-    try
-    {
-      loadSceneFromString(text, "bad");
-    }
-    catch (const SceneError& e)
-    {
-      return std::string(e.what());
-    }
-    return std::string("accepted");
-  };
   const auto expectRefused = [&](const std::string& text, const std::string& key, const std::string& words)
   {
-    const std::string e = refusal(text);
+    const std::string e = refusalOf(text);
     EXPECT_NE(e.find(key), std::string::npos) << e;
     EXPECT_NE(e.find(words), std::string::npos) << e;
   };
   const std::string good = linearGroundScene(0.5, 1e5, 10.0, 0.2);
-  EXPECT_EQ(refusal(good), "accepted");
+  EXPECT_EQ(refusalOf(good), "accepted");
   std::string t = good;
   t.replace(t.find("law: linear"), 11, "law: kelvin");
   expectRefused(t, "ground.law", "'kelvin'");
