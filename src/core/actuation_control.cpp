@@ -321,8 +321,12 @@ std::string ActuationController::setTargets(double t, const std::vector<std::str
   for (size_t k = 0; k < n; ++k)
   {
     const int i = idx[k];
-    if (!std::isfinite(targets[k]) || targets[k] < min_value_[i] - kBoundSlack ||
-        targets[k] > max_value_[i] + kBoundSlack)
+    if (!std::isfinite(targets[k]))
+    {
+      msg << "target of " << quoted(names[k]) << " is " << targets[k] << ": not a finite number";
+      return msg.str();
+    }
+    if (targets[k] < min_value_[i] - kBoundSlack || targets[k] > max_value_[i] + kBoundSlack)
     {
       msg << "target of " << quoted(names[k]) << " is " << targets[k] << " m, outside its range [" << min_value_[i]
           << ", " << max_value_[i] << "] m";

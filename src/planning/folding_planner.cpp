@@ -262,7 +262,12 @@ std::string checkRequest(const core::Model& model, const PlanRequest& r, std::ve
     for (size_t k = 0; k < n; ++k)
     {
       const core::Actuator& a = model.actuators[idx[k]];
-      if (!std::isfinite(r.target_values[k]) || r.target_values[k] < a.min_value || r.target_values[k] > a.max_value)
+      if (!std::isfinite(r.target_values[k]))
+      {
+        msg << "target value of '" << a.name << "' is " << r.target_values[k] << ": not a finite number";
+        return msg.str();
+      }
+      if (r.target_values[k] < a.min_value || r.target_values[k] > a.max_value)
       {
         msg << "target value of '" << a.name << "' is " << r.target_values[k] << ", outside its range [" << a.min_value
             << ", " << a.max_value << "]";

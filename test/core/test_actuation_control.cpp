@@ -175,7 +175,7 @@ TEST(ActuationController, BadCommandsAreRejectedWholeWithTheirReason)
     { {}, {}, {}, {}, "no actuator names" },
     { { "pull1", "pull1" }, { 0.5, 0.6 }, {}, {}, "named twice" },
     { { "pull1", "pull2" }, { 0.5 }, {}, {}, "1 targets for 2" },
-    { { "pull2", "pull1" }, { 0.5, nan }, {}, {}, "target of 'pull1' is nan" },
+    { { "pull2", "pull1" }, { 0.5, nan }, {}, {}, "target of 'pull1' is nan: not a finite number" },
     { { "pull2", "pull1" }, { 0.5, 1.2 }, {}, {}, "outside its range [0, 1]" },
     { { "pull2", "pull1" }, { 0.5, -0.1 }, {}, {}, "outside its range" },
     { { "pull2", "pull1" }, { 0.5, 0.5 }, { 0.1, -1.0 }, {}, "max_speeds of 'pull1' is -1" },

@@ -168,7 +168,7 @@ TEST(FoldingPlanner, BadRequestsAreRefusedBeforePlanning)
     { [](ap::PlanRequest& r) {
        r.target_values = { std::nan(""), 0.5 };
      },
-      "target value of 'tiltA' is nan" },
+      "target value of 'tiltA' is nan: not a finite number" },
     { [](ap::PlanRequest& r) { r.target_values = {}; }, "finite target_height" },
     { [](ap::PlanRequest& r) { r.limits.min_clearance = -0.1; }, "min_clearance must be" },
     { [](ap::PlanRequest& r) { r.limits.max_contact_force = std::nan(""); }, "max_contact_force must be" },

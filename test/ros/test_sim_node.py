@@ -284,7 +284,7 @@ class TestSimNode(unittest.TestCase):
 
         bad = [
             (self.actuation, ActuationCommand(names=["nope"], targets=[0.01]), "unknown actuator 'nope'"),
-            (self.actuation, ActuationCommand(names=["lift"], targets=[nan]), "target of 'lift' is nan"),
+            (self.actuation, ActuationCommand(names=["lift"], targets=[nan]), "target of 'lift' is nan: not a finite number"),
             (self.actuation, ActuationCommand(names=["lift"], targets=[inf]), "target of 'lift' is inf"),
             (self.actuation, ActuationCommand(names=["lift"], targets=[0.2]), "outside its range [0, 0.05]"),
             (self.actuation, ActuationCommand(names=["lift"], targets=[-0.01]), "outside its range"),
