@@ -533,11 +533,11 @@ TEST(FoldingPlanner, CancelAnswersWithTheBestPathSoFar)
   req.target_height = 0.95;
   req.limits.min_clearance = 0.005;
   int approximate = 0;
-  for (const char* planner : { "RRTConnect", "RRT", "PRM", "KPIECE1" })
+  const auto cancelled = [&](const char* planner, long cancel_at)
   {
     req.planner = planner;
     Watcher w;
-    w.cancel_at = 400;
+    w.cancel_at = cancel_at;
     const ap::PlanResult p = ap::planFolding(model, start, req, w.control());
     std::printf("[ measured ] %s cancelled at %ld solves, %.3f s: %s, %ld solves, %.3f s, %zu waypoints, final height "
                 "%.4f m (%s)\n",
@@ -545,7 +545,7 @@ TEST(FoldingPlanner, CancelAnswersWithTheBestPathSoFar)
                 p.planning_time, p.waypoints.size(), p.final_height, p.message.c_str());
     EXPECT_TRUE(p.cancelled) << planner;
     EXPECT_FALSE(p.stopped_by_time_limit) << planner;
-    ASSERT_GE(w.solves_at_stop, 400) << planner;
+    ASSERT_GE(w.solves_at_stop, cancel_at) << planner;
     EXPECT_LE(p.equilibrium_solves - w.solves_at_stop, answerCost(model, req, p) + 4) << planner;
     if (p.status == ap::PlanStatus::kApproximateSolution)
     {
@@ -559,8 +559,16 @@ TEST(FoldingPlanner, CancelAnswersWithTheBestPathSoFar)
     else
       EXPECT_TRUE(p.status == ap::PlanStatus::kExactSolution || p.status == ap::PlanStatus::kTimeout)
           << planner << ": " << ap::toString(p.status);
-  }
-  // RRT has a best path to give (KPIECE1 too, but its own random choices depend on the tests run before)
+  };
+  for (const char* planner : { "RRTConnect", "RRT", "PRM", "KPIECE1" })
+    cancelled(planner, 400);
+  // RRT and KPIECE1 have a best path to give, but which one depends on OMPL's process-wide random numbers (the
+  // tests run before) and on when the cancel is seen: a path whose following fails is no answer (seen for RRT in
+  // a whole-suite run), so they search longer before the test gives up on seeing one
+  for (long later : { 800L, 1600L })
+    for (const char* planner : { "RRT", "KPIECE1" })
+      if (approximate == 0)
+        cancelled(planner, later);
   EXPECT_GE(approximate, 1);
 }
 
