@@ -273,15 +273,13 @@ ContactPairState evaluateGroundContact(const Model& model, int slot, const Eigen
   if (!st.active)
     return st;
   const double zeta = st.penetration;
+  // (g.stiffness is the sphere's K, or the ground's k under the linear law)
+  st.stiffness = g.stiffness;
   NormalLaw law;
   if (ground.law == ContactLaw::kLinear)
-  {
-    st.stiffness = ground.linear_stiffness;
-    law = linearLaw(ground.linear_stiffness, dynamic ? ground.linear_damping : 0.0, zeta, st.penetration_rate);
-  }
+    law = linearLaw(g.stiffness, dynamic ? ground.linear_damping : 0.0, zeta, st.penetration_rate);
   else
   {
-    st.stiffness = g.stiffness;
     law = hertzLaw(g.stiffness * zeta * std::sqrt(zeta), 1.5 * g.stiffness * std::sqrt(zeta),
                    dynamic ? lankaraniNikravesh(ground.restitution, impact_speed, min_impact_speed) : 0.0,
                    st.penetration_rate);

@@ -119,10 +119,7 @@ SimNode::SimNode(ros::NodeHandle& nh, ros::NodeHandle& pnh, SimParams params, co
   , builder_(model_, params_.frame_id, params_.markers)
 {
   state_ = core::initialState(model_);
-  controller_.reset(state_.u);
-  const core::Summary init = solver_.initialize(state_, [this](double t) { return controller_.values(t); });
-  if (params_.adaptive)
-    stepper_ = std::make_unique<core::AdaptiveStepper>(solver_, model_.solver);
+  const core::Summary init = restart(state_);
   if (!init.ok() || !finite(state_))
     throw std::runtime_error("the initial state of scene '" + params_.scene + "' is not consistent: " + init.message);
   paused_by_user_ = params_.start_paused;
@@ -206,14 +203,22 @@ void SimNode::onTrajectory(const trajectory_msgs::JointTrajectory::ConstPtr& msg
   publishStatus();
 }
 
+core::Summary SimNode::restart(core::State& s)
+{
+  controller_.reset(s.u);
+  const core::Summary init = solver_.initialize(s, [this](double t) { return controller_.values(t); });
+  if (init.ok() && finite(s) && params_.adaptive)
+    stepper_ = std::make_unique<core::AdaptiveStepper>(solver_, model_.solver);  // a new step-size history
+  return init;
+}
+
 bool SimNode::onReset(std_srvs::Trigger::Request& /*req*/, std_srvs::Trigger::Response& res)
 {
   const std::lock_guard<std::mutex> lock(mutex_);
   // stamps keep increasing across a reset (tf and bags never see time go back)
   stamp_origin_ += state_.t + 1.0 / params_.publish_rate;
   core::State fresh = core::initialState(model_);
-  controller_.reset(fresh.u);
-  const core::Summary init = solver_.initialize(fresh, [this](double t) { return controller_.values(t); });
+  const core::Summary init = restart(fresh);
   if (!init.ok() || !finite(fresh))
   {
     res.success = false;
@@ -221,8 +226,6 @@ bool SimNode::onReset(std_srvs::Trigger::Request& /*req*/, std_srvs::Trigger::Re
     return true;
   }
   state_ = std::move(fresh);
-  if (params_.adaptive)
-    stepper_ = std::make_unique<core::AdaptiveStepper>(solver_, model_.solver);
   failed_ = false;
   solver_status_ = running() ? "running" : "paused";
   message_ = "reset";

@@ -47,6 +47,9 @@ private:
 
   void onActuation(const active_tensegrity::ActuationCommand::ConstPtr& msg);
   void onTrajectory(const trajectory_msgs::JointTrajectory::ConstPtr& msg);
+  /// Starts the controller and the solver (and, with ~adaptive, a new step-size controller) from the scene's
+  /// initial state s (the start and ~reset).
+  core::Summary restart(core::State& s);
   bool onReset(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
   bool onPause(std_srvs::SetBool::Request& req, std_srvs::SetBool::Response& res);
   /// Plans from the quasi-static equilibrium nearest to the live state (the simulation keeps running);
