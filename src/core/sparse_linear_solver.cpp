@@ -69,20 +69,12 @@ bool SparseLinearSolver::factorizeStaticPivot(const Eigen::SparseMatrix<double>&
   if (!(diag > 0.0) || !(phi > 0.0) || !std::isfinite(diag) || !std::isfinite(phi))
     return false;
   const double delta = kShift * phi * phi / diag;
-  std::vector<Eigen::Triplet<double>> shift;
-  shift.reserve(no_diagonal_.size());
-  for (int r : no_diagonal_)
-    shift.emplace_back(r, r, -delta);
-  shift_.resize(n, n);
-  shift_.setFromTriplets(shift.begin(), shift.end());
-  shifted_ = a + shift_;
   if (!static_analyzed_)
   {
-    static_lu_.analyzePattern(shifted_);
+    static_lu_.analyzePattern(a);
     static_analyzed_ = true;
-    ++analyses_;
   }
-  if (!static_lu_.factorize(shifted_))
+  if (!static_lu_.factorize(a, no_diagonal_, -delta))
     return false;
   check_b_ = a * Eigen::VectorXd::Ones(n);
   static_lu_.solve(check_b_, check_x_);

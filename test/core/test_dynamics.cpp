@@ -2,6 +2,7 @@
 // invariants (energy, angular momentum, quaternion norm), a closed-form pendulum period, the
 // measured order of accuracy of each integrator, and a clean failure status.
 #include <algorithm>
+#include <numeric>
 #include <cmath>
 #include <cstdio>
 #include <random>
@@ -850,6 +851,60 @@ TEST(StaticPivotLU, SolvesANonsymmetricMatrixWithSymmetricPatternExactlyAndRepor
   StaticPivotLU zlu;
   zlu.analyzePattern(z);
   EXPECT_FALSE(zlu.factorize(z));
+}
+
+TEST(StaticPivotLU, ShiftsTheGivenDiagonalAndFollowsAChangeOfPattern)
+{
+  // a saddle matrix stores no diagonal in its constraint rows: the factors of A with -delta there must
+  // solve the matrix with those entries put in, to round-off (a shift on the wrong rows, or lost because
+  // the diagonal was not stored, leaves a residual of order delta)
+  // (shuffled: in saddleMatrix's own order AMD leaves the constraint rows where they are, and a shift
+  // put on the wrong one of the two orders would go unseen)
+  std::mt19937 rng(11);
+  std::vector<int> shuffle(260);
+  std::iota(shuffle.begin(), shuffle.end(), 0);
+  std::shuffle(shuffle.begin(), shuffle.end(), rng);
+  Eigen::PermutationMatrix<Eigen::Dynamic, Eigen::Dynamic, int> q(260);
+  q.indices() = Eigen::Map<const Eigen::VectorXi>(shuffle.data(), 260);
+  Eigen::SparseMatrix<double> a = saddleMatrix(200, 60, 1.0, rng);
+  a = q * a * q.transpose();
+  a.makeCompressed();
+  std::vector<int> rows;
+  for (int r = 200; r < 260; ++r)
+    rows.push_back(shuffle[r]);
+  const double delta = 0.25;
+  Eigen::SparseMatrix<double> shifted = a;
+  for (int r : rows)
+    shifted.coeffRef(r, r) -= delta;
+  ASSERT_NE(shifted.nonZeros(), a.nonZeros());  // (the diagonal of those rows was not stored)
+  StaticPivotLU lu;
+  lu.analyzePattern(a);
+  ASSERT_TRUE(lu.factorize(a, rows, -delta));
+  const Eigen::VectorXd b = Eigen::VectorXd::Random(a.rows());
+  Eigen::VectorXd x;
+  lu.solve(b, x);
+  EXPECT_LT((shifted * x - b).lpNorm<Eigen::Infinity>(), 1e-11);
+  EXPECT_GT((a * x - b).lpNorm<Eigen::Infinity>(), 1e-3);
+  EXPECT_EQ(lu.analyses(), 1);
+  // another pattern with as many entries: one entry moved. Analyzed again, then exact for it
+  Eigen::SparseMatrix<double> moved = a;
+  int gone = -1, added = 1;
+  for (Eigen::SparseMatrix<double>::InnerIterator it(a, 0); it; ++it)
+    if (it.row() != 0 && gone < 0)
+      gone = static_cast<int>(it.row());
+  while (a.coeff(added, 0) != 0.0)
+    ++added;
+  moved.coeffRef(gone, 0) = 0.0;
+  moved.coeffRef(0, gone) = 0.0;
+  moved.prune(0.0, 0.0);
+  moved.coeffRef(added, 0) = 0.5;
+  moved.coeffRef(0, added) = -0.5;
+  moved.makeCompressed();
+  ASSERT_EQ(moved.nonZeros(), a.nonZeros());
+  ASSERT_TRUE(lu.factorize(moved));
+  EXPECT_EQ(lu.analyses(), 2);
+  lu.solve(b, x);
+  EXPECT_LT((moved * x - b).lpNorm<Eigen::Infinity>(), 1e-11);
 }
 
 TEST(LinearSolver, EquilibratedDenseFactorsJudgeTheStructureNotItsUnits)

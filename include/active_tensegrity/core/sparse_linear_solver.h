@@ -53,7 +53,7 @@ public:
   /// Symbolic analyses done so far (one per pattern seen, two when the static pivots were refused).
   int analyses() const
   {
-    return analyses_;
+    return analyses_ + static_lu_.analyses();
   }
   bool dense() const
   {
@@ -124,8 +124,7 @@ private:
   Eigen::MatrixXd dense_;
   Eigen::PartialPivLU<Eigen::MatrixXd> dense_lu_;
   StaticPivotLU static_lu_;
-  Eigen::SparseMatrix<double> shift_, shifted_;  // -delta on the constraint rows; the matrix plus it
-  std::vector<int> no_diagonal_;                 // rows of the pattern without a diagonal entry
+  std::vector<int> no_diagonal_;  // rows of the pattern without a diagonal entry (they get -delta)
   Eigen::VectorXd check_b_, check_x_;
 };
 

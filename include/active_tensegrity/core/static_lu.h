@@ -16,14 +16,19 @@ namespace active_tensegrity::core
 /// others are for the caller to check (a zero pivot is reported). The algorithm is the up-looking one
 /// of LDL (Davis 2005, ACM TOMS 31(4), "Algorithm 849"), with the row of L and the column of U of each
 /// step found by two sparse triangular solves over the same elimination-tree reach.
+///
+/// Everything that depends on the pattern alone is done once, in analyzePattern: the order, where each
+/// stored entry of A lands in P A P^T, the reach of every row and where each entry of the factors goes.
+/// A factorization then scatters A's values and does the arithmetic; it allocates nothing.
 class StaticPivotLU
 {
 public:
-  /// The order, the elimination tree and the factors' pattern; `a` must have a symmetric pattern and a
-  /// stored diagonal (explicit zeros allowed).
+  /// The order, the elimination tree and the factors' pattern; `a` must have a symmetric pattern. Its
+  /// diagonal is in the factors' pattern whether `a` stores it or not.
   void analyzePattern(const Eigen::SparseMatrix<double>& a);
-  /// False on a zero or non-finite pivot. The pattern must be the analyzed one.
-  bool factorize(const Eigen::SparseMatrix<double>& a);
+  /// Factorizes A + shift * sum_r e_r e_r^T over the rows r in `shifted` (none by default). A pattern
+  /// other than the analyzed one is analyzed first. False on a zero or non-finite pivot.
+  bool factorize(const Eigen::SparseMatrix<double>& a, const std::vector<int>& shifted = {}, double shift = 0.0);
   void solve(const Eigen::VectorXd& b, Eigen::VectorXd& x) const;
   /// Sign of det(A) = prod(D) (P A P^T has the determinant of A; L and U are unit triangular).
   int determinantSign() const
@@ -38,17 +43,30 @@ public:
   {
     return static_cast<Eigen::Index>(lx_.size());
   }
+  /// Symbolic analyses so far (the first call, and one per change of pattern).
+  int analyses() const
+  {
+    return analyses_;
+  }
 
 private:
-  Eigen::Index n_ = 0;
-  Eigen::PermutationMatrix<Eigen::Dynamic, Eigen::Dynamic, int> perm_;  // P
-  Eigen::SparseMatrix<double> c_, ct_;  // P A P^T and its transpose (column k of ct_: row k of c_)
-  std::vector<int> parent_, lp_, li_;   // elimination tree; L's column starts and row indices
-  std::vector<double> lx_, ux_;         // L by columns; U by rows in the same positions (U^T by columns)
+  bool samePattern(const Eigen::SparseMatrix<double>& a) const;
+
+  int n_ = 0;
+  int analyses_ = 0;
+  std::vector<int> perm_;               // row/column i of A is row/column perm_[i] of C = P A P^T
+  std::vector<int> a_outer_, a_inner_;  // the analyzed pattern of A (by columns)
+  std::vector<int> dest_;               // stored entry q of A (in storage order) -> its slot in cx_
+  std::vector<int> diag_;               // slot of C(k, k) in cx_
+  std::vector<int> up_p_, up_i_;        // C's upper part, diagonal included, by columns: rows i <= k
+  std::vector<int> lo_p_, lo_i_;        // C's strict lower part by rows: columns j < k of row k
+  std::vector<double> cx_;              // values: up_ (up_i_.size() slots), then lo_
+  std::vector<int> lp_, li_;            // L by columns: starts and row indices
+  std::vector<int> rp_, ri_, rpos_;     // each row k of L: its columns i (ascending) and their slots in li_
+  std::vector<double> lx_, ux_;         // L by columns; U by rows in the same slots (U^T by columns)
+  std::vector<double> lrx_;             // L by rows, in the slots of ri_ (for the solve)
   Eigen::VectorXd d_;
-  // work arrays
-  std::vector<int> flag_, pattern_, lnz_;
-  Eigen::VectorXd y_, w_;
+  Eigen::VectorXd y_, w_;  // work: column k of U D, row k of D L, as they are solved for
   mutable Eigen::VectorXd t_;
 };
 
