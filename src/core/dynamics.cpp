@@ -50,7 +50,9 @@ void DynamicsSolver::prepareContact(const State& s, double h)
 {
   const ScopeTimer timer(timings_.contact);
   const Model& model = system_.model();
-  step_speeds_.assign(model.contactSlots(), model.contact.min_impact_speed);
+  // (only the near slots' speeds are read, and findNearContacts sets each of them)
+  if (step_speeds_.size() != static_cast<size_t>(model.contactSlots()))
+    step_speeds_.assign(model.contactSlots(), model.contact.min_impact_speed);
   near_.clear();
   if (!model.anyContact())
     return;
@@ -178,24 +180,6 @@ constexpr int kFreshStartsMost = 64;
 // Fresh starts only where a factorization costs about a residual: dense Newton matrices of at most this many
 // unknowns (the six-bar robot, 48: 9 us against 8 us; the tower, 200: 250 us against 15 us)
 constexpr int kFreshStartSize = 64;
-
-/// Whether the pairs touching in `s` are those of `t` (pairs in contact: remembered impact speed > 0).
-bool sameTouching(const std::vector<bool>& t, const State& s)
-{
-  if (t.size() != s.contact_speed.size())
-    return false;
-  for (size_t i = 0; i < t.size(); ++i)
-    if (t[i] != (s.contact_speed[i] > 0.0))
-      return false;
-  return true;
-}
-
-void setTouching(std::vector<bool>& t, const State& s)
-{
-  t.resize(s.contact_speed.size());
-  for (size_t i = 0; i < t.size(); ++i)
-    t[i] = s.contact_speed[i] > 0.0;
-}
 }  // namespace
 
 bool DynamicsSolver::continuesHistory(const State& s) const
@@ -279,8 +263,15 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law, boo
   // After a kept matrix failed (theta > 0.5) in a small dense system, the next steps start with a new one (2, then
   // 4, 8 ... 64 steps while kept matrices go on failing; back to 2 once one serves a whole step): where a kept
   // matrix fails it fails step after step (a robot resting on the ground), and each try wastes two residuals.
+  prepareContact(s, h);
+  // the pairs touching at the start (remembered impact speed > 0): all of them are near
+  touching_.clear();
+  for (int i : near_)
+    if (i < static_cast<int>(s.contact_speed.size()) && s.contact_speed[i] > 0.0)
+      touching_.push_back(i);
+  std::sort(touching_.begin(), touching_.end());
   bool rebuild = !reuse || !factor_valid_ || std::abs(h - factor_h_) > kReuseStepChange * h ||
-                 factor_age_ >= options_.max_jacobian_age || !sameTouching(factor_contacts_, s);
+                 factor_age_ >= options_.max_jacobian_age || touching_ != factor_contacts_;
   if (!rebuild && fresh_starts_ > 0)
   {
     rebuild = true;
@@ -289,7 +280,6 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law, boo
   bool diverged = false;
   double previous = -1.0;  // last scaled increment with this factorization
   bool built_this_step = false;
-  prepareContact(s, h);
   for (int it = 0; it < options_.max_iterations; ++it)
   {
     const bool build = rebuild;
@@ -324,7 +314,7 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law, boo
       factor_h_ = h;
       factor_age_ = 0;
       built_this_step = true;
-      setTouching(factor_contacts_, s);
+      factor_contacts_ = touching_;
       theta_ = 0.0;
       theta_known_ = false;
       previous = -1.0;

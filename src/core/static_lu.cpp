@@ -109,12 +109,11 @@ void StaticPivotLU::analyzePattern(const Eigen::SparseMatrix<double>& a)
       rpos_[r] = lp_[i] + lnz[i]++;
       li_[rpos_[r]] = k;
     }
-  lx_.assign(lp_[n], 0.0);
+  lu_.assign(lp_[n], Pair{ 0.0, 0.0 });
   lrx_.assign(lp_[n], 0.0);
   ux_.assign(lp_[n], 0.0);
   d_.resize(n);
-  y_.setZero(n);
-  w_.setZero(n);
+  yw_.assign(n, Pair{ 0.0, 0.0 });
 }
 
 bool StaticPivotLU::samePattern(const Eigen::SparseMatrix<double>& a) const
@@ -151,37 +150,41 @@ bool StaticPivotLU::factorize(const Eigen::SparseMatrix<double>& a, const std::v
   const double* lo_x = cx_.data() + up_p_[n];
   for (int k = 0; k < n; ++k)
   {
-    // y: column k of C down to the diagonal (-> U(:, k) D), w: row k left of it (-> D L(k, :)^T)
+    // y: column k of C down to the diagonal (-> U(:, k) D), w: row k left of it (-> D L(k, :)^T); the two
+    // are solved for together, (y, w) interleaved as are (L, U^T) in lu_: one index, one 128-bit update
     for (int q = up_p_[k]; q < up_p_[k + 1]; ++q)
-      y_[up_i_[q]] += up_x[q];
+      yw_[up_i_[q]].first += up_x[q];
     for (int q = lo_p_[k]; q < lo_p_[k + 1]; ++q)
-      w_[lo_i_[q]] += lo_x[q];
-    double dk = y_[k];
-    y_[k] = 0.0;
+      yw_[lo_i_[q]].second += lo_x[q];
+    double dk = yw_[k].first;
+    yw_[k].first = 0.0;
     for (int r = rp_[k]; r < rp_[k + 1]; ++r)
     {
       const int i = ri_[r];
       const int end = rpos_[r];  // the slot of L(k, i): column i's entries above it are final
-      const double yi = y_[i];
-      const double wi = w_[i];
-      y_[i] = 0.0;
-      w_[i] = 0.0;
+      const double yi = yw_[i].first;
+      const double wi = yw_[i].second;
+      yw_[i] = { 0.0, 0.0 };
+      const Pair* lu = lu_.data();
+      const int* li = li_.data();
+      Pair* yw = yw_.data();
       for (int p = lp_[i]; p < end; ++p)
       {
-        y_[li_[p]] -= lx_[p] * yi;  // L's column i
-        w_[li_[p]] -= ux_[p] * wi;  // U's row i
+        Pair& t = yw[li[p]];
+        t.first -= lu[p].first * yi;    // L's column i
+        t.second -= lu[p].second * wi;  // U's row i
       }
       const double l_ki = wi / d_[i];
+      const double u_ik = yi / d_[i];
       dk -= l_ki * yi;
-      lx_[end] = l_ki;
+      lu_[end] = { l_ki, u_ik };
       lrx_[r] = l_ki;
-      ux_[end] = yi / d_[i];
+      ux_[end] = u_ik;
     }
     d_[k] = dk;
     if (dk == 0.0 || !std::isfinite(dk))
     {
-      y_.setZero();
-      w_.setZero();
+      std::fill(yw_.begin(), yw_.end(), Pair{ 0.0, 0.0 });
       return false;
     }
   }

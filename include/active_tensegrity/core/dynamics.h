@@ -122,10 +122,11 @@ private:
   // modified Newton (options_.reuse_jacobian): the factorization in linear_ and what it was built for
   bool factor_valid_ = false;
   double factor_h_ = 0.0;
-  int factor_age_ = 0;                 // steps taken with it
-  std::vector<bool> factor_contacts_;  // pairs touching when it was built
-  double theta_ = 0.0;                 // largest contraction rate seen with it
-  bool theta_known_ = false;           // whether theta_ was measured (two increments above round-off)
+  int factor_age_ = 0;                // steps taken with it
+  std::vector<int> factor_contacts_;  // slots touching when it was built (ascending)
+  std::vector<int> touching_;         // slots touching at the start of the step being solved (ascending)
+  double theta_ = 0.0;                // largest contraction rate seen with it
+  bool theta_known_ = false;          // whether theta_ was measured (two increments above round-off)
   // after a kept matrix diverged (theta > 0.5): steps still to start with a new matrix, and how many the next
   // divergence orders (doubling while kept matrices keep failing, back to the least once one serves a step)
   int fresh_starts_ = 0;

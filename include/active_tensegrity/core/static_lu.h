@@ -41,7 +41,7 @@ public:
   /// Stored entries of L (those of U are as many).
   Eigen::Index factorNonZeros() const
   {
-    return static_cast<Eigen::Index>(lx_.size());
+    return static_cast<Eigen::Index>(ux_.size());
   }
   /// Symbolic analyses so far (the first call, and one per change of pattern).
   int analyses() const
@@ -63,10 +63,15 @@ private:
   std::vector<double> cx_;              // values: up_ (up_i_.size() slots), then lo_
   std::vector<int> lp_, li_;            // L by columns: starts and row indices
   std::vector<int> rp_, ri_, rpos_;     // each row k of L: its columns i (ascending) and their slots in li_
-  std::vector<double> lx_, ux_;         // L by columns; U by rows in the same slots (U^T by columns)
-  std::vector<double> lrx_;             // L by rows, in the slots of ri_ (for the solve)
+  struct Pair
+  {
+    double first, second;
+  };
+  std::vector<Pair> lu_;     // (L, U^T) by columns, interleaved: L(j, i) and U(i, j) side by side
+  std::vector<double> lrx_;  // L by rows, in the slots of ri_ (for the solve)
+  std::vector<double> ux_;   // U^T by columns, in the slots of li_ (for the solve)
   Eigen::VectorXd d_;
-  Eigen::VectorXd y_, w_;  // work: column k of U D, row k of D L, as they are solved for
+  std::vector<Pair> yw_;  // work: column k of U D and row k of D L, as they are solved for
   mutable Eigen::VectorXd t_;
 };
 
