@@ -166,6 +166,24 @@ void nearContactSlots(const Model& model, const BroadPhase& broad, const Eigen::
       out.push_back(i);
 }
 
+void NearSlotCache::find(const Model& model, const BroadPhase& broad, const Eigen::VectorXd& q, double reach,
+                         std::vector<int>& out)
+{
+  const bool kept = kept_reach_ >= 0.0 && reference_q_.size() == q.size() &&
+                    reach + largestMotion(model, reference_q_, q) <= kept_reach_;
+  if (!kept)
+  {
+    kept_reach_ = kSkin * reach;
+    nearContactSlots(model, broad, q, kept_reach_, candidates_, kept_);
+    reference_q_ = q;
+    ++rebuilds_;
+  }
+  out.clear();
+  for (int i : kept_)
+    if (contactGeometry(model, i, q).gap <= 2.0 * reach)
+      out.push_back(i);
+}
+
 double largestMotion(const Model& model, const Eigen::VectorXd& q0, const Eigen::VectorXd& q1)
 {
   double reach = 0.0;
@@ -186,7 +204,7 @@ void System::contactCandidates(const Eigen::VectorXd& q, double margin, std::vec
 
 void System::nearContacts(const Eigen::VectorXd& q, double reach, std::vector<int>& out) const
 {
-  nearContactSlots(model_, broad_phase_, q, reach, candidates_, out);
+  near_slots_.find(model_, broad_phase_, q, reach, out);
 }
 
 int System::firstPassedThrough(const Eigen::VectorXd& q0, const Eigen::VectorXd& q1) const

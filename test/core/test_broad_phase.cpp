@@ -3,8 +3,10 @@
 // exactly the pairs whose capsule boxes (computed here independently) overlap; every pair closer than
 // the margin is among them (no contact missed) and sparse scenes are pruned. Then the choice between
 // sweep and direct comparison, and configurations placed by hand (far apart, moved into contact, margin).
+// Last, the kept list of near slots (NearSlotCache) against nearContactSlots along random walks.
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <random>
 #include <set>
 #include <string>
@@ -14,6 +16,7 @@
 
 #include "active_tensegrity/core/broad_phase.h"
 #include "active_tensegrity/core/contact.h"
+#include "active_tensegrity/core/mechanics.h"
 #include "test_models.h"
 
 using namespace active_tensegrity::test;
@@ -360,4 +363,48 @@ TEST(BroadPhase, APairListedTwiceIsRefused)
   Model m = parallelPair(0.03);
   m.checked_pairs.push_back(makeStrutPair(m, 1, 0));
   EXPECT_THROW(BroadPhase{ m }, std::invalid_argument);
+}
+
+TEST(NearSlotCache, GivesTheNearSlotsOfEveryConfigurationAlongARandomWalk)
+{
+  // 50 crowded struts drift and wander (each centre moves by up to reach / 2 per call, half of it along its
+  // own direction; now and then all of them jump by 0.2 m, and the reach changes); at every call the kept list must
+  // give exactly what nearContactSlots computes from scratch, while rebuilding far less often than it is called
+  std::mt19937 rng(31);
+  Model m = randomScene({ 50, 1.8 }, rng);
+  m.contact.enabled = true;
+  const BroadPhase broad(m);
+  NearSlotCache cache;
+  std::vector<int> fresh, kept, scratch;
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  Eigen::VectorXd q = m.q0;
+  std::vector<Vec3> drift;  // each body's own direction: the motions add up, as along a trajectory
+  for (size_t b = 0; b < m.bodies.size(); ++b)
+    drift.push_back(randomUnit(rng));
+  const std::vector<double> reaches = { 1e-3, 1e-3, 1e-3, 4e-3, 1e-4 };
+  long compared = 0, near_total = 0;
+  const int calls = 600;
+  for (int k = 0; k < calls; ++k)
+  {
+    const double reach = reaches[(k / 100) % reaches.size()];
+    const bool jump = k % 150 == 149;
+    for (size_t i = 0; i < m.bodies.size(); ++i)
+    {
+      const Body& b = m.bodies[i];
+      const double step = jump ? 0.2 : 0.5 * reach;
+      q.segment<3>(b.offset) += 0.5 * step * (drift[i] + Vec3(u(rng), u(rng), u(rng)) / std::sqrt(3.0));
+      if (b.kind == BodyKind::kStrut)  // (a turn by at most about step / length at the ends)
+        q.segment<4>(b.offset + 3) += 0.1 * step / b.length * Eigen::Vector4d(u(rng), u(rng), u(rng), u(rng));
+    }
+    nearContactSlots(m, broad, q, reach, scratch, fresh);
+    cache.find(m, broad, q, reach, kept);
+    ASSERT_EQ(kept, fresh) << "call " << k << ", reach " << reach;
+    near_total += static_cast<long>(fresh.size());
+    ++compared;
+  }
+  EXPECT_GT(near_total, 10 * compared);  // (crowded: contacts to find at every call)
+  std::printf("near slots per call %.1f, kept lists built %ld in %d calls\n",
+              static_cast<double>(near_total) / compared, cache.rebuilds(), calls);
+  EXPECT_LT(cache.rebuilds(), calls / 4);
+  EXPECT_GE(cache.rebuilds(), 4);  // at least the first list and one per jump
 }

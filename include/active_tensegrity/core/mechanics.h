@@ -37,6 +37,28 @@ void contactCandidates(const Model& model, const BroadPhase& broad, const Eigen:
 void nearContactSlots(const Model& model, const BroadPhase& broad, const Eigen::VectorXd& q, double reach,
                       std::vector<int>& candidates, std::vector<int>& out);
 
+/// nearContactSlots with a kept list (a Verlet list): the slots within 2 (reach + skin) of touching at a
+/// reference q serve every later q whose bodies moved by at most skin from it (a gap shrinks by at most twice
+/// the largest motion, largestMotion), so the sweep and the narrow phase of the far candidates run once in many
+/// calls. The result is the one nearContactSlots gives, in the same order. skin = kSkin reach at each rebuild.
+class NearSlotCache
+{
+public:
+  static constexpr double kSkin = 16.0;
+  void find(const Model& model, const BroadPhase& broad, const Eigen::VectorXd& q, double reach, std::vector<int>& out);
+  /// Lists built so far (one per call that found the kept list too far from q).
+  long rebuilds() const
+  {
+    return rebuilds_;
+  }
+
+private:
+  Eigen::VectorXd reference_q_;
+  double kept_reach_ = -1.0;  // the reach the kept list was made for: reach + skin
+  std::vector<int> kept_, candidates_;
+  long rebuilds_ = 0;
+};
+
 /// The equations of one model plus optional extra constraints (e.g. statics' spin locks), with a
 /// sparse Jacobian whose pattern is fixed at construction: rows and columns are [q; lambda], one
 /// group per body then one per constraint. Not thread-safe (contact scratch): one System per thread.
@@ -170,6 +192,7 @@ private:
   Eigen::VectorXd zero_q_;  // zero velocities (for positions-only point kinematics)
   double load_factor_ = 1.0;
   mutable std::vector<int> candidates_;  // scratch of contactForce
+  mutable NearSlotCache near_slots_;     // of nearContacts
   mutable ContactContribution contribution_;
 };
 
