@@ -23,7 +23,6 @@ void StaticPivotLU::analyzePattern(const Eigen::SparseMatrix<double>& a)
   a_outer_.assign(n + 1, 0);
   a_inner_.clear();
   std::vector<int> up_count(n, 1), lo_count(n, 0);  // (every column of the upper part has its diagonal)
-  std::vector<char> has_diag(n, 0);
   for (int j = 0; j < n; ++j)
   {
     for (Eigen::SparseMatrix<double>::InnerIterator it(a, j); it; ++it)
@@ -31,11 +30,9 @@ void StaticPivotLU::analyzePattern(const Eigen::SparseMatrix<double>& a)
       const int i = static_cast<int>(it.row());
       a_inner_.push_back(i);
       const int pi = perm_[i], pj = perm_[j];
-      if (pi == pj)
-        has_diag[pj] = 1;
-      else if (pi < pj)
+      if (pi < pj)
         ++up_count[pj];
-      else
+      else if (pi > pj)
         ++lo_count[pi];
     }
     a_outer_[j + 1] = static_cast<int>(a_inner_.size());

@@ -37,10 +37,11 @@ void contactCandidates(const Model& model, const BroadPhase& broad, const Eigen:
 void nearContactSlots(const Model& model, const BroadPhase& broad, const Eigen::VectorXd& q, double reach,
                       std::vector<int>& candidates, std::vector<int>& out);
 
-/// nearContactSlots with a kept list (a Verlet list): the slots within 2 (reach + skin) of touching at a
-/// reference q serve every later q whose bodies moved by at most skin from it (a gap shrinks by at most twice
-/// the largest motion, largestMotion), so the sweep and the narrow phase of the far candidates run once in many
-/// calls. The result is the one nearContactSlots gives, in the same order. skin = kSkin reach at each rebuild.
+/// nearContactSlots with a kept list (a Verlet list): the list is nearContactSlots at a reference q for kSkin
+/// times the reach of the call that made it, R = kSkin reach_0. It serves every later call whose reach plus
+/// the largest motion of a body since the reference (largestMotion) is at most R: a gap shrinks by at most
+/// twice that motion, so every slot within 2 reach of touching is in it. The sweep and the narrow phase of the
+/// far candidates thus run once in many calls; the result is the one nearContactSlots gives, in the same order.
 class NearSlotCache
 {
 public:
@@ -54,7 +55,7 @@ public:
 
 private:
   Eigen::VectorXd reference_q_;
-  double kept_reach_ = -1.0;  // the reach the kept list was made for: reach + skin
+  double kept_reach_ = -1.0;  // R, the reach the kept list was made for
   std::vector<int> kept_, candidates_;
   long rebuilds_ = 0;
 };
