@@ -257,12 +257,6 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law, boo
   const double bh2 = coef_.beta * h * h * (1.0 - coef_.alpha_f) / (1.0 - coef_.alpha_m);
   const int nq = system_.nq();
   const bool reuse = options_.reuse_jacobian && !full_newton;
-  // modified Newton keeps the factorization while it stays a good one (see the option)
-  // (h differs in its last bits from step to step: t = k dt; a cut changes it by a factor 2; a variable
-  // step keeps it while within 20 %: the matrix is then a little off, which the contraction check sees)
-  // After a kept matrix failed (theta > 0.5) in a small dense system, the next steps start with a new one (2, then
-  // 4, 8 ... 64 steps while kept matrices go on failing; back to 2 once one serves a whole step): where a kept
-  // matrix fails it fails step after step (a robot resting on the ground), and each try wastes two residuals.
   prepareContact(s, h);
   // the pairs touching at the start (remembered impact speed > 0): all of them are near
   touching_.clear();
@@ -270,6 +264,12 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law, boo
     if (i < static_cast<int>(s.contact_speed.size()) && s.contact_speed[i] > 0.0)
       touching_.push_back(i);
   std::sort(touching_.begin(), touching_.end());
+  // modified Newton keeps the factorization while it stays a good one (see the option)
+  // (h differs in its last bits from step to step: t = k dt; a cut changes it by a factor 2; a variable
+  // step keeps it while within 20 %: the matrix is then a little off, which the contraction check sees)
+  // After a kept matrix failed (theta > 0.5) in a small dense system, the next steps start with a new one (2, then
+  // 4, 8 ... 64 steps while kept matrices go on failing; back to 2 once one serves a whole step): where a kept
+  // matrix fails it fails step after step (a robot resting on the ground), and each try wastes two residuals.
   bool rebuild = !reuse || !factor_valid_ || std::abs(h - factor_h_) > kReuseStepChange * h ||
                  factor_age_ >= options_.max_jacobian_age || touching_ != factor_contacts_;
   if (!rebuild && fresh_starts_ > 0)

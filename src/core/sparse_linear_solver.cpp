@@ -69,11 +69,7 @@ bool SparseLinearSolver::factorizeStaticPivot(const Eigen::SparseMatrix<double>&
   if (!(diag > 0.0) || !(phi > 0.0) || !std::isfinite(diag) || !std::isfinite(phi))
     return false;
   const double delta = kShift * phi * phi / diag;
-  if (!static_analyzed_)
-  {
-    static_lu_.analyzePattern(a);
-    static_analyzed_ = true;
-  }
+  // (static_lu_ analyzes a pattern it has not seen itself)
   if (!static_lu_.factorize(a, no_diagonal_, -delta))
     return false;
   check_b_ = a * Eigen::VectorXd::Ones(n);
@@ -88,7 +84,6 @@ bool SparseLinearSolver::factorize(const Eigen::SparseMatrix<double>& a)
     analyzed_rows_ = a.rows();
     analyzed_nonzeros_ = a.nonZeros();
     lu_analyzed_ = false;
-    static_analyzed_ = false;
     decided_ = false;
     static_pivot_pattern_ = false;
     static_pivot_skip_ = 0;

@@ -109,7 +109,6 @@ private:
 
   mutable Eigen::SparseLU<Eigen::SparseMatrix<double>, Eigen::COLAMDOrdering<int>> lu_;  // (signDeterminant)
   bool lu_analyzed_ = false;           // lu_ holds the analysis of the current pattern
-  bool static_analyzed_ = false;       // static_lu_ likewise
   bool static_pivot_pattern_ = false;  // the current pattern gets the static pivots when they pass
   int static_pivot_skip_ = 0;          // factorizations left before they are tried again
   int static_pivot_refusals_ = 0;
