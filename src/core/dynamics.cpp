@@ -8,12 +8,32 @@
 
 namespace active_tensegrity::core
 {
+namespace
+{
+/// Modified Newton keeps a factorization built for a step within this relative change of h.
+constexpr double kReuseStepChange = 0.2;
+/// The smallest contraction rate modified Newton assumes when it estimates the error left in an iterate.
+constexpr double kRateFloor = 0.05;
+constexpr int kFreshStartsLeast = 2;
+constexpr int kFreshStartsMost = 64;
+// Fresh starts only where a factorization costs about a residual: dense Newton matrices of at most this many
+// unknowns (the six-bar robot, 48: 9 us against 8 us; the tower, 200: 250 us against 15 us)
+constexpr int kFreshStartSize = 64;
+}  // namespace
+
 DynamicsSolver::DynamicsSolver(const Model& model, const SolverOptions& options)
   : system_(model), options_(options), jac_(system_.makeMatrix())
 {
   linear_.allowDense(true);
   // the approximate static-pivot factorization is for modified Newton only (its contraction test)
   linear_.allowStaticPivot(options.reuse_jacobian);
+  if (options.reuse_jacobian && system_.size() > kFreshStartSize)
+  {
+    std::vector<int> body_sizes;
+    for (const Body& b : model.bodies)
+      body_sizes.push_back(b.nq);
+    linear_.allowBodyBlocks(body_sizes);
+  }
   for (const Body& b : model.bodies)
     mass_scale_ = std::max(mass_scale_, b.mass);
   if (options.integrator == Integrator::kNewmark)
@@ -169,19 +189,6 @@ void DynamicsSolver::residual(const State& s, double h, const ActuationValues& u
   r.tail(system_.nLambda()) = phi_ / bh2;
 }
 
-namespace
-{
-/// Modified Newton keeps a factorization built for a step within this relative change of h.
-constexpr double kReuseStepChange = 0.2;
-/// The smallest contraction rate modified Newton assumes when it estimates the error left in an iterate.
-constexpr double kRateFloor = 0.05;
-constexpr int kFreshStartsLeast = 2;
-constexpr int kFreshStartsMost = 64;
-// Fresh starts only where a factorization costs about a residual: dense Newton matrices of at most this many
-// unknowns (the six-bar robot, 48: 9 us against 8 us; the tower, 200: 250 us against 15 us)
-constexpr int kFreshStartSize = 64;
-}  // namespace
-
 bool DynamicsSolver::continuesHistory(const State& s) const
 {
   return history_count_ > 0 && s.t == last_end_t_ && s.qdd == last_end_qdd_;
@@ -238,9 +245,9 @@ Summary DynamicsSolver::attemptOrFullNewton(State& s, double h, const ActuationL
   if (sum.ok() || sum.status == SolveStatus::kPassedThrough || !options_.reuse_jacobian)
     return sum;
   const int spent = sum.iterations;
-  linear_.allowStaticPivot(false);  // Newton's own matrices, factorized exactly
+  linear_.allowApproximate(false);  // Newton's own matrices, factorized exactly
   sum = attempt(s, h, law, true);
-  linear_.allowStaticPivot(true);
+  linear_.allowApproximate(true);
   factor_valid_ = false;  // the kept factorization is gone
   sum.iterations += spent;
   ++timings_.full_newton_retries;
@@ -303,6 +310,8 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law, boo
       ++timings_.factorizations;
       if (linear_.staticPivot())
         ++timings_.static_pivot_factorizations;
+      if (linear_.bodyBlocks())
+        ++timings_.body_block_factorizations;
       timings_.analyses = linear_.analyses();
       factor_valid_ = factorized;
       if (!factorized)
@@ -354,6 +363,8 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law, boo
       {
         rebuild = true;
         diverged = diverged || !built_this_step;
+        if (built_this_step)
+          linear_.distrustBodyBlocks();  // too far off where it was made: the other methods for a while
       }
     }
     previous = scaled;

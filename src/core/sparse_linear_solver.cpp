@@ -27,6 +27,11 @@ constexpr int kStaticPivotSkip = 4;
 /// The check of each factorization: A 1 solved must come back within this of 1, the largest
 /// contraction rate modified Newton keeps a matrix for (measured: about 3e-6 on the lattices).
 constexpr double kStaticPivotCheck = 0.5;
+/// After refused body blocks, this many factorizations use the exact methods; after distrusted ones as many,
+/// doubled with each distrust up to kBodyBlockPauseMost while the body blocks go on failing, back to
+/// kBodyBlockSkip once one serves until it is replaced.
+constexpr int kBodyBlockSkip = 4;
+constexpr int kBodyBlockPauseMost = 256;
 
 bool hasSymmetricPattern(const Eigen::SparseMatrix<double>& a)
 {
@@ -77,6 +82,15 @@ bool SparseLinearSolver::factorizeStaticPivot(const Eigen::SparseMatrix<double>&
   return check_x_.allFinite() && (check_x_.array() - 1.0).abs().maxCoeff() <= kStaticPivotCheck;
 }
 
+void SparseLinearSolver::distrustBodyBlocks()
+{
+  if (method_ != Method::kBodyBlocks || body_blocks_distrusted_)
+    return;
+  body_blocks_distrusted_ = true;
+  body_block_skip_ = body_block_pause_;
+  body_block_pause_ = std::min(2 * body_block_pause_, kBodyBlockPauseMost);
+}
+
 bool SparseLinearSolver::factorize(const Eigen::SparseMatrix<double>& a)
 {
   if (a.rows() != analyzed_rows_ || a.nonZeros() != analyzed_nonzeros_)
@@ -87,7 +101,8 @@ bool SparseLinearSolver::factorize(const Eigen::SparseMatrix<double>& a)
     decided_ = false;
     static_pivot_pattern_ = false;
     static_pivot_skip_ = 0;
-    method_ = Method::kSparse;
+    body_block_skip_ = 0;
+    exact_method_ = Method::kSparse;
     if (allow_static_pivot_ && a.rows() > kStaticPivotMinRows && hasSymmetricPattern(a))
     {
       no_diagonal_.clear();
@@ -97,7 +112,28 @@ bool SparseLinearSolver::factorize(const Eigen::SparseMatrix<double>& a)
       static_pivot_pattern_ = !no_diagonal_.empty();
     }
   }
-  if (static_pivot_pattern_)
+  if (method_ == Method::kBodyBlocks && !body_blocks_distrusted_)
+    body_block_pause_ = kBodyBlockSkip;  // the last one served until it was replaced
+  body_blocks_distrusted_ = false;
+  if (allow_body_blocks_ && approximate_)
+  {
+    if (body_block_skip_ > 0)
+      --body_block_skip_;
+    else if (body_blocks_.factorize(a))
+    {
+      method_ = Method::kBodyBlocks;
+      return true;
+    }
+    else
+      body_block_skip_ = kBodyBlockSkip;
+    ++body_block_refusals_;
+  }
+  return factorizeExact(a);
+}
+
+bool SparseLinearSolver::factorizeExact(const Eigen::SparseMatrix<double>& a)
+{
+  if (static_pivot_pattern_ && approximate_)
   {
     if (static_pivot_skip_ > 0)
       --static_pivot_skip_;
@@ -113,6 +149,7 @@ bool SparseLinearSolver::factorize(const Eigen::SparseMatrix<double>& a)
     ++static_pivot_refusals_;
     return factorizeSparse(a);
   }
+  method_ = exact_method_;
   if (method_ == Method::kSparse)
   {
     if (!factorizeSparse(a))
@@ -125,7 +162,7 @@ bool SparseLinearSolver::factorize(const Eigen::SparseMatrix<double>& a)
     const bool dense = a.rows() <= kDenseMaxRows && static_cast<double>(lu_.nnzL() + lu_.nnzU()) >= kDenseFill * n * n;
     if (!dense)
       return true;
-    method_ = Method::kDense;
+    method_ = exact_method_ = Method::kDense;
   }
   dense_ = a;
   if (equilibrate_)
@@ -169,6 +206,8 @@ int SparseLinearSolver::determinantSign() const
     }
     case Method::kStaticPivot:
       return static_lu_.determinantSign();
+    case Method::kBodyBlocks:
+      return 0;
     case Method::kSparse:
       break;
   }

@@ -8,6 +8,7 @@
 #include <Eigen/SparseCore>
 #include <Eigen/SparseLU>
 
+#include "active_tensegrity/core/body_block_solver.h"
 #include "active_tensegrity/core/static_lu.h"
 
 namespace active_tensegrity::core
@@ -29,6 +30,10 @@ namespace active_tensegrity::core
 ///   when refined): for modified Newton only, whose contraction test sees it (exact() is false). Each
 ///   factorization is checked on one right-hand side (A 1 must come back within 0.5 of 1); a matrix
 ///   failing that, or with a zero pivot, gets the sparse LU, and so do the next four factorizations.
+/// - allowBodyBlocks(): a matrix of body groups and constraint rows is solved through BodyBlockSolver, the
+///   couplings between bodies dropped (modified Newton in dynamics, at steps where the mass dominates).
+///   Approximate, so exact() is false. A refused one (BodyBlockSolver::factorize) and the next four after it
+///   get the other methods; so do the next ones after distrustBodyBlocks().
 class SparseLinearSolver
 {
 public:
@@ -46,6 +51,23 @@ public:
   {
     allow_static_pivot_ = allow;
   }
+  /// Lets the solver use BodyBlockSolver on matrices whose first columns are grouped by body as given
+  /// (sizes from the first column on; empty: never).
+  void allowBodyBlocks(const std::vector<int>& body_sizes)
+  {
+    body_blocks_ = BodyBlockSolver(body_sizes);
+    allow_body_blocks_ = !body_sizes.empty();
+  }
+  /// Suspends (false) or restores (true) the approximate methods, static pivots and body blocks, as allowed.
+  void allowApproximate(bool allow)
+  {
+    approximate_ = allow;
+  }
+  /// The caller found the last factorization, when it is the body blocks, too far off (modified Newton did
+  /// not contract with it): the next factorizations use the other methods (4, doubled with each distrust
+  /// while they keep failing, up to 256; back to 4 once a body-block factorization serves until the next
+  /// factorization).
+  void distrustBodyBlocks();
   /// False when the matrix is singular: sparse, an exact zero pivot (round-off can hide a numerically
   /// singular matrix); dense, a reciprocal condition estimate below 1e-14; static pivots, a zero pivot
   /// in both them and the sparse LU.
@@ -53,7 +75,7 @@ public:
   /// Symbolic analyses done so far (one per pattern seen, two when the static pivots were refused).
   int analyses() const
   {
-    return analyses_ + static_lu_.analyses();
+    return analyses_ + static_lu_.analyses() + body_blocks_.analyses();
   }
   bool dense() const
   {
@@ -63,20 +85,31 @@ public:
   {
     return method_ == Method::kStaticPivot;
   }
+  bool bodyBlocks() const
+  {
+    return method_ == Method::kBodyBlocks;
+  }
+  /// Factorizations that fell back from the body blocks to the other methods (refused, distrusted or in the
+  /// pause after them).
+  int bodyBlockRefusals() const
+  {
+    return body_block_refusals_;
+  }
   /// Factorizations that fell back from the static pivots to the sparse LU (refused, or in the
   /// pause after a refusal).
   int staticPivotRefusals() const
   {
     return static_pivot_refusals_;
   }
-  /// Whether solve() solves the factorized matrix to round-off (false: the shifted static pivots).
+  /// Whether solve() solves the factorized matrix to round-off (false: the shifted static pivots, the body
+  /// blocks).
   bool exact() const
   {
-    return method_ != Method::kStaticPivot;
+    return method_ != Method::kStaticPivot && method_ != Method::kBodyBlocks;
   }
   /// Sign of the determinant of the last factorized matrix (+1, -1, or 0 when a pivot is exactly zero);
-  /// with the static pivots that of the shifted matrix. A change of sign along a path of Newton matrices
-  /// says that an odd number of eigenvalues passed through zero (statics: a critical point).
+  /// with the static pivots that of the shifted matrix; with the body blocks 0 (not computed). A change of sign along a
+  /// path of Newton matrices says that an odd number of eigenvalues passed through zero (statics: a critical point).
   int determinantSign() const;
   void solve(const Eigen::VectorXd& b, Eigen::VectorXd& x) const
   {
@@ -94,6 +127,9 @@ public:
       case Method::kSparse:
         x = lu_.solve(b);
         break;
+      case Method::kBodyBlocks:
+        body_blocks_.solve(b, x);
+        break;
     }
   }
 
@@ -102,8 +138,10 @@ private:
   {
     kSparse,
     kDense,
-    kStaticPivot
+    kStaticPivot,
+    kBodyBlocks
   };
+  bool factorizeExact(const Eigen::SparseMatrix<double>& a);
   bool factorizeSparse(const Eigen::SparseMatrix<double>& a);
   bool factorizeStaticPivot(const Eigen::SparseMatrix<double>& a);
 
@@ -123,7 +161,15 @@ private:
   Eigen::MatrixXd dense_;
   Eigen::PartialPivLU<Eigen::MatrixXd> dense_lu_;
   StaticPivotLU static_lu_;
-  std::vector<int> no_diagonal_;  // rows of the pattern without a diagonal entry (they get -delta)
+  bool approximate_ = true;
+  bool allow_body_blocks_ = false;
+  int body_block_skip_ = 0;              // factorizations left before the body blocks are tried again
+  int body_block_pause_ = 4;             // the skip after the next distrust
+  bool body_blocks_distrusted_ = false;  // the current factorization is distrusted body blocks
+  int body_block_refusals_ = 0;
+  BodyBlockSolver body_blocks_;
+  Method exact_method_ = Method::kSparse;  // the method of the pattern's exact factorizations
+  std::vector<int> no_diagonal_;           // rows of the pattern without a diagonal entry (they get -delta)
   Eigen::VectorXd check_b_, check_x_;
 };
 

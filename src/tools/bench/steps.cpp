@@ -66,8 +66,11 @@ int steps(const std::string& scene, const std::vector<at::Override>& overrides, 
   else if (!peaks)
     std::printf("heap allocations per step (solver and loop, after the first output): %.2f\n",
                 static_cast<double>(allocations) / std::max(1, last.solver_steps));
-  std::printf("factorizations per step: %.3f, symbolic analyses: %ld\n",
-              static_cast<double>(last.timings.factorizations) / std::max(1, last.solver_steps), last.timings.analyses);
+  std::printf("factorizations per step: %.3f (body blocks %.3f, static pivots %.3f), symbolic analyses: %ld\n",
+              static_cast<double>(last.timings.factorizations) / std::max(1, last.solver_steps),
+              static_cast<double>(last.timings.body_block_factorizations) / std::max(1, last.solver_steps),
+              static_cast<double>(last.timings.static_pivot_factorizations) / std::max(1, last.solver_steps),
+              last.timings.analyses);
   if (dynamic)
     std::printf("full-Newton retries: %ld, iterates beyond the contact reach: %ld, fresh starts: %ld\n",
                 last.timings.full_newton_retries, last.timings.contact_reach_misses, last.timings.fresh_starts);

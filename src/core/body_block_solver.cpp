@@ -1,0 +1,344 @@
+#include "active_tensegrity/core/body_block_solver.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+#include <utility>
+
+namespace active_tensegrity::core
+{
+namespace
+{
+/// A body system or Schur complement with a reciprocal condition estimate below this is refused.
+constexpr double kMinRcond = 1e-13;
+enum EntryKind : unsigned char
+{
+  kDropped = 0,
+  kBody = 1,
+  kJoinG = 2,
+  kJoinGt = 3,
+  kConstraintBlock = 4
+};
+}  // namespace
+
+BodyBlockSolver::BodyBlockSolver(std::vector<int> body_sizes) : body_sizes_(std::move(body_sizes)) {}
+
+bool BodyBlockSolver::samePattern(const Eigen::SparseMatrix<double>& a) const
+{
+  if (a.rows() != n_ || a.cols() != n_ || static_cast<size_t>(a.nonZeros()) != a_inner_.size() || !a.isCompressed())
+    return false;
+  return std::equal(a_outer_.begin(), a_outer_.end(), a.outerIndexPtr()) &&
+         std::equal(a_inner_.begin(), a_inner_.end(), a.innerIndexPtr());
+}
+
+bool BodyBlockSolver::analyze(const Eigen::SparseMatrix<double>& a)
+{
+  ++analyses_;
+  usable_ = false;
+  n_ = static_cast<int>(a.rows());
+  a_outer_.assign(a.outerIndexPtr(), a.outerIndexPtr() + a.cols() + 1);
+  a_inner_.assign(a.innerIndexPtr(), a.innerIndexPtr() + a.nonZeros());
+  nq_ = std::accumulate(body_sizes_.begin(), body_sizes_.end(), 0);
+  const int nb = static_cast<int>(body_sizes_.size());
+  if (nb == 0 || nq_ > n_ || a.cols() != n_)
+    return false;
+  std::vector<int> body(nq_);
+  for (int b = 0, c = 0; b < nb; ++b)
+    for (int k = 0; k < body_sizes_[b]; ++k)
+      body[c++] = b;
+  // the bodies each constraint row touches (in G and in Gt): -1 none, -2 more than one
+  std::vector<int> owner(n_ - nq_, -1);
+  const auto touch = [&](int row, int b)
+  {
+    int& o = owner[row - nq_];
+    o = (o == -1 || o == b) ? b : -2;
+  };
+  for (int j = 0; j < n_; ++j)
+    for (int p = a_outer_[j]; p < a_outer_[j + 1]; ++p)
+    {
+      const int i = a_inner_[p];
+      if (j < nq_ && i >= nq_)
+        touch(i, body[j]);
+      else if (j >= nq_ && i < nq_)
+        touch(j, body[i]);
+    }
+  joining_.clear();
+  std::vector<int> join_pos(n_ - nq_, -1);
+  for (int r = nq_; r < n_; ++r)
+  {
+    if (owner[r - nq_] == -1)
+      return false;  // a row on no body: A is singular
+    if (owner[r - nq_] == -2)
+    {
+      join_pos[r - nq_] = static_cast<int>(joining_.size());
+      joining_.push_back(r);
+    }
+  }
+  // each body's rows: its columns, then the constraint rows it owns; and the joining rows it takes part in
+  std::vector<std::vector<int>> own(nb), joins(nb);
+  for (int r = nq_; r < n_; ++r)
+    if (owner[r - nq_] >= 0)
+      own[owner[r - nq_]].push_back(r);
+  for (int j = 0; j < n_; ++j)
+    for (int p = a_outer_[j]; p < a_outer_[j + 1]; ++p)
+    {
+      const int i = a_inner_[p];
+      if (j < nq_ && i >= nq_ && join_pos[i - nq_] >= 0)
+        joins[body[j]].push_back(join_pos[i - nq_]);
+      else if (j >= nq_ && i < nq_ && join_pos[j - nq_] >= 0)
+        joins[body[i]].push_back(join_pos[j - nq_]);
+    }
+  blocks_.assign(nb, BodyBlock());
+  rows_.clear();
+  jidx_.clear();
+  std::vector<int> local(n_, -1);  // a row's index in its body system
+  int k_size = 0, g_size = 0, w_size = 0, y_size = 0;
+  for (int b = 0, c = 0; b < nb; ++b)
+  {
+    std::sort(joins[b].begin(), joins[b].end());
+    joins[b].erase(std::unique(joins[b].begin(), joins[b].end()), joins[b].end());
+    BodyBlock& bb = blocks_[b];
+    bb.n = body_sizes_[b];
+    bb.size = bb.n + static_cast<int>(own[b].size());
+    if (bb.size > kMaxBodyRows)
+      return false;
+    bb.rows = static_cast<int>(rows_.size());
+    for (int k = 0; k < bb.n; ++k)
+      rows_.push_back(c + k);
+    c += bb.n;
+    rows_.insert(rows_.end(), own[b].begin(), own[b].end());
+    for (int k = 0; k < bb.size; ++k)
+      local[rows_[bb.rows + k]] = k;
+    bb.joins = static_cast<int>(joins[b].size());
+    bb.j_start = static_cast<int>(jidx_.size());
+    jidx_.insert(jidx_.end(), joins[b].begin(), joins[b].end());
+    bb.k_start = k_size;
+    bb.g_start = g_size;
+    bb.w_start = w_size;
+    bb.y_start = y_size;
+    k_size += bb.size * bb.size;
+    g_size += bb.joins * bb.n;
+    w_size += bb.size * bb.joins;
+    y_size += bb.size;
+  }
+  const auto joinLocal = [&](int b, int row)
+  {
+    const BodyBlock& bb = blocks_[b];
+    const auto first = jidx_.begin() + bb.j_start;
+    return static_cast<int>(std::lower_bound(first, first + bb.joins, join_pos[row - nq_]) - first);
+  };
+  kind_.assign(a_inner_.size(), kDropped);
+  slot_.assign(a_inner_.size(), -1);
+  for (int j = 0; j < n_; ++j)
+    for (int p = a_outer_[j]; p < a_outer_[j + 1]; ++p)
+    {
+      const int i = a_inner_[p];
+      if (i < nq_ && j < nq_)
+      {
+        if (body[i] != body[j])
+          continue;
+        const BodyBlock& bb = blocks_[body[i]];
+        kind_[p] = kBody;
+        slot_[p] = bb.k_start + local[j] * bb.size + local[i];
+      }
+      else if (i >= nq_ && j >= nq_)
+        kind_[p] = kConstraintBlock;
+      else
+      {
+        const int b = j < nq_ ? body[j] : body[i];
+        const int row = j < nq_ ? i : j;  // the constraint row
+        const BodyBlock& bb = blocks_[b];
+        if (join_pos[row - nq_] < 0)
+        {
+          kind_[p] = kBody;
+          slot_[p] = bb.k_start + local[j] * bb.size + local[i];
+        }
+        else if (j < nq_)  // G: joins x n, column-major
+        {
+          kind_[p] = kJoinG;
+          slot_[p] = bb.g_start + local[j] * bb.joins + joinLocal(b, row);
+        }
+        else  // Gt: n x joins, column-major
+        {
+          kind_[p] = kJoinGt;
+          slot_[p] = bb.g_start + joinLocal(b, row) * bb.n + local[i];
+        }
+      }
+    }
+  kx_.setZero(k_size);
+  kinv_.setZero(k_size);
+  gx_.setZero(g_size);
+  gtx_.setZero(g_size);
+  wx_.setZero(w_size);
+  body_lu_.resize(kMaxBodyRows + 1);
+  y_.resize(y_size);
+  const int nj = static_cast<int>(joining_.size());
+  sparse_schur_ = nj > kDenseSchurRows;
+  s_start_.assign(nb, 0);
+  s_slot_.clear();
+  if (sparse_schur_)
+  {
+    s_.resize(0, 0);
+    std::vector<Eigen::Triplet<double>> entries;
+    for (int k = 0; k < nj; ++k)
+      entries.emplace_back(k, k, 0.0);
+    for (const BodyBlock& bb : blocks_)
+      for (int c = 0; c < bb.joins; ++c)
+        for (int r = 0; r < bb.joins; ++r)
+          entries.emplace_back(jidx_[bb.j_start + r], jidx_[bb.j_start + c], 0.0);
+    s_sparse_.resize(nj, nj);
+    s_sparse_.setFromTriplets(entries.begin(), entries.end());
+    s_sparse_.makeCompressed();
+    const int* outer = s_sparse_.outerIndexPtr();
+    const int* inner = s_sparse_.innerIndexPtr();
+    for (int b = 0; b < nb; ++b)
+    {
+      const BodyBlock& bb = blocks_[b];
+      s_start_[b] = static_cast<int>(s_slot_.size());
+      for (int c = 0; c < bb.joins; ++c)
+        for (int r = 0; r < bb.joins; ++r)
+        {
+          const int row = jidx_[bb.j_start + r], col = jidx_[bb.j_start + c];
+          s_slot_.push_back(static_cast<int>(std::lower_bound(inner + outer[col], inner + outer[col + 1], row) - inner));
+        }
+    }
+  }
+  else
+    s_.resize(nj, nj);
+  rhs_.resize(nj);
+  xj_.resize(nj);
+  usable_ = true;
+  return true;
+}
+
+bool BodyBlockSolver::factorize(const Eigen::SparseMatrix<double>& a)
+{
+  if (!samePattern(a) && !analyze(a))
+    return false;
+  if (!usable_)
+    return false;
+  kx_.setZero();
+  gx_.setZero();
+  gtx_.setZero();
+  const double* v = a.valuePtr();
+  for (size_t p = 0; p < kind_.size(); ++p)
+    switch (kind_[p])
+    {
+      case kBody:
+        kx_[slot_[p]] += v[p];
+        break;
+      case kJoinG:
+        gx_[slot_[p]] += v[p];
+        break;
+      case kJoinGt:
+        gtx_[slot_[p]] += v[p];
+        break;
+      case kConstraintBlock:
+        if (v[p] != 0.0)
+          return false;
+        break;
+      default:
+        break;
+    }
+  s_.setZero();
+  double* s_values = s_sparse_.valuePtr();
+  if (sparse_schur_)
+    std::fill(s_values, s_values + s_sparse_.nonZeros(), 0.0);
+  for (size_t b = 0; b < blocks_.size(); ++b)
+  {
+    const BodyBlock& bb = blocks_[b];
+    const Eigen::Map<const Eigen::MatrixXd> k(kx_.data() + bb.k_start, bb.size, bb.size);
+    Eigen::PartialPivLU<Eigen::MatrixXd>& lu = body_lu_[bb.size];
+    lu.compute(k);
+    // (the condition estimate allocates: made only when the pivots spread over more than 8 decades)
+    const auto pivots = lu.matrixLU().diagonal().cwiseAbs();
+    if (!(pivots.minCoeff() > 1e-8 * pivots.maxCoeff()) && !(lu.rcond() > kMinRcond))
+      return false;
+    Eigen::Map<Eigen::MatrixXd> kinv(kinv_.data() + bb.k_start, bb.size, bb.size);
+    kinv.setIdentity();
+    kinv = lu.permutationP() * kinv;
+    lu.matrixLU().triangularView<Eigen::UnitLower>().solveInPlace(kinv);
+    lu.matrixLU().triangularView<Eigen::Upper>().solveInPlace(kinv);
+    if (bb.joins == 0)
+      continue;
+    // W_b = K_b^-1 [Gt_b; 0] and S += G_b W_b (its first n rows)
+    const Eigen::Map<const Eigen::MatrixXd> g(gx_.data() + bb.g_start, bb.joins, bb.n);
+    const Eigen::Map<const Eigen::MatrixXd> gt(gtx_.data() + bb.g_start, bb.n, bb.joins);
+    Eigen::Map<Eigen::MatrixXd> w(wx_.data() + bb.w_start, bb.size, bb.joins);
+    w.noalias() = kinv.leftCols(bb.n) * gt;
+    const int* jl = jidx_.data() + bb.j_start;
+    const int* slot = s_slot_.data() + s_start_[b];
+    for (int c = 0; c < bb.joins; ++c)
+      for (int r = 0; r < bb.joins; ++r)
+      {
+        const double gw = g.row(r).dot(w.col(c).head(bb.n));
+        if (sparse_schur_)
+          s_values[*slot++] += gw;
+        else
+          s_(jl[r], jl[c]) += gw;
+      }
+  }
+  if (sparse_schur_)
+    return s_static_.factorize(s_sparse_);
+  if (s_.rows() > 0)
+  {
+    s_lu_.compute(s_);
+    const auto pivots = s_lu_.matrixLU().diagonal().cwiseAbs();
+    if (!(pivots.minCoeff() > 1e-8 * pivots.maxCoeff()) && !(s_lu_.rcond() > kMinRcond))
+      return false;
+  }
+  return true;
+}
+
+void BodyBlockSolver::solve(const Eigen::VectorXd& b, Eigen::VectorXd& x) const
+{
+  x.resize(n_);
+  const int nj = static_cast<int>(joining_.size());
+  for (int k = 0; k < nj; ++k)
+    rhs_(k) = -b(joining_[k]);
+  // y_b = K_b^-1 b_b, and the joining rows' right-hand side sum_b G_b y_b - b_J
+  for (const BodyBlock& bb : blocks_)
+  {
+    const int* rows = rows_.data() + bb.rows;
+    const double* kinv = kinv_.data() + bb.k_start;
+    double* y = y_.data() + bb.y_start;
+    std::fill(y, y + bb.size, 0.0);
+    for (int c = 0; c < bb.size; ++c)
+    {
+      const double bc = b(rows[c]);
+      const double* col = kinv + c * bb.size;
+      for (int r = 0; r < bb.size; ++r)
+        y[r] += col[r] * bc;
+    }
+    const double* g = gx_.data() + bb.g_start;
+    const int* jl = jidx_.data() + bb.j_start;
+    for (int c = 0; c < bb.n; ++c)
+      for (int r = 0; r < bb.joins; ++r)
+        rhs_(jl[r]) += g[c * bb.joins + r] * y[c];
+  }
+  if (sparse_schur_)
+    s_static_.solve(rhs_, xj_);
+  else if (nj > 0)
+    xj_ = s_lu_.solve(rhs_);
+  // x_b = y_b - W_b x_J
+  for (const BodyBlock& bb : blocks_)
+  {
+    const int* rows = rows_.data() + bb.rows;
+    const double* w = wx_.data() + bb.w_start;
+    const int* jl = jidx_.data() + bb.j_start;
+    double* y = y_.data() + bb.y_start;
+    for (int c = 0; c < bb.joins; ++c)
+    {
+      const double xc = xj_(jl[c]);
+      const double* col = w + c * bb.size;
+      for (int r = 0; r < bb.size; ++r)
+        y[r] -= col[r] * xc;
+    }
+    for (int r = 0; r < bb.size; ++r)
+      x(rows[r]) = y[r];
+  }
+  for (int k = 0; k < nj; ++k)
+    x(joining_[k]) = xj_(k);
+}
+
+}  // namespace active_tensegrity::core
