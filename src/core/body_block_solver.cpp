@@ -19,6 +19,40 @@ enum EntryKind : unsigned char
   kJoinGt = 3,
   kConstraintBlock = 4
 };
+/// y = A x for a row-major rows x cols matrix at a: four rows at a time (four independent sums; each sums
+/// in the order of its columns, so the result does not depend on where the data lie).
+void multiply(const double* a, int rows, int cols, const double* x, double* y)
+{
+  int r = 0;
+  for (; r + 4 <= rows; r += 4)
+  {
+    const double* a0 = a + r * cols;
+    const double* a1 = a0 + cols;
+    const double* a2 = a1 + cols;
+    const double* a3 = a2 + cols;
+    double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
+    for (int c = 0; c < cols; ++c)
+    {
+      const double xc = x[c];
+      s0 += a0[c] * xc;
+      s1 += a1[c] * xc;
+      s2 += a2[c] * xc;
+      s3 += a3[c] * xc;
+    }
+    y[r] = s0;
+    y[r + 1] = s1;
+    y[r + 2] = s2;
+    y[r + 3] = s3;
+  }
+  for (; r < rows; ++r)
+  {
+    const double* ar = a + r * cols;
+    double s = 0.0;
+    for (int c = 0; c < cols; ++c)
+      s += ar[c] * x[c];
+    y[r] = s;
+  }
+}
 }  // namespace
 
 BodyBlockSolver::BodyBlockSolver(std::vector<int> body_sizes) : body_sizes_(std::move(body_sizes)) {}
@@ -153,10 +187,10 @@ bool BodyBlockSolver::analyze(const Eigen::SparseMatrix<double>& a)
           kind_[p] = kBody;
           slot_[p] = bb.k_start + local[j] * bb.size + local[i];
         }
-        else if (j < nq_)  // G: joins x n, column-major
+        else if (j < nq_)  // G: joins x n, row-major
         {
           kind_[p] = kJoinG;
-          slot_[p] = bb.g_start + local[j] * bb.joins + joinLocal(b, row);
+          slot_[p] = bb.g_start + joinLocal(b, row) * bb.n + local[j];
         }
         else  // Gt: n x joins, column-major
         {
@@ -172,6 +206,11 @@ bool BodyBlockSolver::analyze(const Eigen::SparseMatrix<double>& a)
   wx_.setZero(w_size);
   body_lu_.resize(kMaxBodyRows + 1);
   y_.resize(y_size);
+  int widest = kMaxBodyRows;
+  for (const BodyBlock& bb : blocks_)
+    widest = std::max(widest, bb.joins);
+  v_.resize(widest);
+  t_.resize(widest);
   const int nj = static_cast<int>(joining_.size());
   sparse_schur_ = nj > kDenseSchurRows;
   s_start_.assign(nb, 0);
@@ -254,7 +293,7 @@ bool BodyBlockSolver::factorize(const Eigen::SparseMatrix<double>& a)
     const auto pivots = lu.matrixLU().diagonal().cwiseAbs();
     if (!(pivots.minCoeff() > 1e-8 * pivots.maxCoeff()) && !(lu.rcond() > kMinRcond))
       return false;
-    Eigen::Map<Eigen::MatrixXd> kinv(kinv_.data() + bb.k_start, bb.size, bb.size);
+    Eigen::Map<RowMajor> kinv(kinv_.data() + bb.k_start, bb.size, bb.size);
     kinv.setIdentity();
     kinv = lu.permutationP() * kinv;
     lu.matrixLU().triangularView<Eigen::UnitLower>().solveInPlace(kinv);
@@ -262,9 +301,9 @@ bool BodyBlockSolver::factorize(const Eigen::SparseMatrix<double>& a)
     if (bb.joins == 0)
       continue;
     // W_b = K_b^-1 [Gt_b; 0] and S += G_b W_b (its first n rows)
-    const Eigen::Map<const Eigen::MatrixXd> g(gx_.data() + bb.g_start, bb.joins, bb.n);
+    const Eigen::Map<const RowMajor> g(gx_.data() + bb.g_start, bb.joins, bb.n);
     const Eigen::Map<const Eigen::MatrixXd> gt(gtx_.data() + bb.g_start, bb.n, bb.joins);
-    Eigen::Map<Eigen::MatrixXd> w(wx_.data() + bb.w_start, bb.size, bb.joins);
+    Eigen::Map<RowMajor> w(wx_.data() + bb.w_start, bb.size, bb.joins);
     w.noalias() = kinv.leftCols(bb.n) * gt;
     const int* jl = jidx_.data() + bb.j_start;
     const int* slot = s_slot_.data() + s_start_[b];
@@ -296,25 +335,22 @@ void BodyBlockSolver::solve(const Eigen::VectorXd& b, Eigen::VectorXd& x) const
   const int nj = static_cast<int>(joining_.size());
   for (int k = 0; k < nj; ++k)
     rhs_(k) = -b(joining_[k]);
+  double* v = v_.data();
+  double* t = t_.data();
   // y_b = K_b^-1 b_b, and the joining rows' right-hand side sum_b G_b y_b - b_J
   for (const BodyBlock& bb : blocks_)
   {
     const int* rows = rows_.data() + bb.rows;
-    const double* kinv = kinv_.data() + bb.k_start;
+    for (int k = 0; k < bb.size; ++k)
+      v[k] = b(rows[k]);
     double* y = y_.data() + bb.y_start;
-    std::fill(y, y + bb.size, 0.0);
-    for (int c = 0; c < bb.size; ++c)
-    {
-      const double bc = b(rows[c]);
-      const double* col = kinv + c * bb.size;
-      for (int r = 0; r < bb.size; ++r)
-        y[r] += col[r] * bc;
-    }
-    const double* g = gx_.data() + bb.g_start;
+    multiply(kinv_.data() + bb.k_start, bb.size, bb.size, v, y);
+    if (bb.joins == 0)
+      continue;
+    multiply(gx_.data() + bb.g_start, bb.joins, bb.n, y, t);
     const int* jl = jidx_.data() + bb.j_start;
-    for (int c = 0; c < bb.n; ++c)
-      for (int r = 0; r < bb.joins; ++r)
-        rhs_(jl[r]) += g[c * bb.joins + r] * y[c];
+    for (int r = 0; r < bb.joins; ++r)
+      rhs_(jl[r]) += t[r];
   }
   if (sparse_schur_)
     s_static_.solve(rhs_, xj_);
@@ -324,18 +360,19 @@ void BodyBlockSolver::solve(const Eigen::VectorXd& b, Eigen::VectorXd& x) const
   for (const BodyBlock& bb : blocks_)
   {
     const int* rows = rows_.data() + bb.rows;
-    const double* w = wx_.data() + bb.w_start;
-    const int* jl = jidx_.data() + bb.j_start;
-    double* y = y_.data() + bb.y_start;
-    for (int c = 0; c < bb.joins; ++c)
+    const double* y = y_.data() + bb.y_start;
+    if (bb.joins == 0)
     {
-      const double xc = xj_(jl[c]);
-      const double* col = w + c * bb.size;
       for (int r = 0; r < bb.size; ++r)
-        y[r] -= col[r] * xc;
+        x(rows[r]) = y[r];
+      continue;
     }
+    const int* jl = jidx_.data() + bb.j_start;
+    for (int c = 0; c < bb.joins; ++c)
+      v[c] = xj_(jl[c]);
+    multiply(wx_.data() + bb.w_start, bb.size, bb.joins, v, t);
     for (int r = 0; r < bb.size; ++r)
-      x(rows[r]) = y[r];
+      x(rows[r]) = y[r] - t[r];
   }
   for (int k = 0; k < nj; ++k)
     x(joining_[k]) = xj_(k);
