@@ -74,7 +74,7 @@ bool BodyBlockSolver::analyze(const Eigen::SparseMatrix<double>& a)
   a_inner_.assign(a.innerIndexPtr(), a.innerIndexPtr() + a.nonZeros());
   nq_ = std::accumulate(body_sizes_.begin(), body_sizes_.end(), 0);
   const int nb = static_cast<int>(body_sizes_.size());
-  if (nb == 0 || nq_ > n_ || a.cols() != n_)
+  if (nb == 0 || nq_ > n_ || a.cols() != n_ || !a.isCompressed())  // (the pattern is read from its arrays)
     return false;
   std::vector<int> body(nq_);
   for (int b = 0, c = 0; b < nb; ++b)

@@ -240,6 +240,7 @@ TEST(LinearSolver, DistrustedBodyBlocksPauseLongerEachTimeUntilOneServes)
   ASSERT_TRUE(solver.bodyBlocks());
   solver.distrustBodyBlocks();
   EXPECT_EQ(exactRun(), 4);
+  EXPECT_EQ(solver.bodyBlockRefusals(), 4 + 8 + 16 + 4);
   // suspended approximations give exact factors
   solver.allowApproximate(false);
   ASSERT_TRUE(solver.factorize(a));

@@ -40,9 +40,10 @@ public:
   /// them are the constraint rows'.
   explicit BodyBlockSolver(std::vector<int> body_sizes = {});
 
-  /// False when A0 cannot be formed or solved here: a constraint row touching no body, a nonzero entry
-  /// between two constraint rows, a body system of more than kMaxBodyRows rows, a body system or dense
-  /// Schur complement with a reciprocal condition below 1e-13, a sparse one with a zero pivot.
+  /// False when A0 cannot be formed or solved here: `a` not compressed, a constraint row touching no body,
+  /// a nonzero entry between two constraint rows, a body system of more than kMaxBodyRows rows, a body
+  /// system or dense Schur complement with a reciprocal condition below 1e-13, a sparse one with a zero
+  /// pivot.
   bool factorize(const Eigen::SparseMatrix<double>& a);
   void solve(const Eigen::VectorXd& b, Eigen::VectorXd& x) const;
 
