@@ -16,13 +16,10 @@ constexpr double kReuseStepChange = 0.2;
 constexpr double kRateFloor = 0.05;
 constexpr int kFreshStartsLeast = 2;
 constexpr int kFreshStartsMost = 64;
-// Fresh starts only where a factorization costs about a residual: dense Newton matrices of at most this many
-// unknowns (the six-bar robot, 48: 9 us against 8 us; the tower, 200: 250 us against 15 us)
-constexpr int kFreshStartSize = 64;
-// Body-block matrices (SparseLinearSolver) contracting slower than this in the step that made them are distrusted
-// (0.25 and 0.1 measured: more exact factorizations and no fewer iterations, on the tower's fixed and adaptive
-// steps and on the lattices)
-constexpr double kBodyBlockRate = 0.5;
+// Small systems, where a factorization costs about a residual: Newton matrices of at most this many unknowns
+// (the six-bar robot, 48: 9 us against 8 us; the tower, 200: 250 us against 15 us). Fresh starts there (dense
+// ones); body blocks only above (the six-bar robot on them: 4.2 Newton iterations per step instead of 2.1)
+constexpr int kSmallSystem = 64;
 }  // namespace
 
 DynamicsSolver::DynamicsSolver(const Model& model, const SolverOptions& options)
@@ -31,7 +28,7 @@ DynamicsSolver::DynamicsSolver(const Model& model, const SolverOptions& options)
   linear_.allowDense(true);
   // the approximate static-pivot factorization is for modified Newton only (its contraction test)
   linear_.allowStaticPivot(options.reuse_jacobian);
-  if (options.reuse_jacobian && system_.size() > kFreshStartSize)
+  if (options.reuse_jacobian && system_.size() > kSmallSystem)
   {
     std::vector<int> body_sizes;
     for (const Body& b : model.bodies)
@@ -367,12 +364,11 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law, boo
       {
         rebuild = true;
         diverged = diverged || !built_this_step;
-      }
-      if (built_this_step && linear_.bodyBlocks() && theta_ > kBodyBlockRate)
-      {
-        // too far off where it was made: the exact matrix now, and for a while
-        linear_.distrustBodyBlocks();
-        rebuild = true;
+        // body blocks too far off in the step that made them: the exact matrix now, and for a while (distrusting
+        // them at 0.25 or 0.1 gave more exact factorizations and no fewer iterations, on the tower's fixed and
+        // adaptive steps and on the lattices)
+        if (built_this_step && linear_.bodyBlocks())
+          linear_.distrustBodyBlocks();
       }
     }
     previous = scaled;
@@ -423,7 +419,7 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law, boo
       s.u = u;
       updateContactMemory(s, q_);
       ++factor_age_;
-      if (diverged && linear_.dense() && system_.size() <= kFreshStartSize)
+      if (diverged && linear_.dense() && system_.size() <= kSmallSystem)
       {
         fresh_streak_ = std::clamp(2 * fresh_streak_, kFreshStartsLeast, kFreshStartsMost);
         fresh_starts_ = fresh_streak_;
