@@ -525,11 +525,11 @@ PeakTracker::PeakTracker(const Model& model) : model_(model), contacts_(model)
     peaks_.push_back({ name, 0.0, 0.0 });
 }
 
-void PeakTracker::add(const State& state)
+void PeakTracker::add(const State& state, const std::vector<ContactPairState>* given)
 {
   // the five columns as csvRow computes them, and nothing else of the row (this runs at every step)
   double max_normal = 0.0, max_friction = 0.0;
-  const std::vector<ContactPairState>& contacts = contacts_.active(state);
+  const std::vector<ContactPairState>& contacts = given ? *given : contacts_.active(state);
   for (const ContactPairState& c : contacts)
     if (c.body_b >= 0)
     {
@@ -612,7 +612,7 @@ namespace
 /// The dynamic loop with solver.adaptive: steps to every output time and every actuation breakpoint.
 void runAdaptive(const Model& model, DynamicsSolver& solver, const ActuationLaw& law, State& state, RunResult& result,
                  const std::function<void(const State&)>& on_output, const std::function<void(double)>& on_progress,
-                 const std::function<void(const State&)>& on_step)
+                 const StepCallback& on_step)
 {
   const AnalysisSettings& an = model.analysis;
   const double eps = 1e-12 * std::max(1.0, an.duration);
@@ -646,7 +646,7 @@ void runAdaptive(const Model& model, DynamicsSolver& solver, const ActuationLaw&
         [&]()
         {
           if (on_step)
-            on_step(s);
+            on_step(s, solver.contactsAt(s));
           if (every && s.t < an.duration - eps)
           {
             on_output(s);
@@ -686,8 +686,17 @@ void runAdaptive(const Model& model, DynamicsSolver& solver, const ActuationLaw&
 }
 }  // namespace
 
-RunResult runAnalysis(const Model& model, const std::function<void(const State&)>& user_output,
+RunResult runAnalysis(const Model& model, const std::function<void(const State&)>& on_output,
                       const std::function<void(double)>& on_progress, const std::function<void(const State&)>& on_step)
+{
+  StepCallback each;
+  if (on_step)
+    each = [&on_step](const State& s, const std::vector<ContactPairState>*) { on_step(s); };
+  return runAnalysis(model, on_output, on_progress, each);
+}
+
+RunResult runAnalysis(const Model& model, const std::function<void(const State&)>& user_output,
+                      const std::function<void(double)>& on_progress, const StepCallback& on_step)
 {
   // cables that run through a strut, at the output steps: once per cable and strut, at most kMaxCrossingWarnings
   constexpr size_t kMaxCrossingWarnings = 20;
@@ -767,11 +776,11 @@ RunResult runAnalysis(const Model& model, const std::function<void(const State&)
                                                                    "t = " + roundedNumber(s.t) + " s"));
     }
   };
-  const std::function<void(const State&)> step_hook = [&](const State& s)
+  const StepCallback step_hook = [&](const State& s, const std::vector<ContactPairState>* contacts)
   {
     watch(s);
     if (on_step)
-      on_step(s);
+      on_step(s, contacts);
   };
   const auto with_yield_warnings = [&](Summary& s)
   { s.warnings.insert(s.warnings.end(), yield_warnings.begin(), yield_warnings.end()); };
@@ -803,7 +812,7 @@ RunResult runAnalysis(const Model& model, const std::function<void(const State&)
                           [&](const State& s, const Summary&)
                           {
                             const auto callbacks = std::chrono::steady_clock::now();
-                            step_hook(s);
+                            step_hook(s, nullptr);
                             on_output(s);
                             result.callback_time +=
                                 std::chrono::duration<double>(std::chrono::steady_clock::now() - callbacks).count();
@@ -860,7 +869,7 @@ RunResult runAnalysis(const Model& model, const std::function<void(const State&)
         }
         state.t = t_target;  // no drift from summing steps
         const auto callbacks = std::chrono::steady_clock::now();
-        step_hook(state);
+        step_hook(state, solver.contactsAt(state));
         if (state.t >= next_output - 1e-9 * dt || k == n_steps)
         {
           on_output(state);

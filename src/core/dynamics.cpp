@@ -98,17 +98,32 @@ void DynamicsSolver::findNearContacts(const State& s, double motion)
   const Model& model = system_.model();
   near_motion_ = motion;
   system_.nearContacts(s.q, motion, near_);
+  // the slots the last accepted step evaluated at its end, which is this start: their approach rates
+  const bool at_end = atEnd(s);
   for (int i : near_)
   {
     const double memory = i < static_cast<int>(s.contact_speed.size()) ? s.contact_speed[i] : 0.0;
     if (memory > 0.0)
       step_speeds_[i] = memory;
+    else if (at_end && !std::isnan(end_rate_[i]))
+      step_speeds_[i] = std::max(end_rate_[i], model.contact.min_impact_speed);
     else
     {
       const ContactPairState st = evaluateContact(model, i, s.q, s.qd, 0.0, ContactMode::kDynamic, nullptr);
       step_speeds_[i] = std::max(st.penetration_rate, model.contact.min_impact_speed);
     }
   }
+}
+
+bool DynamicsSolver::atEnd(const State& s) const
+{
+  // (not the time: callers round it to their step grid; the contacts depend on q, qd and the memory)
+  return end_valid_ && s.q == end_q_ && s.qd == end_qd_ && s.contact_speed == end_memory_;
+}
+
+const std::vector<ContactPairState>* DynamicsSolver::contactsAt(const State& state) const
+{
+  return atEnd(state) ? &end_contacts_ : nullptr;
 }
 
 void DynamicsSolver::updateContactMemory(State& s, const Eigen::VectorXd& q_start)
@@ -120,11 +135,31 @@ void DynamicsSolver::updateContactMemory(State& s, const Eigen::VectorXd& q_star
   estimate_.onset_depth = 0.0;
   estimate_.onset_gap = 0.0;
   estimate_.onset_pair = -1;
+  // the end's evaluation (contactsAt, and the next step's approach rates): the earlier one's slots forgotten
+  if (end_rate_.size() != static_cast<size_t>(model.contactSlots()))
+    end_rate_.assign(model.contactSlots(), std::numeric_limits<double>::quiet_NaN());
+  for (int i : end_slots_)
+    end_rate_[i] = std::numeric_limits<double>::quiet_NaN();
+  end_slots_.clear();
+  end_contacts_.clear();
+  end_q_ = s.q;
+  end_qd_ = s.qd;
+  end_valid_ = true;
   if (!model.anyContact())
-    return;
-  for (int i : near_)  // (every slot touching at the step's end is in it: attempt() checks the motion)
   {
-    const double gap = contactGeometry(model, i, s.q).gap;
+    end_memory_ = s.contact_speed;
+    return;
+  }
+  // every slot touching at the step's end is near (attempt() checks the motion); each is evaluated with the
+  // step's impact speed, which is the one its memory keeps
+  for (int i : near_)
+  {
+    const ContactPairState st = evaluateContact(model, i, s.q, s.qd, step_speeds_[i], ContactMode::kDynamic, nullptr);
+    end_rate_[i] = st.penetration_rate;
+    end_slots_.push_back(i);
+    if (st.active)
+      end_contacts_.push_back(st);
+    const double gap = st.gap;
     if (gap >= 0.0)
       continue;
     s.contact_speed[i] = step_speeds_[i];
@@ -139,6 +174,9 @@ void DynamicsSolver::updateContactMemory(State& s, const Eigen::VectorXd& q_star
       estimate_.onset_pair = i;
     }
   }
+  std::sort(end_contacts_.begin(), end_contacts_.end(),
+            [](const ContactPairState& a, const ContactPairState& b) { return a.pair < b.pair; });
+  end_memory_ = s.contact_speed;
 }
 
 double DynamicsSolver::errorEstimate(const Eigen::VectorXd& a0, const Eigen::VectorXd& a1, double h) const

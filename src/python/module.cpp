@@ -116,7 +116,7 @@ py::dict run(const at::Model& model)
           }
           ++c.steps;
         },
-        {}, [&](const at::State& s) { peaks.add(s); });
+        {}, [&](const at::State& s, const std::vector<at::ContactPairState>* contacts) { peaks.add(s, contacts); });
   }
   const std::vector<std::string> columns = at::csvColumns(model);
   const std::vector<std::string> member_columns = at::memberColumns(model);

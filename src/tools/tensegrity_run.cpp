@@ -398,7 +398,8 @@ int main(int argc, char** argv)
 
   // peaks over every time step (or load step), not only the output steps
   at::PeakTracker peaks(model);
-  const auto track_peaks = [&](const at::State& s) { peaks.add(s); };
+  const auto track_peaks = [&](const at::State& s, const std::vector<at::ContactPairState>* contacts)
+  { peaks.add(s, contacts); };
 
   at::State last;
   const auto wall_start = std::chrono::steady_clock::now();

@@ -188,33 +188,70 @@ TEST(Tower, SlowDynamicFoldFollowsTheQuasiStaticHeights)
   EXPECT_LT(worst, 0.06);
 }
 
-TEST(Tower, ContactScanFindsTheContactsOfEveryStep)
+TEST(Tower, EveryStepsContactsAreThoseOfAFullSearch)
 {
-  // ContactScan (the peak tracker's contacts) keeps its candidates while the bodies stay within a tenth of a
-  // contact radius of where it last looked: at every step of a fast fold through contact it must give
-  // exactly what a full broad and narrow phase gives
+  // Two shortcuts must give, at every step of a fast fold through contact, exactly what a full broad and narrow
+  // phase gives: ContactScan (which keeps its candidates while the bodies stay within a tenth of a contact radius
+  // of where it last looked) and the contacts the dynamics solver evaluated at the step's end (runAnalysis hands
+  // them to on_step; the peaks use them)
   const Model model = tower({ { "analysis.type", "dynamic" },
                               { "actuation.speed", "5" },
                               { "analysis.duration", "0.45" },
                               { "analysis.output_interval", "0.05" } });
   ContactScan scan(model);
-  int steps = 0, touching = 0;
+  int steps = 0, touching = 0, given = 0;
+  const auto same = [](const std::vector<ContactPairState>& a, const std::vector<ContactPairState>& b, double t)
+  {
+    ASSERT_EQ(a.size(), b.size()) << "t = " << t;
+    for (size_t i = 0; i < a.size(); ++i)
+    {
+      EXPECT_EQ(a[i].pair, b[i].pair) << "t = " << t;
+      EXPECT_EQ(a[i].normal_force, b[i].normal_force) << "t = " << t;
+      EXPECT_EQ(a[i].friction_force, b[i].friction_force) << "t = " << t;
+      EXPECT_EQ(a[i].penetration_rate, b[i].penetration_rate) << "t = " << t;
+      EXPECT_EQ(a[i].force_on_a, b[i].force_on_a) << "t = " << t;
+    }
+  };
   const RunResult result = runAnalysis(
       model, [](const State&) {}, {},
-      [&](const State& s)
+      [&](const State& s, const std::vector<ContactPairState>* contacts)
       {
         const std::vector<ContactPairState> full = activeContacts(model, s);
-        const std::vector<ContactPairState>& kept = scan.active(s);
-        ASSERT_EQ(kept.size(), full.size()) << "t = " << s.t;
-        for (size_t i = 0; i < full.size(); ++i)
+        same(scan.active(s), full, s.t);
+        if (contacts)
         {
-          EXPECT_EQ(kept[i].pair, full[i].pair) << "t = " << s.t;
-          EXPECT_EQ(kept[i].normal_force, full[i].normal_force) << "t = " << s.t;
+          same(*contacts, full, s.t);
+          ++given;
         }
         ++steps;
         touching += full.empty() ? 0 : 1;
       });
   ASSERT_TRUE(result.summary.ok()) << result.summary.message;
   EXPECT_GT(steps, 2000);
+  EXPECT_EQ(given, steps) << "every time step's contacts come from the solver";
   EXPECT_GT(touching, 50) << "the fold must reach contact for the comparison to mean anything";
+}
+
+TEST(Tower, TheSolverGivesContactsOnlyForTheStateItsLastStepEndedIn)
+{
+  const Model model = tower({ { "analysis.type", "dynamic" }, { "actuation.speed", "5" } });
+  const ActuationLaw law = [&model](double t) { return scheduledActuation(model, t); };
+  DynamicsSolver solver(model, model.solver);
+  State s = initialState(model);
+  ASSERT_TRUE(solver.initialize(s, law).ok());
+  EXPECT_EQ(solver.contactsAt(s), nullptr) << "no step taken yet";
+  ASSERT_TRUE(solver.step(s, model.solver.dt, law).ok());
+  ASSERT_NE(solver.contactsAt(s), nullptr);
+  State moved = s;
+  moved.qd[0] += 1e-12;
+  EXPECT_EQ(solver.contactsAt(moved), nullptr) << "a velocity changed";
+  moved = s;
+  moved.q[1] -= 1e-12;
+  EXPECT_EQ(solver.contactsAt(moved), nullptr) << "a position changed";
+  moved = s;
+  moved.contact_speed.assign(moved.contact_speed.size(), 0.5);
+  EXPECT_EQ(solver.contactsAt(moved), nullptr) << "the contact memory changed";
+  moved = s;
+  moved.t += 1e-9;  // callers round the time to their step grid
+  EXPECT_NE(solver.contactsAt(moved), nullptr);
 }

@@ -147,7 +147,9 @@ class PeakTracker
 {
 public:
   explicit PeakTracker(const Model& model);
-  void add(const State& state);
+  /// `contacts`: the state's active contacts when the caller has them (runAnalysis's StepCallback), else null
+  /// and they are found here.
+  void add(const State& state, const std::vector<ContactPairState>* contacts = nullptr);
   const std::vector<Peak>& peaks() const
   {
     return peaks_;
@@ -179,10 +181,18 @@ struct RunResult
 /// sum to wall_time. Static runs have only callbacks and rest (the step split is dynamic only).
 std::vector<std::pair<std::string, double>> timeBreakdown(const RunResult& result);
 
+/// runAnalysis's per-step callback: the state after a time step or load step, and its active contacts (as
+/// activeContacts gives them) when the solver evaluated them there (dynamics: DynamicsSolver::contactsAt), else
+/// null (statics).
+using StepCallback = std::function<void(const State&, const std::vector<ContactPairState>* contacts)>;
+
 /// Runs model.analysis; calls on_output for every output step (the initial state included) and
 /// on_step, when given, after every time step or load step (for peaks between output steps).
 RunResult runAnalysis(const Model& model, const std::function<void(const State&)>& on_output,
-                      const std::function<void(double fraction)>& on_progress = {},
-                      const std::function<void(const State&)>& on_step = {});
+                      const std::function<void(double fraction)>& on_progress = {}, const StepCallback& on_step = {});
+/// As above, with a per-step callback that takes the state alone.
+RunResult runAnalysis(const Model& model, const std::function<void(const State&)>& on_output,
+                      const std::function<void(double fraction)>& on_progress,
+                      const std::function<void(const State&)>& on_step);
 
 }  // namespace active_tensegrity::core

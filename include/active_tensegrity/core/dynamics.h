@@ -6,6 +6,7 @@
 
 #include <functional>
 
+#include "active_tensegrity/core/contact.h"
 #include "active_tensegrity/core/sparse_linear_solver.h"
 #include "active_tensegrity/core/state.h"
 #include "active_tensegrity/core/summary.h"
@@ -52,6 +53,12 @@ public:
   {
     return system_;
   }
+
+  /// The active contacts of `state` (as activeContacts(model, state) gives them, ordered by contact slot)
+  /// when it is the state the last accepted step ended in, evaluated with that step's contact memory; else
+  /// null. Every step evaluates them at its end (the step after it starts from their approach rates), so
+  /// per-step consumers (peaks, messages) need no contact pass of their own.
+  const std::vector<ContactPairState>* contactsAt(const State& state) const;
 
   const StepTimings& timings() const
   {
@@ -117,6 +124,16 @@ private:
   /// The least motion near_ allows for (m): a body at rest still moves a little in its first step.
   static constexpr double kNearFloor = 1e-4;
   std::vector<double> previous_speed_;  // contact memory at the start of the step being accepted
+  // the near slots evaluated where the last accepted step ended (end_q_, end_qd_, contact memory end_memory_):
+  // their approach rates (NaN: not evaluated) for the next step's impact speeds, and the active contacts
+  bool end_valid_ = false;
+  Eigen::VectorXd end_q_, end_qd_;
+  std::vector<double> end_memory_;
+  std::vector<double> end_rate_;
+  std::vector<int> end_slots_;
+  std::vector<ContactPairState> end_contacts_;
+  /// Whether `s` is the state the last accepted step ended in (end_*).
+  bool atEnd(const State& s) const;
   StepTimings timings_;
   StepEstimate estimate_;
   // modified Newton (options_.reuse_jacobian): the factorization in linear_ and what it was built for

@@ -17,8 +17,8 @@ namespace
 const char* kUsage =
     "usage: tensegrity_bench steps SCENE.yaml [--set key=value]... [--repeat N] [--peaks]\n"
     "  Runs the scene's analysis N times (default 5) and prints wall time and Newton iterations per step\n"
-    "  and where the time goes; --peaks also evaluates a full output row after every step (as\n"
-    "  tensegrity_run's summary peaks do).\n"
+    "  and where the time goes; --peaks also tracks the summary's peaks after every step (as\n"
+    "  tensegrity_run does).\n"
     "       tensegrity_bench contact-pair [--repeat N]\n"
     "  Times one strut pair's contact evaluation (dynamic with friction, with and without tangents;\n"
     "  static): ns per call, median over N (default 5) loops of 100000 calls.\n"

@@ -2,8 +2,8 @@
 // runs the scene's analysis N times and prints the wall time per solver step (median and minimum
 // over the runs), Newton iterations per step, for dynamic runs the real-time factor, and where the
 // time of the last run went (forces, contact, constraints, factorization, solve, the rest); with
-// --peaks the run also evaluates a full output row after every step, as tensegrity_run does for
-// its summary peaks, so that the cost of that tracking shows under "callbacks".
+// --peaks the run also tracks the summary's peaks after every step as tensegrity_run does (PeakTracker), so
+// that the cost of that tracking shows under "callbacks".
 #include <algorithm>
 #include <cstdio>
 #include <iostream>
@@ -26,7 +26,9 @@ int steps(const std::string& scene, const std::vector<at::Override>& overrides, 
   long allocations = 0;
   for (int r = 0; r < repeat; ++r)
   {
-    const auto per_step_row = [&model](const at::State& s) { g_sink = g_sink + at::csvRow(model, s).back(); };
+    at::PeakTracker tracker(model);
+    const auto track = [&tracker](const at::State& s, const std::vector<at::ContactPairState>* contacts)
+    { tracker.add(s, contacts); };
     // allocations from the first step on (setup and initialization excluded)
     long at_first_step = -1;
     const auto count = [&at_first_step](const at::State&)
@@ -35,7 +37,7 @@ int steps(const std::string& scene, const std::vector<at::Override>& overrides, 
         at_first_step = heapAllocations();
     };
     last = peaks ? at::runAnalysis(
-                       model, [](const at::State&) {}, {}, per_step_row) :
+                       model, [](const at::State&) {}, {}, track) :
                    at::runAnalysis(model, count);
     allocations = at_first_step < 0 ? 0 : heapAllocations() - at_first_step;
     if (!last.summary.ok())
