@@ -82,7 +82,9 @@ int steps(const std::string& scene, const std::vector<at::Override>& overrides, 
     std::printf("  %-14s %10.2f us %6.1f %%\n", part.c_str(), 1e6 * seconds / n,
                 last.wall_time > 0.0 ? 100.0 * seconds / last.wall_time : 0.0);
   if (dynamic)
-    std::printf("real-time factor (simulated / wall, median): %.1f\n", model.solver.dt / median);
+    // (the mean simulated time per step: dt for fixed steps, the mean step with solver.adaptive)
+    std::printf("real-time factor (simulated / wall, median): %.1f\n",
+                model.analysis.duration / std::max(1, last.solver_steps) / median);
   return 0;
 }
 }  // namespace active_tensegrity::tools::bench
