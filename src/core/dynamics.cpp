@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <sstream>
 
@@ -117,8 +118,14 @@ void DynamicsSolver::findNearContacts(const State& s, double motion)
 
 bool DynamicsSolver::atEnd(const State& s) const
 {
-  // (not the time: callers round it to their step grid; the contacts depend on q, qd and the memory)
-  return end_valid_ && s.q == end_q_ && s.qd == end_qd_ && s.contact_speed == end_memory_;
+  // (not the time: callers round it to their step grid; the contacts depend on q, qd and the memory) Bitwise
+  // (memcmp: Eigen's == compares coefficient by coefficient, 1.3 % of the tower's step)
+  const auto same = [](const double* a, const double* b, size_t n)
+  { return n == 0 || std::memcmp(a, b, n * sizeof(double)) == 0; };
+  return end_valid_ && s.q.size() == end_q_.size() && s.qd.size() == end_qd_.size() &&
+         s.contact_speed.size() == end_memory_.size() && same(s.q.data(), end_q_.data(), end_q_.size()) &&
+         same(s.qd.data(), end_qd_.data(), end_qd_.size()) &&
+         same(s.contact_speed.data(), end_memory_.data(), end_memory_.size());
 }
 
 const std::vector<ContactPairState>* DynamicsSolver::contactsAt(const State& state) const
