@@ -55,7 +55,66 @@ void multiply(const double* a, int rows, int cols, const double* x, double* y)
 }
 }  // namespace
 
-BodyBlockSolver::BodyBlockSolver(std::vector<int> body_sizes) : body_sizes_(std::move(body_sizes)) {}
+BodyBlockSolver::BodyBlockSolver(std::vector<int> body_sizes) : body_sizes_(std::move(body_sizes))
+{
+  for (size_t b = 0; b < body_sizes_.size(); ++b)
+    body_of_column_.insert(body_of_column_.end(), body_sizes_[b], static_cast<int>(b));
+  group_of_body_wanted_.resize(body_sizes_.size());
+  std::iota(group_of_body_wanted_.begin(), group_of_body_wanted_.end(), 0);
+}
+
+void BodyBlockSolver::chooseGroups(const Eigen::SparseMatrix<double>& a)
+{
+  const int nb = static_cast<int>(body_sizes_.size());
+  const int nq = static_cast<int>(body_of_column_.size());
+  std::vector<int>& group = group_of_body_wanted_;
+  std::iota(group.begin(), group.end(), 0);
+  if (nq > a.cols())
+    return;
+  body_diagonal_.assign(nb, 0.0);
+  couplings_.clear();
+  const int* outer = a.outerIndexPtr();
+  const int* inner = a.innerIndexPtr();
+  const double* v = a.valuePtr();
+  for (int j = 0; j < nq; ++j)
+    for (int p = outer[j]; p < outer[j + 1]; ++p)
+      if (inner[p] == j)
+        body_diagonal_[body_of_column_[j]] = std::max(body_diagonal_[body_of_column_[j]], std::abs(v[p]));
+  for (int j = 0; j < nq; ++j)
+    for (int p = outer[j]; p < outer[j + 1]; ++p)
+    {
+      const int i = inner[p];
+      if (i >= nq || i >= j)  // (the lower triangle's: the pattern of H is symmetric)
+        continue;
+      const int bi = body_of_column_[i], bj = body_of_column_[j];
+      if (bi == bj)
+        continue;
+      const double scale = std::min(body_diagonal_[bi], body_diagonal_[bj]);
+      if (scale > 0.0 && std::abs(v[p]) >= kGroupCoupling * scale)
+        couplings_.push_back({ std::abs(v[p]) / scale, { bi, bj } });
+    }
+  if (couplings_.empty())
+    return;
+  // strongest first; a pair already together, or whose groups together would be too large, is left
+  std::sort(couplings_.begin(), couplings_.end(), [](const auto& x, const auto& y) { return x.first > y.first; });
+  std::vector<int> columns(body_sizes_);
+  const auto find = [&group](int b)
+  {
+    while (group[b] != b)
+      b = group[b] = group[group[b]];
+    return b;
+  };
+  for (const auto& c : couplings_)
+  {
+    const int x = find(c.second.first), y = find(c.second.second);
+    if (x == y || columns[x] + columns[y] > kMaxGroupColumns)
+      continue;
+    group[std::max(x, y)] = std::min(x, y);
+    columns[std::min(x, y)] += columns[std::max(x, y)];
+  }
+  for (int b = 0; b < nb; ++b)
+    group[b] = find(b);
+}
 
 bool BodyBlockSolver::samePattern(const Eigen::SparseMatrix<double>& a) const
 {
@@ -73,13 +132,29 @@ bool BodyBlockSolver::analyze(const Eigen::SparseMatrix<double>& a)
   a_outer_.assign(a.outerIndexPtr(), a.outerIndexPtr() + a.cols() + 1);
   a_inner_.assign(a.innerIndexPtr(), a.innerIndexPtr() + a.nonZeros());
   nq_ = std::accumulate(body_sizes_.begin(), body_sizes_.end(), 0);
-  const int nb = static_cast<int>(body_sizes_.size());
-  if (nb == 0 || nq_ > n_ || a.cols() != n_ || !a.isCompressed())  // (the pattern is read from its arrays)
+  if (body_sizes_.empty() || nq_ > n_ || a.cols() != n_ || !a.isCompressed())  // (the pattern is read from its arrays)
     return false;
+  // the blocks: one per group of bodies (group_of_body_: each body's group named by its smallest body)
+  group_of_body_ = group_of_body_wanted_;
+  std::vector<int> block_of_group(body_sizes_.size(), -1);
+  int nb = 0;
+  for (int g : group_of_body_)
+    if (block_of_group[g] < 0)
+      block_of_group[g] = nb++;
   std::vector<int> body(nq_);
-  for (int b = 0, c = 0; b < nb; ++b)
-    for (int k = 0; k < body_sizes_[b]; ++k)
-      body[c++] = b;
+  for (int c = 0; c < nq_; ++c)
+    body[c] = block_of_group[group_of_body_[body_of_column_[c]]];
+  std::vector<std::vector<int>> columns(nb);
+  for (int c = 0; c < nq_; ++c)
+    columns[body[c]].push_back(c);
+  std::vector<int> bodies_in_block(nb, 0);
+  for (int g : group_of_body_)
+    if (g >= 0)
+      ++bodies_in_block[block_of_group[g]];
+  grouped_bodies_ = 0;
+  for (int b = 0; b < static_cast<int>(body_sizes_.size()); ++b)
+    if (group_of_body_[b] != b || std::count(group_of_body_.begin(), group_of_body_.end(), b) > 1)
+      ++grouped_bodies_;
   // the bodies each constraint row touches (in G and in Gt): -1 none, -2 more than one
   std::vector<int> owner(n_ - nq_, -1);
   const auto touch = [&](int row, int b)
@@ -127,19 +202,19 @@ bool BodyBlockSolver::analyze(const Eigen::SparseMatrix<double>& a)
   jidx_.clear();
   std::vector<int> local(n_, -1);  // a row's index in its body system
   int k_size = 0, g_size = 0, w_size = 0, y_size = 0;
-  for (int b = 0, c = 0; b < nb; ++b)
+  int largest = 0;
+  for (int b = 0; b < nb; ++b)
   {
     std::sort(joins[b].begin(), joins[b].end());
     joins[b].erase(std::unique(joins[b].begin(), joins[b].end()), joins[b].end());
     BodyBlock& bb = blocks_[b];
-    bb.n = body_sizes_[b];
+    bb.n = static_cast<int>(columns[b].size());
     bb.size = bb.n + static_cast<int>(own[b].size());
-    if (bb.size > kMaxBodyRows)
+    if (bb.size > (bodies_in_block[b] == 1 ? kMaxBodyRows : kMaxGroupRows))
       return false;
+    largest = std::max(largest, bb.size);
     bb.rows = static_cast<int>(rows_.size());
-    for (int k = 0; k < bb.n; ++k)
-      rows_.push_back(c + k);
-    c += bb.n;
+    rows_.insert(rows_.end(), columns[b].begin(), columns[b].end());
     rows_.insert(rows_.end(), own[b].begin(), own[b].end());
     for (int k = 0; k < bb.size; ++k)
       local[rows_[bb.rows + k]] = k;
@@ -204,9 +279,9 @@ bool BodyBlockSolver::analyze(const Eigen::SparseMatrix<double>& a)
   gx_.setZero(g_size);
   gtx_.setZero(g_size);
   wx_.setZero(w_size);
-  body_lu_.resize(kMaxBodyRows + 1);
+  body_lu_.resize(std::max<size_t>(body_lu_.size(), largest + 1));
   y_.resize(y_size);
-  int widest = kMaxBodyRows;
+  int widest = largest;
   for (const BodyBlock& bb : blocks_)
     widest = std::max(widest, bb.joins);
   v_.resize(widest);
@@ -252,7 +327,8 @@ bool BodyBlockSolver::analyze(const Eigen::SparseMatrix<double>& a)
 
 bool BodyBlockSolver::factorize(const Eigen::SparseMatrix<double>& a)
 {
-  if (!samePattern(a) && !analyze(a))
+  chooseGroups(a);
+  if ((!samePattern(a) || group_of_body_wanted_ != group_of_body_) && !analyze(a))
     return false;
   if (!usable_)
     return false;

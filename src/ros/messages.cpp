@@ -102,7 +102,8 @@ void MessageBuilder::clearMarkers()
   clear_all_ = true;
 }
 
-Snapshot MessageBuilder::build(const core::State& state, const ros::Time& stamp)
+Snapshot MessageBuilder::build(const core::State& state, const ros::Time& stamp,
+                               const std::vector<core::ContactPairState>* given)
 {
   Snapshot out;
   const Eigen::VectorXd& q = state.q;
@@ -120,7 +121,10 @@ Snapshot MessageBuilder::build(const core::State& state, const ros::Time& stamp)
     out.transforms.push_back(t);
   }
 
-  const std::vector<core::ContactPairState> contacts = core::activeContacts(model_, state);
+  std::vector<core::ContactPairState> searched;
+  if (!given)
+    searched = core::activeContacts(model_, state);
+  const std::vector<core::ContactPairState>& contacts = given ? *given : searched;
   out.contacts.header.stamp = stamp;
   out.contacts.header.frame_id = frame_id_;
   for (const core::ContactPairState& c : contacts)

@@ -501,7 +501,7 @@ void SimNode::publishState(const core::State& state, const ros::Time& stamp)
     c.clock = stamp;
     clock_pub_.publish(c);
   }
-  const Snapshot snap = builder_.build(state, stamp);
+  const Snapshot snap = builder_.build(state, stamp, solver_.contactsAt(state));
   tf_.sendTransform(snap.transforms);
   contacts_pub_.publish(snap.contacts);
   cables_pub_.publish(snap.cables);

@@ -1,5 +1,6 @@
 // BodyBlockSolver: the Newton matrix without the couplings between bodies, solved body by body with the
 // joining rows' Schur complement; and the dynamics that use it for modified Newton.
+#include <algorithm>
 #include <random>
 #include <string>
 #include <utility>
@@ -97,13 +98,14 @@ Saddle makeSaddle(const std::vector<int>& sizes, const std::vector<int>& own_row
   return s;
 }
 
-/// A with the couplings between bodies zeroed: the matrix BodyBlockSolver solves.
-Eigen::MatrixXd withoutCouplings(const Saddle& s)
+/// A with the couplings between bodies zeroed, except within a group (groups: each body's group; empty: every
+/// body alone): the matrix BodyBlockSolver solves.
+Eigen::MatrixXd withoutCouplings(const Saddle& s, const std::vector<int>& groups = {})
 {
   Eigen::MatrixXd a0 = s.a;
   std::vector<int> body;
   for (size_t b = 0; b < s.sizes.size(); ++b)
-    body.insert(body.end(), s.sizes[b], static_cast<int>(b));
+    body.insert(body.end(), s.sizes[b], groups.empty() ? static_cast<int>(b) : groups[b]);
   for (int i = 0; i < s.nq; ++i)
     for (int j = 0; j < s.nq; ++j)
       if (body[i] != body[j])
@@ -118,14 +120,15 @@ Eigen::SparseMatrix<double> sparse(const Eigen::MatrixXd& a)
   return m;
 }
 
-/// The relative difference between BodyBlockSolver's solution and the dense LU's of A0, on a random b.
+/// The relative difference between BodyBlockSolver's solution and the dense LU's of A0 (its groups' couplings
+/// kept), on a random b.
 double solveError(BodyBlockSolver& solver, const Saddle& s, std::mt19937& rng)
 {
   std::uniform_real_distribution<double> u(-1.0, 1.0);
   const Eigen::VectorXd b = Eigen::VectorXd::NullaryExpr(s.a.rows(), [&] { return u(rng); });
   Eigen::VectorXd x;
   solver.solve(b, x);
-  const Eigen::VectorXd x0 = withoutCouplings(s).partialPivLu().solve(b);
+  const Eigen::VectorXd x0 = withoutCouplings(s, solver.groups()).partialPivLu().solve(b);
   return (x - x0).norm() / x0.norm();
 }
 }  // namespace
@@ -167,6 +170,49 @@ TEST(BodyBlockSolver, ManyJoiningRowsGoToTheSparseSchurComplement)
   EXPECT_GT(solver.joiningRows(), BodyBlockSolver::kDenseSchurRows);
   EXPECT_LT(solveError(solver, s, rng), 1e-11);
   EXPECT_LT(solveError(solver, s, rng), 1e-11);
+}
+
+TEST(BodyBlockSolver, StronglyCoupledBodiesAreSolvedTogether)
+{
+  // a chain of six struts joined end to end, couplings of 0.3 between neighbours (3 % of their diagonals of
+  // about 10: dropped); bodies 1 and 2 coupled at 4 (40 %): one group, their coupling and the joint between
+  // them kept, the rest dropped
+  std::mt19937 rng(5);
+  std::vector<int> sizes(6, 7), own(6, 1);
+  const std::vector<std::pair<int, int>> joints = { { 0, 1 }, { 1, 2 }, { 2, 3 }, { 3, 4 }, { 4, 5 } };
+  Saddle s = makeSaddle(sizes, own, joints, {}, 0.3, 0.1, rng);
+  s.a.block(7, 14, 7, 7).setConstant(4.0);
+  s.a.block(14, 7, 7, 7).setConstant(4.0);
+  BodyBlockSolver solver(s.sizes);
+  ASSERT_TRUE(solver.factorize(sparse(s.a)));
+  EXPECT_EQ(solver.groupedBodies(), 2);
+  EXPECT_EQ(solver.groups(), (std::vector<int>{ 0, 1, 1, 3, 4, 5 }));
+  EXPECT_EQ(solver.joiningRows(), 12) << "the joint between bodies 1 and 2 is the group's own";
+  EXPECT_LT(solveError(solver, s, rng), 1e-12);
+  Eigen::VectorXd x;
+  const Eigen::VectorXd b = Eigen::VectorXd::Ones(s.a.rows());
+  solver.solve(b, x);
+  EXPECT_GT((x - withoutCouplings(s).partialPivLu().solve(b)).norm(), 1e-3 * x.norm()) << "the strong coupling is kept";
+
+  // every neighbour strongly coupled: groups of at most four struts (kMaxGroupColumns), strongest first
+  Saddle strong = makeSaddle(sizes, own, joints, {}, 4.0, 0.1, rng);
+  strong.a.block(28, 35, 7, 7).setConstant(6.0);  // bodies 4 and 5 the strongest pair
+  strong.a.block(35, 28, 7, 7).setConstant(6.0);
+  ASSERT_TRUE(solver.factorize(sparse(strong.a)));
+  const std::vector<int>& g = solver.groups();
+  EXPECT_EQ(g[5], 4) << "the strongest pair is joined";
+  for (int b = 0; b < 6; ++b)
+    EXPECT_LE(std::count(g.begin(), g.end(), g[b]) * 7, BodyBlockSolver::kMaxGroupColumns) << "body " << b;
+  EXPECT_EQ(solver.groupedBodies(), 6);
+  EXPECT_LT(solveError(solver, strong, rng), 1e-12);
+
+  // weak couplings again: every body alone (a new analysis)
+  const int analyses = solver.analyses();
+  const Saddle weak = makeSaddle(sizes, own, joints, {}, 0.3, 0.1, rng);
+  ASSERT_TRUE(solver.factorize(sparse(weak.a)));
+  EXPECT_EQ(solver.analyses(), analyses + 1);
+  EXPECT_EQ(solver.groupedBodies(), 0);
+  EXPECT_LT(solveError(solver, weak, rng), 1e-12);
 }
 
 TEST(BodyBlockSolver, FollowsAChangeOfPatternAndRefusesWhatItCannotSolve)

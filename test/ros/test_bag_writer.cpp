@@ -151,6 +151,13 @@ TEST(MessageBuilder, ContactArrowsAreDrawnAndDeletedWhenTheContactEnds)
   EXPECT_EQ(countNs(without.markers, "contact_forces", visualization_msgs::Marker::ADD), 0);
   const rl::Snapshot again = builder.build(at::initialState(model), ros::Time(12.0));
   EXPECT_EQ(countNs(again.markers, "contact_forces", visualization_msgs::Marker::DELETE), 0);
+  // given the contacts (the node passes those the solver evaluated at the step's end), the builder takes them
+  // instead of searching
+  std::vector<at::ContactPairState> given = contacts;
+  given[0].normal_force *= 2.0;
+  const rl::Snapshot taken = builder.build(folded.final_state, ros::Time(13.0), &given);
+  ASSERT_EQ(taken.contacts.contacts.size(), given.size());
+  EXPECT_DOUBLE_EQ(taken.contacts.contacts[0].normal_force, given[0].normal_force);
 }
 
 TEST(TensegrityRunBag, WritesEveryTopicPerOutputStepInSimulatedTime)

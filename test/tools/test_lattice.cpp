@@ -315,11 +315,14 @@ TEST(Lattice, ModifiedNewtonOnApproximateFactorsFollowsFullNewton)
 
 TEST(Lattice, ModifiedNewtonOnBodyBlocksFollowsFullNewtonThroughContact)
 {
-  // 8 struts (88 unknowns): modified Newton factorizes on body blocks (the couplings between bodies dropped).
-  // The bracings fold the lattice into contact from about 0.26 s. Contact amplifies the differences the
-  // tolerance allows, so over 0.4 s the distance to full Newton is judged by how it shrinks with the
-  // tolerance (measured: 7.6e-4, 1.6e-5, 2.4e-7 m at 1e-6, 1e-8, 1e-10; modified Newton on the whole matrix
-  // 6.5e-3, 2.0e-4, 1.5e-6).
+  // 8 struts (88 unknowns): modified Newton factorizes on body blocks (the couplings between bodies dropped,
+  // strongly coupled bodies grouped). The bracings fold the lattice into contact from about 0.26 s. Contact
+  // amplifies the differences the tolerance allows, so over 0.4 s the distance to full Newton is judged by how
+  // it shrinks with the tolerance, down to a floor that no tolerance removes: the two runs at 1e-12 end 4.2e-8
+  // m apart (3.9e-8 without the groups; full Newton at 1e-10 and 1e-12 8.5e-11 apart; its cause is not traced,
+  // a contact's impact speed taken at a different onset step would do it). Measured: 1.7e-3, 2.7e-7, 5.0e-8 m at
+  // 1e-6, 1e-8, 1e-10 (without the groups 7.6e-4, 1.6e-5, 1.6e-7; on the whole matrix 6.5e-3, 2.0e-4,
+  // 1.5e-6).
   tl::LatticeOptions o;
   o.nx = 1;
   o.ny = 2;
@@ -350,9 +353,14 @@ TEST(Lattice, ModifiedNewtonOnBodyBlocksFollowsFullNewtonThroughContact)
                 tolerance, modified.timings.body_block_factorizations, modified.timings.factorizations,
                 modified.timings.newton_iterations, full.timings.newton_iterations, distance.back());
   }
+  const at::RunResult floor_modified = run(true, 1e-12);
+  const at::RunResult floor_full = run(false, 1e-12);
+  const double floor = (floor_modified.final_state.q - floor_full.final_state.q).lpNorm<Eigen::Infinity>();
+  std::printf("[ measured ] the same at tolerance 1e-12 (the floor): %.2e\n", floor);
   EXPECT_GT(touched, 0);
   EXPECT_LT(distance[0], 1e-2);
   EXPECT_LT(distance[1], 0.1 * distance[0]);
-  EXPECT_LT(distance[2], 0.1 * distance[1]);
+  EXPECT_LT(distance[2], std::max(0.1 * distance[1], 3.0 * floor));
   EXPECT_LT(distance[2], 1e-5);
+  EXPECT_LT(floor, 1e-6);
 }
