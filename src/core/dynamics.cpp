@@ -118,14 +118,19 @@ void DynamicsSolver::findNearContacts(const State& s, double motion)
 
 bool DynamicsSolver::atEnd(const State& s) const
 {
-  // (not the time: callers round it to their step grid; the contacts depend on q, qd and the memory) Bitwise
-  // (memcmp: Eigen's == compares coefficient by coefficient, 1.3 % of the tower's step)
+  // (not the time: callers round it to their step grid; the contacts depend on q, qd and the memory of the
+  // evaluated slots, no other slot touching there) Bitwise (memcmp: Eigen's == compares coefficient by
+  // coefficient, 1.3 % of the tower's step)
   const auto same = [](const double* a, const double* b, size_t n)
   { return n == 0 || std::memcmp(a, b, n * sizeof(double)) == 0; };
-  return end_valid_ && s.q.size() == end_q_.size() && s.qd.size() == end_qd_.size() &&
-         s.contact_speed.size() == end_memory_.size() && same(s.q.data(), end_q_.data(), end_q_.size()) &&
-         same(s.qd.data(), end_qd_.data(), end_qd_.size()) &&
-         same(s.contact_speed.data(), end_memory_.data(), end_memory_.size());
+  if (!end_valid_ || s.q.size() != end_q_.size() || s.qd.size() != end_qd_.size() ||
+      s.contact_speed.size() != end_rate_.size() || !same(s.q.data(), end_q_.data(), end_q_.size()) ||
+      !same(s.qd.data(), end_qd_.data(), end_qd_.size()))
+    return false;
+  for (size_t k = 0; k < end_slots_.size(); ++k)
+    if (s.contact_speed[end_slots_[k]] != end_memory_[k])
+      return false;
+  return true;
 }
 
 const std::vector<ContactPairState>* DynamicsSolver::contactsAt(const State& state) const
@@ -148,15 +153,13 @@ void DynamicsSolver::updateContactMemory(State& s, const Eigen::VectorXd& q_star
   for (int i : end_slots_)
     end_rate_[i] = std::numeric_limits<double>::quiet_NaN();
   end_slots_.clear();
+  end_memory_.clear();
   end_contacts_.clear();
   end_q_ = s.q;
   end_qd_ = s.qd;
   end_valid_ = true;
   if (!model.anyContact())
-  {
-    end_memory_ = s.contact_speed;
     return;
-  }
   // every slot touching at the step's end is near (attempt() checks the motion); each is evaluated with the
   // step's impact speed, which is the one its memory keeps
   for (int i : near_)
@@ -167,6 +170,7 @@ void DynamicsSolver::updateContactMemory(State& s, const Eigen::VectorXd& q_star
     if (st.active)
       end_contacts_.push_back(st);
     const double gap = st.gap;
+    end_memory_.push_back(gap < 0.0 ? step_speeds_[i] : 0.0);
     if (gap >= 0.0)
       continue;
     s.contact_speed[i] = step_speeds_[i];
@@ -183,7 +187,6 @@ void DynamicsSolver::updateContactMemory(State& s, const Eigen::VectorXd& q_star
   }
   std::sort(end_contacts_.begin(), end_contacts_.end(),
             [](const ContactPairState& a, const ContactPairState& b) { return a.pair < b.pair; });
-  end_memory_ = s.contact_speed;
 }
 
 double DynamicsSolver::errorEstimate(const Eigen::VectorXd& a0, const Eigen::VectorXd& a1, double h) const

@@ -124,13 +124,15 @@ private:
   /// The least motion near_ allows for (m): a body at rest still moves a little in its first step.
   static constexpr double kNearFloor = 1e-4;
   std::vector<double> previous_speed_;  // contact memory at the start of the step being accepted
-  // the near slots evaluated where the last accepted step ended (end_q_, end_qd_, contact memory end_memory_):
-  // their approach rates (NaN: not evaluated) for the next step's impact speeds, and the active contacts
+  // the near slots evaluated where the last accepted step ended (end_q_, end_qd_; end_slots_ with their
+  // contact memory end_memory_, every other slot apart there): their approach rates (per slot, NaN: not
+  // evaluated) for the next step's impact speeds, and the active contacts (no copy of the whole memory: a
+  // lattice of 2000 struts has 2 million slots)
   bool end_valid_ = false;
   Eigen::VectorXd end_q_, end_qd_;
+  std::vector<int> end_slots_;
   std::vector<double> end_memory_;
   std::vector<double> end_rate_;
-  std::vector<int> end_slots_;
   std::vector<ContactPairState> end_contacts_;
   /// Whether `s` is the state the last accepted step ended in (end_*).
   bool atEnd(const State& s) const;
