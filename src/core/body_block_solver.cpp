@@ -84,7 +84,7 @@ void BodyBlockSolver::chooseGroups(const Eigen::SparseMatrix<double>& a)
     for (int p = outer[j]; p < outer[j + 1]; ++p)
     {
       const int i = inner[p];
-      if (i >= nq || i >= j)  // (the lower triangle's: the pattern of H is symmetric)
+      if (i >= nq || i >= j)  // (above the diagonal: H's pattern is symmetric, and a coupling's two sides alike)
         continue;
       const int bi = body_of_column_[i], bj = body_of_column_[j];
       if (bi == bj)
@@ -149,12 +149,10 @@ bool BodyBlockSolver::analyze(const Eigen::SparseMatrix<double>& a)
     columns[body[c]].push_back(c);
   std::vector<int> bodies_in_block(nb, 0);
   for (int g : group_of_body_)
-    if (g >= 0)
-      ++bodies_in_block[block_of_group[g]];
+    ++bodies_in_block[block_of_group[g]];
   grouped_bodies_ = 0;
-  for (int b = 0; b < static_cast<int>(body_sizes_.size()); ++b)
-    if (group_of_body_[b] != b || std::count(group_of_body_.begin(), group_of_body_.end(), b) > 1)
-      ++grouped_bodies_;
+  for (int g : group_of_body_)
+    grouped_bodies_ += bodies_in_block[block_of_group[g]] > 1 ? 1 : 0;
   // the bodies each constraint row touches (in G and in Gt): -1 none, -2 more than one
   std::vector<int> owner(n_ - nq_, -1);
   const auto touch = [&](int row, int b)
