@@ -21,6 +21,36 @@ double elasticTension(const Cable& cable, const CableState& s)
   const double stretch = s.length - s.rest_length;
   return storesEnergy(cable, stretch) ? s.stiffness * stretch : 0.0;
 }
+/// A cable's state and, when `force`, its forces -T w_j at its points (dl/dp_j = w_j = n_{j-1} - n_j, n_k the
+/// unit vector of segment k), with the points' motion and the force application supplied by the caller:
+/// motion(j, p, v) and apply(j, f).
+template <class Motion, class Apply>
+CableState cableForces(const Cable& cable, const ActuationValues& u, bool damping, bool force, Motion&& motion,
+                       Apply&& apply)
+{
+  const int m = static_cast<int>(cable.points.size());
+  std::array<Vec3, Cable::kMaxPoints> p, v, n;
+  for (int j = 0; j < m; ++j)
+    motion(j, p[j], v[j]);
+  double length = 0.0, rate = 0.0;
+  for (int k = 0; k + 1 < m; ++k)
+  {
+    const Vec3 d = p[k + 1] - p[k];
+    const double seg = d.norm();
+    n[k] = seg > 0.0 ? Vec3(d / seg) : Vec3::Zero();
+    length += seg;
+    rate += n[k].dot(v[k + 1] - v[k]);
+  }
+  const CableState s = cableLaw(cable, length, rate, u, damping);
+  if (s.slack || !force)
+    return s;
+  for (int j = 0; j < m; ++j)
+  {
+    const Vec3 w = (j > 0 ? n[j - 1] : Vec3::Zero()) - (j + 1 < m ? n[j] : Vec3::Zero());
+    apply(j, -s.tension * w);
+  }
+  return s;
+}
 }  // namespace
 
 CableState cableLaw(const Cable& cable, double length, double rate, const ActuationValues& u, bool damping)
@@ -57,30 +87,11 @@ CableState evaluateCable(const Model& model, const Cable& cable, const Eigen::Ve
   // l = sum_k |p_{k+1} - p_k|; dl/dp_j = w_j = n_{j-1} - n_j (n_k the unit vector of segment k)
   const int m = static_cast<int>(cable.points.size());
   if (!jac)
-  {
-    // forces alone (a residual of modified Newton, an output): no point Jacobians formed
-    std::array<Vec3, Cable::kMaxPoints> p, v, n;
-    for (int j = 0; j < m; ++j)
-      pointMotion(model, cable.points[j], q, qd, p[j], v[j]);
-    double length = 0.0, rate = 0.0;
-    for (int k = 0; k + 1 < m; ++k)
-    {
-      const Vec3 d = p[k + 1] - p[k];
-      const double seg = d.norm();
-      n[k] = seg > 0.0 ? Vec3(d / seg) : Vec3::Zero();
-      length += seg;
-      rate += n[k].dot(v[k + 1] - v[k]);
-    }
-    const CableState s = cableLaw(cable, length, rate, u, damping);
-    if (s.slack || !F)
-      return s;
-    for (int j = 0; j < m; ++j)
-    {
-      const Vec3 w = (j > 0 ? n[j - 1] : Vec3::Zero()) - (j + 1 < m ? n[j] : Vec3::Zero());
-      addPointForce(model, cable.points[j], q, -s.tension * w, *F);
-    }
-    return s;
-  }
+    // forces alone (an output, a static residual): no point Jacobians formed
+    return cableForces(
+        cable, u, damping, F != nullptr,
+        [&](int j, Vec3& p, Vec3& v) { pointMotion(model, cable.points[j], q, qd, p, v); },
+        [&](int j, const Vec3& f) { addPointForce(model, cable.points[j], q, f, *F); });
   // per-thread scratch: no allocation once a thread has seen its longest cable
   thread_local std::vector<PointKinematics> kin;
   if (static_cast<int>(kin.size()) < m)
@@ -174,6 +185,15 @@ CableState evaluateCable(const Model& model, const Cable& cable, const Eigen::Ve
     }
   }
   return s;
+}
+
+CableState evaluateCable(const Model& model, const Cable& cable, const BodyFrames& frames, const Eigen::VectorXd& q,
+                         const Eigen::VectorXd& qd, const ActuationValues& u, bool damping, PointForceSum& sum,
+                         Eigen::VectorXd& F)
+{
+  return cableForces(
+      cable, u, damping, true, [&](int j, Vec3& p, Vec3& v) { frames.motion(model, cable.points[j], q, qd, p, v); },
+      [&](int j, const Vec3& f) { sum.add(model, cable.points[j], f, F); });
 }
 
 double cablePotentialEnergy(const Cable& cable, const CableState& s)

@@ -77,6 +77,92 @@ void addPointForce(const Model& model, const PointRef& point, const Eigen::Vecto
     F.segment<4>(b.offset + 3) += pointJacobianThetaTransposeTimes(thetaOf(q, b), point.local, f);
 }
 
+void BodyFrames::update(const Model& model, const Eigen::VectorXd& q, const Eigen::VectorXd& qd)
+{
+  rotation_.resize(model.bodies.size());
+  rate_.resize(model.bodies.size());
+  for (size_t i = 0; i < model.bodies.size(); ++i)
+  {
+    const Body& b = model.bodies[i];
+    if (b.kind != BodyKind::kStrut)
+      continue;
+    // A = (e0^2 - e.e) I + 2 e e^T + 2 e0 [e]x written out, and its derivative along Theta_dot
+    // dA = 2 (e0 d0 - e.d) I + 2 (d e^T + e d^T) + 2 [d0 e + e0 d]x
+    const double e0 = q(b.offset + 3), e1 = q(b.offset + 4), e2 = q(b.offset + 5), e3 = q(b.offset + 6);
+    const double d0 = qd(b.offset + 3), d1 = qd(b.offset + 4), d2 = qd(b.offset + 5), d3 = qd(b.offset + 6);
+    Mat3& a = rotation_[i];
+    const double s0 = e0 * e0 - e1 * e1 - e2 * e2 - e3 * e3;
+    a(0, 0) = s0 + 2.0 * e1 * e1;
+    a(1, 1) = s0 + 2.0 * e2 * e2;
+    a(2, 2) = s0 + 2.0 * e3 * e3;
+    a(0, 1) = 2.0 * (e1 * e2 - e0 * e3);
+    a(1, 0) = 2.0 * (e1 * e2 + e0 * e3);
+    a(0, 2) = 2.0 * (e1 * e3 + e0 * e2);
+    a(2, 0) = 2.0 * (e1 * e3 - e0 * e2);
+    a(1, 2) = 2.0 * (e2 * e3 - e0 * e1);
+    a(2, 1) = 2.0 * (e2 * e3 + e0 * e1);
+    Mat3& r = rate_[i];
+    const double t0 = 2.0 * (e0 * d0 - e1 * d1 - e2 * d2 - e3 * d3);
+    const double w1 = 2.0 * (d0 * e1 + e0 * d1), w2 = 2.0 * (d0 * e2 + e0 * d2), w3 = 2.0 * (d0 * e3 + e0 * d3);
+    r(0, 0) = t0 + 4.0 * e1 * d1;
+    r(1, 1) = t0 + 4.0 * e2 * d2;
+    r(2, 2) = t0 + 4.0 * e3 * d3;
+    r(0, 1) = 2.0 * (d1 * e2 + e1 * d2) - w3;
+    r(1, 0) = 2.0 * (d2 * e1 + e2 * d1) + w3;
+    r(0, 2) = 2.0 * (d1 * e3 + e1 * d3) + w2;
+    r(2, 0) = 2.0 * (d3 * e1 + e3 * d1) - w2;
+    r(1, 2) = 2.0 * (d2 * e3 + e2 * d3) - w1;
+    r(2, 1) = 2.0 * (d3 * e2 + e3 * d2) + w1;
+  }
+}
+
+void BodyFrames::motion(const Model& model, const PointRef& point, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                        Vec3& p, Vec3& v) const
+{
+  if (point.body < 0)
+  {
+    p = point.local;
+    v.setZero();
+    return;
+  }
+  const Body& b = model.bodies[point.body];
+  if (b.kind == BodyKind::kPointMass)
+  {
+    p = q.segment<3>(b.offset) + point.local;
+    v = qd.segment<3>(b.offset);
+    return;
+  }
+  p = q.segment<3>(b.offset) + rotation_[point.body] * point.local;
+  v = qd.segment<3>(b.offset) + rate_[point.body] * point.local;
+}
+
+void PointForceSum::reset(const Model& model)
+{
+  moment_.resize(model.bodies.size());
+  loaded_.assign(model.bodies.size(), 0);
+}
+
+void PointForceSum::flush(const Model& model, const Eigen::VectorXd& q, Eigen::VectorXd& F)
+{
+  // With M = sum_j f_j u_j^T, sum_j B_Theta(Theta, u_j)^T f_j = 2 [e0 tr M + e.a; M e + M^T e - tr(M) e + e0 a],
+  // a = sum_j u_j x f_j (from M's antisymmetric part): pointJacobianThetaTransposeTimes summed
+  for (size_t i = 0; i < moment_.size() && i < loaded_.size(); ++i)
+  {
+    if (!loaded_[i])
+      continue;
+    loaded_[i] = 0;
+    const Body& b = model.bodies[i];
+    const Mat3& m = moment_[i];
+    const Vec4 th = thetaOf(q, b);
+    const double e0 = th(0);
+    const Vec3 e = th.tail<3>();
+    const double tr = m.trace();
+    const Vec3 a(m(2, 1) - m(1, 2), m(0, 2) - m(2, 0), m(1, 0) - m(0, 1));
+    F(b.offset + 3) += 2.0 * (e0 * tr + e.dot(a));
+    F.segment<3>(b.offset + 4) += 2.0 * (m * e + m.transpose() * e - tr * e + e0 * a);
+  }
+}
+
 Vec3 pointPosition(const Model& model, const PointRef& point, const Eigen::VectorXd& q)
 {
   if (point.body < 0)

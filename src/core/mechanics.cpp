@@ -75,8 +75,18 @@ void System::appliedForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, c
   if (model_.gravity_enabled)
     for (const Body& b : model_.bodies)
       F.segment<3>(b.offset) += b.mass * model_.gravity;
-  for (const Cable& c : model_.cables)
-    evaluateCable(model_, c, q, qd, u, model_.damping_enabled, &F, jac, k_weight, c_weight);
+  if (jac)
+    for (const Cable& c : model_.cables)
+      evaluateCable(model_, c, q, qd, u, model_.damping_enabled, &F, jac, k_weight, c_weight);
+  else if (!model_.cables.empty())
+  {
+    // a residual without tangents: each strut's frame once, then every cable point from it
+    frames_.update(model_, q, qd);
+    point_sum_.reset(model_);
+    for (const Cable& c : model_.cables)
+      evaluateCable(model_, c, frames_, q, qd, u, model_.damping_enabled, point_sum_, F);
+    point_sum_.flush(model_, q, F);
+  }
   for (const PointLoad& load : model_.loads)
   {
     if (load.point.body < 0)
@@ -258,16 +268,16 @@ void System::inertialForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, 
     const Vec4 th = thetaOf(q, b);
     const Vec4 thd = thetaOf(qd, b);
     const Vec4 thdd = thetaOf(qdd, b);
+    // M_theta thdd = 4 L^T J L thdd;  Qv = 8 L(thd)^T J L(th) thd (the products without forming L)
+    const Vec3 w = b.inertia.cwiseProduct(lTimes(th, thdd));
+    const Vec3 z = b.inertia.cwiseProduct(lTimes(th, thd));
+    out.segment<4>(b.offset + 3) = 4.0 * lMatrixTransposeTimes(th, w) + 8.0 * lMatrixTransposeTimes(thd, z);
+    if (!jac)
+      continue;
     const Mat3 J = inertiaMatrix(b);
     const Mat34 l = lMatrix(th);
     const Mat34 ld = lMatrix(thd);
     const Mat34 ldd = lMatrix(thdd);
-    // M_theta thdd = 4 L^T J L thdd;  Qv = 8 L(thd)^T J L(th) thd
-    const Vec3 w = J * (l * thdd);
-    const Vec3 z = J * (l * thd);
-    out.segment<4>(b.offset + 3) = 4.0 * l.transpose() * w + 8.0 * ld.transpose() * z;
-    if (!jac)
-      continue;
     Eigen::Matrix<double, 7, 7> blk = Eigen::Matrix<double, 7, 7>::Zero();
     // d(M thdd)/dth = 4 N(w) - 4 L^T J L(thdd);  dQv/dth = -8 L(thd)^T J L(thd)
     blk.bottomRightCorner<4, 4>() =

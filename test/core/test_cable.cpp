@@ -245,3 +245,55 @@ TEST(CableLaw, IsWhatEvaluateCableAppliesToItsLengthAndRate)
     EXPECT_EQ(law.stiffness, s.stiffness) << c.name;
   }
 }
+
+TEST(CableFrames, ResidualLoopEqualsThePointwiseForms)
+{
+  // the residual's loop (frames once per strut, moments summed per strut) against evaluateCable point by point,
+  // off the unit sphere too (Newton iterates), for cables on struts, the ground and a point mass
+  const Model m = cableModel();
+  std::mt19937 rng(29);
+  BodyFrames frames;
+  PointForceSum sum;
+  for (int trial = 0; trial < 5; ++trial)
+  {
+    const Eigen::VectorXd q = perturbed(m.q0, 0.2, rng);
+    const Eigen::VectorXd qd = randomVector(m.nq, 5.0, rng);
+    frames.update(m, q, qd);
+    sum.reset(m);
+    Eigen::VectorXd F = Eigen::VectorXd::Zero(m.nq), F_each = Eigen::VectorXd::Zero(m.nq);
+    int taut = 0;
+    for (const Cable& c : m.cables)
+    {
+      const CableState s = evaluateCable(m, c, frames, q, qd, kHeld, true, sum, F);
+      const CableState each = evaluate(m, c, q, qd, kHeld, true, &F_each);
+      EXPECT_NEAR(s.length, each.length, 1e-14 * each.length) << c.name;
+      EXPECT_NEAR(s.rate, each.rate, 1e-12 * (1.0 + std::abs(each.rate))) << c.name;
+      EXPECT_EQ(s.slack, each.slack) << c.name;
+      taut += s.slack ? 0 : 1;
+      for (const PointRef& p : c.points)
+      {
+        Vec3 pf, vf, pe, ve;
+        frames.motion(m, p, q, qd, pf, vf);
+        pointMotion(m, p, q, qd, pe, ve);
+        EXPECT_LT((pf - pe).norm(), 1e-14 * (1.0 + pe.norm())) << c.name;
+        EXPECT_LT((vf - ve).norm(), 1e-13 * (1.0 + ve.norm())) << c.name;
+      }
+    }
+    EXPECT_GE(taut, 3);
+    // before the flush only the translations are in
+    for (const Body& b : m.bodies)
+    {
+      if (b.kind == BodyKind::kStrut)
+      {
+        EXPECT_EQ(F.segment<4>(b.offset + 3).norm(), 0.0);
+      }
+    }
+    sum.flush(m, q, F);
+    EXPECT_LT((F - F_each).norm(), 1e-12 * F_each.norm()) << F.transpose() << "\n" << F_each.transpose();
+    EXPECT_GT(F_each.norm(), 1.0);
+    // a flush leaves nothing behind
+    const Eigen::VectorXd kept = F;
+    sum.flush(m, q, F);
+    EXPECT_EQ(F, kept);
+  }
+}

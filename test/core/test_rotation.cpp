@@ -80,6 +80,9 @@ TEST(Rotation, HessianAndLTransposeMatricesMatchDerivatives)
     // L(x)^T v = N(v) x
     const at::Vec4 x = randomTheta(rng, false);
     EXPECT_TRUE((at::lMatrix(x).transpose() * f).isApprox(at::lTransposeTimes(f) * x, 1e-12));
+    // the products without the matrix
+    EXPECT_TRUE(at::lTimes(th, x).isApprox(at::lMatrix(th) * x, 1e-13));
+    EXPECT_TRUE(at::lMatrixTransposeTimes(th, f).isApprox(at::lMatrix(th).transpose() * f, 1e-13));
     // L(a) b = -L(b) a and L(a) a = 0
     EXPECT_TRUE((at::lMatrix(th) * x).isApprox(-at::lMatrix(x) * th, 1e-12));
     EXPECT_LT((at::lMatrix(th) * th).norm(), 1e-12);

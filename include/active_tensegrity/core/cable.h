@@ -50,6 +50,11 @@ CableState cableLaw(const Cable& cable, double length, double rate, const Actuat
 CableState evaluateCable(const Model& model, const Cable& cable, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
                          const ActuationValues& u, bool damping, Eigen::VectorXd* F, BlockSparseMatrix* jac,
                          double k_weight, double c_weight);
+/// The same without tangents, the points' motion from frames formed at (q, qd) and the forces summed into
+/// `sum` and F (the caller flushes `sum` into F once all elements are added): a residual's force loop.
+CableState evaluateCable(const Model& model, const Cable& cable, const BodyFrames& frames, const Eigen::VectorXd& q,
+                         const Eigen::VectorXd& qd, const ActuationValues& u, bool damping, PointForceSum& sum,
+                         Eigen::VectorXd& F);
 
 /// V = 1/2 k (l - l0)^2 of a cable in state s (from evaluateCable), J; 0 when slack under tension_only
 /// (l <= l0).

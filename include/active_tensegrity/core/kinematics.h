@@ -53,4 +53,56 @@ inline Vec4 thetaOf(const Eigen::VectorXd& x, const Body& b)
   return x.segment<4>(b.offset + 3);
 }
 
+/// The rotation matrix A(Theta) of every strut at one configuration and its rate dA/dt, formed once so that
+/// each material point on a strut then costs two 3x3 products: the force loops of a residual visit every
+/// strut's points many times (a cable end, a joint), and the quaternion forms of pointMotion cost about
+/// three times as much per point. Non-unit Theta (Newton iterates) keep the same quadratic form.
+class BodyFrames
+{
+public:
+  /// Forms the frames at q, qd for every strut of the model (no allocation once sized).
+  void update(const Model& model, const Eigen::VectorXd& q, const Eigen::VectorXd& qd);
+  /// As pointMotion, from the frames last formed (at the same q, qd).
+  void motion(const Model& model, const PointRef& point, const Eigen::VectorXd& q, const Eigen::VectorXd& qd, Vec3& p,
+              Vec3& v) const;
+
+private:
+  std::vector<Mat3> rotation_;  // A(Theta) per body (unused for point masses)
+  std::vector<Mat3> rate_;      // dA/dt = sum_i dA/dTheta_i Theta_dot_i
+};
+
+/// Sums the generalized forces of world forces at material points (as repeated addPointForce): translations
+/// go straight into F; on a strut, sum_j B_Theta(Theta, u_j)^T f_j is linear in the moment matrix
+/// sum_j f_j u_j^T, which add() accumulates and flush() turns into the Euler-parameter force once per strut.
+class PointForceSum
+{
+public:
+  /// Clears the moments (sized to the model's bodies).
+  void reset(const Model& model);
+  /// Adds the force f at a material point: its translation part into F, its moment into the sum.
+  void add(const Model& model, const PointRef& point, const Vec3& f, Eigen::VectorXd& F)
+  {
+    if (point.body < 0)
+      return;
+    const Body& b = model.bodies[point.body];
+    F.segment<3>(b.offset) += f;
+    if (b.kind != BodyKind::kStrut)
+      return;
+    Mat3& m = moment_[point.body];
+    if (loaded_[point.body])
+      m.noalias() += f * point.local.transpose();
+    else
+    {
+      m.noalias() = f * point.local.transpose();
+      loaded_[point.body] = 1;
+    }
+  }
+  /// Adds the Euler-parameter forces of the summed moments into F (at the struts' Theta in q) and clears them.
+  void flush(const Model& model, const Eigen::VectorXd& q, Eigen::VectorXd& F);
+
+private:
+  std::vector<Mat3> moment_;  // sum_j f_j u_j^T per body
+  std::vector<char> loaded_;  // whether a strut's moment is nonzero
+};
+
 }  // namespace active_tensegrity::core

@@ -195,6 +195,8 @@ private:
   mutable std::vector<int> candidates_;  // scratch of contactForce
   mutable NearSlotCache near_slots_;     // of nearContacts
   mutable ContactContribution contribution_;
+  mutable BodyFrames frames_;        // scratch of appliedForce without tangents
+  mutable PointForceSum point_sum_;  // of appliedForce without tangents
 };
 
 /// Generalized inertia of one strut: the 4x4 rotational mass 4 L^T J L.

@@ -28,6 +28,23 @@ Vec3 bodyZAxis(const Vec4& theta);
 /// L(Theta) = [-e, -skew(e) + e0 I] (3x4); body angular velocity omega_bar = 2 L(Theta) Theta_dot.
 Mat34 lMatrix(const Vec4& theta);
 
+/// L(Theta) x without forming the matrix: e0 x_v - x0 e - e x x_v (x = (x0, x_v)).
+inline Vec3 lTimes(const Vec4& theta, const Vec4& x)
+{
+  const Vec3 e = theta.tail<3>(), xv = x.tail<3>();
+  return theta(0) * xv - x(0) * e - e.cross(xv);
+}
+
+/// L(Theta)^T w without forming the matrix: (-e.w, e x w + e0 w).
+inline Vec4 lMatrixTransposeTimes(const Vec4& theta, const Vec3& w)
+{
+  const Vec3 e = theta.tail<3>();
+  Vec4 out;
+  out(0) = -e.dot(w);
+  out.tail<3>() = e.cross(w) + theta(0) * w;
+  return out;
+}
+
 /// B_Theta(Theta, u) = d(A(Theta) u)/dTheta (3x4), linear in Theta; B_Theta(Theta, u) Theta = 2 A(Theta) u.
 Mat34 pointJacobianTheta(const Vec4& theta, const Vec3& u);
 
