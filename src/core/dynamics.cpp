@@ -75,6 +75,7 @@ void DynamicsSolver::prepareContact(const State& s, double h)
   // (only the near slots' speeds are read, and findNearContacts sets each of them)
   if (step_speeds_.size() != static_cast<size_t>(model.contactSlots()))
     step_speeds_.assign(model.contactSlots(), model.contact.min_impact_speed);
+  start_at_end_ = atEnd(s);
   near_.clear();
   if (!model.anyContact())
     return;
@@ -100,7 +101,7 @@ void DynamicsSolver::findNearContacts(const State& s, double motion)
   near_motion_ = motion;
   system_.nearContacts(s.q, motion, near_);
   // the slots the last accepted step evaluated at its end, which is this start: their approach rates
-  const bool at_end = atEnd(s);
+  const bool at_end = start_at_end_;
   for (int i : near_)
   {
     const double memory = i < static_cast<int>(s.contact_speed.size()) ? s.contact_speed[i] : 0.0;
@@ -142,8 +143,19 @@ void DynamicsSolver::updateContactMemory(State& s, const Eigen::VectorXd& q_star
 {
   const ScopeTimer timer(timings_.contact);
   const Model& model = system_.model();
-  previous_speed_.swap(s.contact_speed);
-  s.contact_speed.assign(model.contactSlots(), 0.0);
+  const size_t slots = static_cast<size_t>(model.contactSlots());
+  // the start's memory at the near slots (whether each was touching), then the memory cleared: when the step
+  // began where the last one ended, its nonzero entries are that end's touching slots, all among end_slots_
+  // (every other slot was apart there), and only they are cleared (a lattice of 2000 struts has 2 million
+  // slots: clearing them all was a 16 MB memset per step); else the whole memory
+  near_previous_.clear();
+  for (int i : near_)
+    near_previous_.push_back(i < static_cast<int>(s.contact_speed.size()) ? s.contact_speed[i] : 0.0);
+  if (start_at_end_ && s.contact_speed.size() == slots)
+    for (int i : end_slots_)
+      s.contact_speed[i] = 0.0;
+  else
+    s.contact_speed.assign(slots, 0.0);
   estimate_.onset_depth = 0.0;
   estimate_.onset_gap = 0.0;
   estimate_.onset_pair = -1;
@@ -162,8 +174,9 @@ void DynamicsSolver::updateContactMemory(State& s, const Eigen::VectorXd& q_star
     return;
   // every slot touching at the step's end is near (attempt() checks the motion); each is evaluated with the
   // step's impact speed, which is the one its memory keeps
-  for (int i : near_)
+  for (size_t k = 0; k < near_.size(); ++k)
   {
+    const int i = near_[k];
     const ContactPairState st = evaluateContact(model, i, s.q, s.qd, step_speeds_[i], ContactMode::kDynamic, nullptr);
     end_rate_[i] = st.penetration_rate;
     end_slots_.push_back(i);
@@ -174,7 +187,7 @@ void DynamicsSolver::updateContactMemory(State& s, const Eigen::VectorXd& q_star
     if (gap >= 0.0)
       continue;
     s.contact_speed[i] = step_speeds_[i];
-    const bool was_touching = i < static_cast<int>(previous_speed_.size()) && previous_speed_[i] > 0.0;
+    const bool was_touching = near_previous_[k] > 0.0;
     if (was_touching || -gap <= estimate_.onset_depth)
       continue;
     const double gap_start = contactGeometry(model, i, q_start).gap;

@@ -123,7 +123,8 @@ private:
   double near_motion_ = 0.0;         // the motion near_ allows for (m)
   /// The least motion near_ allows for (m): a body at rest still moves a little in its first step.
   static constexpr double kNearFloor = 1e-4;
-  std::vector<double> previous_speed_;  // contact memory at the start of the step being accepted
+  bool start_at_end_ = false;          // the step being solved starts where the last accepted one ended (atEnd)
+  std::vector<double> near_previous_;  // contact memory at the start of the step being accepted, per near_ slot
   // the near slots evaluated where the last accepted step ended (end_q_, end_qd_; end_slots_ with their
   // contact memory end_memory_, every other slot apart there): their approach rates (per slot, NaN: not
   // evaluated) for the next step's impact speeds, and the active contacts (no copy of the whole memory: a
