@@ -46,7 +46,7 @@ StrutAxis strutAxis(const Body& b, const Eigen::VectorXd& q, const Eigen::Vector
   {
     s.centre_rate = qd->segment<3>(b.offset);
     s.theta_rate = qd->segment<4>(b.offset + 3);
-    s.axis_rate = pointJacobianThetaTimes(s.theta, kAxis, s.theta_rate);
+    s.axis_rate = bodyZAxisRate(s.theta, s.theta_rate);
   }
   else
   {
@@ -601,8 +601,8 @@ ContactPairState evaluateContact(const Model& model, int pair, const Eigen::Vect
   if (!out->tangents)
   {
     // the generalized force alone: g F_N (g below) and the friction's [f; B_A^T f; -f; -B_B^T f]
-    out->force << fn * c.n, (fn * c.s1) * pointJacobianThetaTransposeTimes(a.theta, kAxis, c.n), -fn * c.n,
-        (-fn * c.s2) * pointJacobianThetaTransposeTimes(b.theta, kAxis, c.n);
+    out->force << fn * c.n, (fn * c.s1) * bodyZAxisTransposeTimes(a.theta, c.n), -fn * c.n,
+        (-fn * c.s2) * bodyZAxisTransposeTimes(b.theta, c.n);
     if (ft > 0.0)
     {
       out->force.segment<3>(0) += f;

@@ -60,6 +60,10 @@ TEST(Rotation, PointJacobianIsExactDerivativeForAnyTheta)
     EXPECT_TRUE(at::pointJacobianThetaTimes(th, u, x).isApprox(at::pointJacobianTheta(th, u) * x, 1e-13));
     EXPECT_TRUE(
         at::pointJacobianThetaTransposeTimes(th, u, f).isApprox(at::pointJacobianTheta(th, u).transpose() * f, 1e-13));
+    // the body z axis's rate and transposed product, written out, against the general forms at e_z
+    EXPECT_TRUE(at::bodyZAxisRate(th, x).isApprox(at::pointJacobianThetaTimes(th, at::Vec3::UnitZ(), x), 1e-14));
+    EXPECT_TRUE(at::bodyZAxisTransposeTimes(th, f).isApprox(
+        at::pointJacobianThetaTransposeTimes(th, at::Vec3::UnitZ(), f), 1e-14));
     // the body z axis, written out, is the matrix's third column for any Theta
     EXPECT_TRUE(at::bodyZAxis(th).isApprox(at::rotationMatrix(th).col(2), 1e-14));
   }

@@ -76,6 +76,24 @@ inline Vec4 pointJacobianThetaTransposeTimes(const Vec4& theta, const Vec3& u, c
   return g;
 }
 
+/// B_Theta(Theta, e_z) x: the rate of bodyZAxis(Theta) for Theta moving at x (pointJacobianThetaTimes at the
+/// body z axis, written out: the contact's strut axes need it for every pair of every residual).
+inline Vec3 bodyZAxisRate(const Vec4& theta, const Vec4& x)
+{
+  const double e0 = theta(0), e1 = theta(1), e2 = theta(2), e3 = theta(3);
+  return 2.0 * Vec3(e2 * x(0) + e3 * x(1) + e0 * x(2) + e1 * x(3), -e1 * x(0) - e0 * x(1) + e3 * x(2) + e2 * x(3),
+                    e0 * x(0) - e1 * x(1) - e2 * x(2) + e3 * x(3));
+}
+
+/// B_Theta(Theta, e_z)^T f: the generalized force on Theta of f at the body z axis's unit point
+/// (pointJacobianThetaTransposeTimes at e_z, written out).
+inline Vec4 bodyZAxisTransposeTimes(const Vec4& theta, const Vec3& f)
+{
+  const double e0 = theta(0), e1 = theta(1), e2 = theta(2), e3 = theta(3);
+  return 2.0 * Vec4(e2 * f.x() - e1 * f.y() + e0 * f.z(), e3 * f.x() - e0 * f.y() - e1 * f.z(),
+                    e0 * f.x() + e3 * f.y() - e2 * f.z(), e1 * f.x() + e2 * f.y() + e3 * f.z());
+}
+
 /// N(v) with L(x)^T v = N(v) x for every x (4x4).
 Mat4 lTransposeTimes(const Vec3& v);
 
