@@ -112,13 +112,18 @@ std::vector<CableState> cableStates(const Model& model, const State& state)
 
 double maxCableStress(const Model& model, const State& state)
 {
+  BodyFrames frames;
+  return maxCableStress(model, state, frames);
+}
+
+double maxCableStress(const Model& model, const State& state, BodyFrames& frames)
+{
+  frames.update(model, state.q, state.qd);
   double sigma = 0.0;
   for (const Cable& c : model.cables)
     if (c.area > 0.0)
       sigma = std::max(
-          sigma,
-          evaluateCable(model, c, state.q, state.qd, state.u, model.damping_enabled, nullptr, nullptr, 0.0, 0.0).tension /
-              c.area);
+          sigma, evaluateCable(model, c, frames, state.q, state.qd, state.u, model.damping_enabled).tension / c.area);
   return sigma;
 }
 
@@ -537,7 +542,7 @@ void PeakTracker::add(const State& state, const std::vector<ContactPairState>* g
       max_friction = std::max(max_friction, c.friction_force);
     }
   const double values[] = { model_.actuators.empty() ? 0.0 : actuationForce(model_, state, 0), max_normal, max_friction,
-                            maxStrutBendingStress(model_, state.q, contacts), maxCableStress(model_, state) };
+                            maxStrutBendingStress(model_, state.q, contacts), maxCableStress(model_, state, frames_) };
   for (size_t k = 0; k < peaks_.size(); ++k)
     if (std::abs(values[k]) > std::abs(peaks_[k].value))
     {

@@ -92,6 +92,9 @@ std::vector<double> memberRow(const Model& model, const State& state);
 
 /// Largest stress T / A in a material cable (springs have no section and are left out), Pa.
 double maxCableStress(const Model& model, const State& state);
+/// The same with the points' motion from `frames`, formed here at the state (a caller that runs it every step
+/// keeps them: no allocation).
+double maxCableStress(const Model& model, const State& state, BodyFrames& frames);
 
 /// Number of slack cables (tension-only elements carrying no tension) in a state.
 int slackCables(const Model& model, const State& state);
@@ -159,6 +162,7 @@ private:
   const Model& model_;
   std::vector<Peak> peaks_;
   ContactScan contacts_;
+  BodyFrames frames_;  // of the cable stresses
 };
 
 struct RunResult

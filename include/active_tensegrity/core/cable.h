@@ -50,6 +50,9 @@ CableState cableLaw(const Cable& cable, double length, double rate, const Actuat
 CableState evaluateCable(const Model& model, const Cable& cable, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
                          const ActuationValues& u, bool damping, Eigen::VectorXd* F, BlockSparseMatrix* jac,
                          double k_weight, double c_weight);
+/// The cable's state alone, the points' motion from frames formed at (q, qd).
+CableState evaluateCable(const Model& model, const Cable& cable, const BodyFrames& frames, const Eigen::VectorXd& q,
+                         const Eigen::VectorXd& qd, const ActuationValues& u, bool damping);
 /// The same without tangents, the points' motion from frames formed at (q, qd) and the forces summed into
 /// `sum` and F (the caller flushes `sum` into F once all elements are added): a residual's force loop.
 CableState evaluateCable(const Model& model, const Cable& cable, const BodyFrames& frames, const Eigen::VectorXd& q,
