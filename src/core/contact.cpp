@@ -109,15 +109,6 @@ Eigen::Matrix<double, 4, 3> transposedPointJacobianTimes(const Vec4& theta, cons
   return m;
 }
 
-// dA/dt for Theta moving at Theta_dot: column j is B_Theta(Theta, e_j) Theta_dot
-Mat3 rotationRate(const Vec4& theta, const Vec4& theta_rate)
-{
-  Mat3 m;
-  for (int j = 0; j < 3; ++j)
-    m.col(j) = pointJacobianTheta(theta, Vec3::Unit(j)) * theta_rate;
-  return m;
-}
-
 // The modified Coulomb law's factor c_d at slip speed `slip` and its slope: 0 up to v0, linear to 1 at v1, then 1.
 struct CoulombFactor
 {
@@ -358,7 +349,7 @@ ContactPairState evaluateGroundContact(const Model& model, int slot, const Eigen
     if (strut)
     {
       jua.block<3, 4>(0, 3) = -g.radius * pointJacobianTheta(conj, Vec3::UnitZ()) * kConjugate.asDiagonal();
-      jq_vtol = rotationRate(theta, theta_rate) * jua;
+      jq_vtol = rotationMatrixRate(theta, theta_rate) * jua;
       jq_vtol.block<3, 4>(0, 3) += pointJacobianTheta(theta_rate, ua);
       jqd_vtol.block<3, 4>(0, 3) = bua;
     }
@@ -685,7 +676,7 @@ ContactPairState evaluateContact(const Model& model, int pair, const Eigen::Vect
     jua.block<3, 4>(0, 3) -= a.radius * pointJacobianTheta(conj1, c.n) * kConjugate.asDiagonal();
     Mat3x14 jub = kAxis * ds2 + b.radius * (at2 * jn);
     jub.block<3, 4>(0, 10) += b.radius * pointJacobianTheta(conj2, c.n) * kConjugate.asDiagonal();
-    Mat3x14 jq_vtol = rotationRate(a.theta, a.theta_rate) * jua - rotationRate(b.theta, b.theta_rate) * jub;
+    Mat3x14 jq_vtol = rotationMatrixRate(a.theta, a.theta_rate) * jua - rotationMatrixRate(b.theta, b.theta_rate) * jub;
     jq_vtol.block<3, 4>(0, 3) += pointJacobianTheta(a.theta_rate, ua);
     jq_vtol.block<3, 4>(0, 10) -= pointJacobianTheta(b.theta_rate, ub);
     Mat3x14 jqd_vtol = Mat3x14::Zero();

@@ -86,33 +86,8 @@ void BodyFrames::update(const Model& model, const Eigen::VectorXd& q, const Eige
     const Body& b = model.bodies[i];
     if (b.kind != BodyKind::kStrut)
       continue;
-    // A = (e0^2 - e.e) I + 2 e e^T + 2 e0 [e]x written out, and its derivative along Theta_dot
-    // dA = 2 (e0 d0 - e.d) I + 2 (d e^T + e d^T) + 2 [d0 e + e0 d]x
-    const double e0 = q(b.offset + 3), e1 = q(b.offset + 4), e2 = q(b.offset + 5), e3 = q(b.offset + 6);
-    const double d0 = qd(b.offset + 3), d1 = qd(b.offset + 4), d2 = qd(b.offset + 5), d3 = qd(b.offset + 6);
-    Mat3& a = rotation_[i];
-    const double s0 = e0 * e0 - e1 * e1 - e2 * e2 - e3 * e3;
-    a(0, 0) = s0 + 2.0 * e1 * e1;
-    a(1, 1) = s0 + 2.0 * e2 * e2;
-    a(2, 2) = s0 + 2.0 * e3 * e3;
-    a(0, 1) = 2.0 * (e1 * e2 - e0 * e3);
-    a(1, 0) = 2.0 * (e1 * e2 + e0 * e3);
-    a(0, 2) = 2.0 * (e1 * e3 + e0 * e2);
-    a(2, 0) = 2.0 * (e1 * e3 - e0 * e2);
-    a(1, 2) = 2.0 * (e2 * e3 - e0 * e1);
-    a(2, 1) = 2.0 * (e2 * e3 + e0 * e1);
-    Mat3& r = rate_[i];
-    const double t0 = 2.0 * (e0 * d0 - e1 * d1 - e2 * d2 - e3 * d3);
-    const double w1 = 2.0 * (d0 * e1 + e0 * d1), w2 = 2.0 * (d0 * e2 + e0 * d2), w3 = 2.0 * (d0 * e3 + e0 * d3);
-    r(0, 0) = t0 + 4.0 * e1 * d1;
-    r(1, 1) = t0 + 4.0 * e2 * d2;
-    r(2, 2) = t0 + 4.0 * e3 * d3;
-    r(0, 1) = 2.0 * (d1 * e2 + e1 * d2) - w3;
-    r(1, 0) = 2.0 * (d2 * e1 + e2 * d1) + w3;
-    r(0, 2) = 2.0 * (d1 * e3 + e1 * d3) + w2;
-    r(2, 0) = 2.0 * (d3 * e1 + e3 * d1) - w2;
-    r(1, 2) = 2.0 * (d2 * e3 + e2 * d3) - w1;
-    r(2, 1) = 2.0 * (d3 * e2 + e3 * d2) + w1;
+    rotation_[i] = rotationMatrix(thetaOf(q, b));
+    rate_[i] = rotationMatrixRate(thetaOf(q, b), thetaOf(qd, b));
   }
 }
 

@@ -60,6 +60,13 @@ TEST(Rotation, PointJacobianIsExactDerivativeForAnyTheta)
     EXPECT_TRUE(at::pointJacobianThetaTimes(th, u, x).isApprox(at::pointJacobianTheta(th, u) * x, 1e-13));
     EXPECT_TRUE(
         at::pointJacobianThetaTransposeTimes(th, u, f).isApprox(at::pointJacobianTheta(th, u).transpose() * f, 1e-13));
+    // dA/dt along x, column by column, and against central differences of A along x
+    const at::Mat3 rate = at::rotationMatrixRate(th, x);
+    for (int j = 0; j < 3; ++j)
+      EXPECT_TRUE(rate.col(j).isApprox(at::pointJacobianTheta(th, at::Vec3::Unit(j)) * x, 1e-14));
+    const double step = 1e-6;
+    const at::Mat3 fd = (at::rotationMatrix(th + step * x) - at::rotationMatrix(th - step * x)) / (2.0 * step);
+    EXPECT_LT((rate - fd).norm(), 1e-8 * rate.norm());
     // the body z axis's rate and transposed product, written out, against the general forms at e_z
     EXPECT_TRUE(at::bodyZAxisRate(th, x).isApprox(at::pointJacobianThetaTimes(th, at::Vec3::UnitZ(), x), 1e-14));
     EXPECT_TRUE(at::bodyZAxisTransposeTimes(th, f).isApprox(

@@ -21,6 +21,8 @@ Mat3 skew(const Vec3& a);
 /// A(Theta) = (e0^2 - e.e) I + 2 e e^T + 2 e0 skew(e); the exact quadratic form, valid for any Theta
 /// (orthonormal only when |Theta| = 1).
 Mat3 rotationMatrix(const Vec4& theta);
+/// dA/dt for Theta moving at x: sum_i dA/dTheta_i x_i, whose column j is B_Theta(Theta, e_j) x.
+Mat3 rotationMatrixRate(const Vec4& theta, const Vec4& x);
 /// rotationMatrix(theta) * (0, 0, 1): the body z axis in the world (the same quadratic form, so it is
 /// scaled by |theta|^2 when theta is not unit).
 Vec3 bodyZAxis(const Vec4& theta);
