@@ -121,7 +121,7 @@ void PointForceSum::flush(const Model& model, const Eigen::VectorXd& q, Eigen::V
 {
   // With M = sum_j f_j u_j^T, sum_j B_Theta(Theta, u_j)^T f_j = 2 [e0 tr M + e.a; M e + M^T e - tr(M) e + e0 a],
   // a = sum_j u_j x f_j (from M's antisymmetric part): pointJacobianThetaTransposeTimes summed
-  for (size_t i = 0; i < moment_.size() && i < loaded_.size(); ++i)
+  for (size_t i = 0; i < loaded_.size(); ++i)  // (moment_ has as many, from reset)
   {
     if (!loaded_[i])
       continue;
