@@ -21,12 +21,19 @@ constexpr int kFreshStartsMost = 64;
 // (the six-bar robot, 48: 9 us against 8 us; the tower, 200: 250 us against 15 us). Fresh starts there (dense
 // ones); body blocks only above (the six-bar robot on them: 4.2 Newton iterations per step instead of 2.1)
 constexpr int kSmallSystem = 64;
+/// Exact factorizations with the one-body rows eliminated (ReducedLinearSolver) above kSmallSystem and up to
+/// this many unknowns (the dense LU's range; above it the static pivots and the sparse LU of the whole matrix).
+/// The tower's adaptive fold (200 unknowns, 120 factorized): 119-172 -> 98-132 us per step; the six-bar robot (48
+/// unknowns, only its 6 quaternion norms to eliminate) would go from 33.3 to 36.3 us per step.
+constexpr int kReducedMost = 400;
 }  // namespace
 
 DynamicsSolver::DynamicsSolver(const Model& model, const SolverOptions& options)
   : system_(model), options_(options), jac_(system_.makeMatrix())
 {
   linear_.allowDense(true);
+  reduced_.allowDense(true);
+  use_reduced_ = system_.size() > kSmallSystem && system_.size() <= kReducedMost;
   // the approximate static-pivot factorization is for modified Newton only (its contraction test)
   linear_.allowStaticPivot(options.reuse_jacobian);
   if (options.reuse_jacobian && system_.size() > kSmallSystem)
@@ -301,6 +308,17 @@ void DynamicsSolver::rememberStep(const State& start, double t_end, const Eigen:
   last_end_qdd_ = qdd_end;
 }
 
+bool DynamicsSolver::factorizeNewtonMatrix()
+{
+  reduced_current_ = false;
+  if (!use_reduced_)
+    return linear_.factorize(jac_.matrix());
+  if (linear_.factorizeApproximate(jac_.matrix()))
+    return true;
+  reduced_current_ = true;
+  return reduced_.factorize(jac_, static_cast<int>(system_.model().bodies.size()));
+}
+
 Summary DynamicsSolver::attemptOrFullNewton(State& s, double h, const ActuationLaw& law)
 {
   Summary sum = attempt(s, h, law, false);
@@ -367,14 +385,16 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law, boo
       bool factorized = false;
       {
         const ScopeTimer timer(timings_.factorization);
-        factorized = linear_.factorize(jac_.matrix());
+        factorized = factorizeNewtonMatrix();
       }
       ++timings_.factorizations;
       if (linear_.staticPivot())
         ++timings_.static_pivot_factorizations;
       if (linear_.bodyBlocks())
         ++timings_.body_block_factorizations;
-      timings_.analyses = linear_.analyses();
+      if (reduced_current_ && reduced_.reduced())
+        ++timings_.reduced_factorizations;
+      timings_.analyses = linear_.analyses() + reduced_.analyses();
       factor_valid_ = factorized;
       if (!factorized)
       {
@@ -394,7 +414,7 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law, boo
     {
       const ScopeTimer timer(timings_.solve);
       r_ = -r_;
-      linear_.solve(r_, dx_);
+      solveNewtonMatrix(r_, dx_);
     }
     if (!dx_.allFinite())
     {
@@ -440,7 +460,7 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law, boo
     // (Hairer & Wanner, Solving ODEs II, Sec. IV.8), theta the largest rate measured with this matrix
     // (floored at kRateFloor); it is accepted only while the iteration contracts (theta <= 0.5), and its
     // multipliers must settle too: an older matrix can shrink the q increments while they are still off.
-    const bool newton_step = !reuse || (built_this_step && linear_.exact());
+    const bool newton_step = !reuse || (built_this_step && factorizationExact());
     const double rate = std::max(theta_, kRateFloor);
     const double left = newton_step ? q_part : (theta_known_ ? rate / (1.0 - rate) : 1.0) * scaled;
     if (left <= 1.0 && !(reuse && theta_ > 0.5))
@@ -480,7 +500,7 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law, boo
       s.u = u;
       updateContactMemory(s, q_);
       ++factor_age_;
-      if (diverged && linear_.dense() && system_.size() <= kSmallSystem)
+      if (diverged && (reduced_current_ ? reduced_.dense() : linear_.dense()) && system_.size() <= kSmallSystem)
       {
         fresh_streak_ = std::clamp(2 * fresh_streak_, kFreshStartsLeast, kFreshStartsMost);
         fresh_starts_ = fresh_streak_;

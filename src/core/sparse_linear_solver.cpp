@@ -93,6 +93,11 @@ void SparseLinearSolver::distrustBodyBlocks()
 
 bool SparseLinearSolver::factorize(const Eigen::SparseMatrix<double>& a)
 {
+  return factorizeApproximate(a) || factorizeExact(a);
+}
+
+bool SparseLinearSolver::factorizeApproximate(const Eigen::SparseMatrix<double>& a)
+{
   if (a.rows() != analyzed_rows_ || a.nonZeros() != analyzed_nonzeros_)
   {
     analyzed_rows_ = a.rows();
@@ -128,7 +133,8 @@ bool SparseLinearSolver::factorize(const Eigen::SparseMatrix<double>& a)
       body_block_skip_ = kBodyBlockSkip;
     ++body_block_refusals_;
   }
-  return factorizeExact(a);
+  method_ = Method::kNone;
+  return false;
 }
 
 bool SparseLinearSolver::factorizeExact(const Eigen::SparseMatrix<double>& a)
@@ -207,6 +213,7 @@ int SparseLinearSolver::determinantSign() const
     case Method::kStaticPivot:
       return static_lu_.determinantSign();
     case Method::kBodyBlocks:
+    case Method::kNone:
       return 0;
     case Method::kSparse:
       break;

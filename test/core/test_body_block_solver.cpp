@@ -298,6 +298,39 @@ TEST(LinearSolver, DistrustedBodyBlocksPauseLongerEachTimeUntilOneServes)
   EXPECT_LT((s.a * x - Eigen::VectorXd::Ones(a.rows())).norm(), 1e-12 * x.norm());
 }
 
+TEST(LinearSolver, FactorizeApproximateLeavesTheExactFactorizationToTheCaller)
+{
+  // the two halves of factorize(): the body blocks when they serve, else nothing factorized (the dynamics
+  // solver then factorizes with the one-body rows eliminated), in the same pause after a distrust
+  std::mt19937 rng(9);
+  const Saddle s = makeSaddle({ 7, 7, 7 }, { 1, 1, 1 }, { { 0, 1 }, { 1, 2 } }, {}, 0.1, 0.0, rng);
+  const Eigen::SparseMatrix<double> a = sparse(s.a);
+  SparseLinearSolver solver;
+  solver.allowDense(true);
+  ASSERT_FALSE(solver.factorizeApproximate(a));  // no body blocks allowed
+  EXPECT_FALSE(solver.bodyBlocks());
+  EXPECT_FALSE(solver.dense());
+  ASSERT_TRUE(solver.factorizeExact(a));
+  EXPECT_TRUE(solver.exact());
+  solver.allowBodyBlocks(s.sizes);
+  ASSERT_TRUE(solver.factorizeApproximate(a));
+  EXPECT_TRUE(solver.bodyBlocks());
+  solver.distrustBodyBlocks();
+  for (int k = 0; k < 4; ++k)
+  {
+    EXPECT_FALSE(solver.factorizeApproximate(a)) << k;
+    EXPECT_FALSE(solver.bodyBlocks());
+  }
+  EXPECT_TRUE(solver.factorizeApproximate(a));
+  solver.allowApproximate(false);
+  EXPECT_FALSE(solver.factorizeApproximate(a));
+  // what factorizeExact() gives solves the whole matrix
+  ASSERT_TRUE(solver.factorizeExact(a));
+  Eigen::VectorXd x;
+  solver.solve(Eigen::VectorXd::Ones(a.rows()), x);
+  EXPECT_LT((s.a * x - Eigen::VectorXd::Ones(a.rows())).norm(), 1e-12 * x.norm());
+}
+
 TEST(BodyBlocks, TheTowerFoldOnBodyBlocksFollowsFullNewton)
 {
   // the first 0.2 s of the tower's fold at the paper's step: modified Newton on body blocks stays within a
@@ -321,6 +354,10 @@ TEST(BodyBlocks, TheTowerFoldOnBodyBlocksFollowsFullNewton)
   ASSERT_TRUE(full.summary.ok()) << full.summary.message;
   EXPECT_GT(modified.timings.body_block_factorizations, 0);
   EXPECT_EQ(full.timings.body_block_factorizations, 0);
+  // every exact factorization with the one-body rows eliminated (200 unknowns, 120 factorized)
+  EXPECT_EQ(full.timings.reduced_factorizations, full.timings.factorizations);
+  EXPECT_EQ(modified.timings.reduced_factorizations,
+            modified.timings.factorizations - modified.timings.body_block_factorizations);
   EXPECT_LT(modified.timings.factorizations, modified.timings.newton_iterations / 10);
   const double distance = (modified.final_state.q - full.final_state.q).lpNorm<Eigen::Infinity>();
   EXPECT_LT(distance, 1e-6);

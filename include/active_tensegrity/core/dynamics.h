@@ -7,6 +7,7 @@
 #include <functional>
 
 #include "active_tensegrity/core/contact.h"
+#include "active_tensegrity/core/reduced_linear_solver.h"
 #include "active_tensegrity/core/sparse_linear_solver.h"
 #include "active_tensegrity/core/state.h"
 #include "active_tensegrity/core/summary.h"
@@ -116,7 +117,27 @@ private:
   SolverOptions options_;
   Coefficients coef_;
   BlockSparseMatrix jac_;
+  /// The Newton matrix's factorizations: linear_ (body blocks when they serve; every method on large systems),
+  /// and on systems of at most kReducedMost unknowns the exact ones in reduced_, the one-body rows eliminated
+  /// (docs/physics.md, "Linear solves").
   SparseLinearSolver linear_;
+  ReducedLinearSolver reduced_;
+  bool use_reduced_ = false;      // whether the exact factorizations go to reduced_
+  bool reduced_current_ = false;  // whether the last factorization is reduced_'s
+  /// Factorizes jac_ (as above); false when it is singular.
+  bool factorizeNewtonMatrix();
+  void solveNewtonMatrix(const Eigen::VectorXd& b, Eigen::VectorXd& x) const
+  {
+    if (reduced_current_)
+      reduced_.solve(b, x);
+    else
+      linear_.solve(b, x);
+  }
+  /// Whether the last factorization solves to round-off (false: body blocks, static pivots).
+  bool factorizationExact() const
+  {
+    return reduced_current_ || linear_.exact();
+  }
   Eigen::VectorXd q_, qd_, acc_, inertial_, applied_, cforce_, phi_, r_, dx_, qdd_iter_, lambda_iter_;
   std::vector<double> step_speeds_;  // v_0 per checked pair for the step being solved
   std::vector<int> near_;            // the step's contact slots within reach (findNearContacts)

@@ -1,6 +1,7 @@
 /// The linear solver of the Newton matrices (sparse LU, dense LU or static pivots; see the class).
 #pragma once
 
+#include <limits>
 #include <vector>
 
 #include <Eigen/Core>
@@ -72,6 +73,13 @@ public:
   /// singular matrix); dense, a reciprocal condition estimate below 1e-14; static pivots, a zero pivot
   /// in both them and the sparse LU.
   bool factorize(const Eigen::SparseMatrix<double>& a);
+  /// The first half of factorize(): the body blocks when they are allowed, not suspended and take the matrix
+  /// (true), else false with nothing factorized (bodyBlocks() and the other methods' queries false, solve()
+  /// not to be called): the caller factorizes the matrix exactly by other means (DynamicsSolver: with the
+  /// one-body rows eliminated), or calls factorizeExact().
+  bool factorizeApproximate(const Eigen::SparseMatrix<double>& a);
+  /// The second half: the static pivots when allowed (large matrices), else the sparse or the dense LU.
+  bool factorizeExact(const Eigen::SparseMatrix<double>& a);
   /// Symbolic analyses done so far (one per pattern seen, two when the static pivots were refused).
   int analyses() const
   {
@@ -130,6 +138,9 @@ public:
       case Method::kBodyBlocks:
         body_blocks_.solve(b, x);
         break;
+      case Method::kNone:
+        x.setConstant(b.size(), std::numeric_limits<double>::quiet_NaN());  // (a caller's error: no factorization)
+        break;
     }
   }
 
@@ -139,9 +150,9 @@ private:
     kSparse,
     kDense,
     kStaticPivot,
-    kBodyBlocks
+    kBodyBlocks,
+    kNone  // factorizeApproximate() declined: nothing factorized here
   };
-  bool factorizeExact(const Eigen::SparseMatrix<double>& a);
   bool factorizeSparse(const Eigen::SparseMatrix<double>& a);
   bool factorizeStaticPivot(const Eigen::SparseMatrix<double>& a);
 

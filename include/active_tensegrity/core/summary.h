@@ -53,6 +53,7 @@ struct StepTimings
   long analyses = 0;  // symbolic analyses of the Newton matrix (its pattern grows when a new pair touches)
   long static_pivot_factorizations = 0;  // of them, the approximate static-pivot LU (SparseLinearSolver)
   long body_block_factorizations = 0;    // of them, the approximate body blocks (SparseLinearSolver)
+  long reduced_factorizations = 0;       // of them, exact ones with the one-body rows eliminated (ReducedLinearSolver)
   long full_newton_retries = 0;   // dynamics: steps retried in full Newton after modified Newton ran out of iterations
   long contact_reach_misses = 0;  // dynamics: converged iterates that moved beyond the contact slots' reach
   long fresh_starts = 0;  // dynamics: steps begun with a new matrix because kept ones had diverged (modified Newton)
@@ -70,6 +71,7 @@ struct StepTimings
     analyses += o.analyses;
     static_pivot_factorizations += o.static_pivot_factorizations;
     body_block_factorizations += o.body_block_factorizations;
+    reduced_factorizations += o.reduced_factorizations;
     full_newton_retries += o.full_newton_retries;
     contact_reach_misses += o.contact_reach_misses;
     fresh_starts += o.fresh_starts;

@@ -68,10 +68,12 @@ int steps(const std::string& scene, const std::vector<at::Override>& overrides, 
   else if (!peaks)
     std::printf("heap allocations per step (solver and loop, after the first output): %.2f\n",
                 static_cast<double>(allocations) / std::max(1, last.solver_steps));
-  std::printf("factorizations per step: %.3f (body blocks %.3f, static pivots %.3f), symbolic analyses: %ld\n",
+  std::printf("factorizations per step: %.3f (body blocks %.3f, static pivots %.3f, one-body rows eliminated %.3f), "
+              "symbolic analyses: %ld\n",
               static_cast<double>(last.timings.factorizations) / std::max(1, last.solver_steps),
               static_cast<double>(last.timings.body_block_factorizations) / std::max(1, last.solver_steps),
               static_cast<double>(last.timings.static_pivot_factorizations) / std::max(1, last.solver_steps),
+              static_cast<double>(last.timings.reduced_factorizations) / std::max(1, last.solver_steps),
               last.timings.analyses);
   if (dynamic)
     std::printf("full-Newton retries: %ld, iterates beyond the contact reach: %ld, fresh starts: %ld\n",
