@@ -1,0 +1,40 @@
+// The tower's dynamic fold at the paper's step, walked to given instants: for the tests of its Newton matrices.
+#pragma once
+
+#include <functional>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "active_tensegrity/core/analysis.h"
+#include "active_tensegrity/core/dynamics.h"
+#include "active_tensegrity/core/scene.h"
+
+namespace active_tensegrity::test
+{
+/// What walkTowerFold() shows at each instant: the model, its solver (residualAndJacobian) and state, the
+/// actuation law.
+using TowerVisit =
+    std::function<void(const core::Model&, core::DynamicsSolver&, const core::State&, const core::ActuationLaw&)>;
+
+/// Steps config/scenes/tower.yaml's dynamic fold (V = its scene's speed) at its dt to each of `times`
+/// (ascending, s) and calls `visit` there; a step that fails fails the test.
+inline void walkTowerFold(const std::vector<double>& times, const TowerVisit& visit)
+{
+  using namespace active_tensegrity::core;
+  const Model m = loadScene(std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) + "/config/scenes/tower.yaml",
+                            { parseOverride("analysis.type=dynamic") });
+  DynamicsSolver solver(m, m.solver);
+  State s = initialState(m);
+  const ActuationLaw law = [&m](double t) { return scheduledActuation(m, t); };
+  ASSERT_TRUE(solver.initialize(s, law).ok());
+  const double h = m.solver.dt;
+  for (double t : times)
+  {
+    while (s.t < t - 0.5 * h)
+      ASSERT_TRUE(solver.step(s, h, law).ok()) << s.t;
+    visit(m, solver, s, law);
+  }
+}
+}  // namespace active_tensegrity::test
