@@ -262,6 +262,8 @@ bool StaticSolver::factorizeFull()
   const ScopeTimer timer(timings_.factorization);
   ++timings_.factorizations;
   const bool ok = linear_.factorize(jac_, nbodies_);
+  if (linear_.reduced())
+    ++timings_.reduced_factorizations;
   timings_.analyses = path_linear_.analyses() + linear_.analyses();
   return ok;
 }
@@ -511,6 +513,8 @@ bool StaticSolver::factorizePath(const Eigen::VectorXd& q, const Eigen::VectorXd
     ok = r_.allFinite() && path_linear_.factorize(jac_, nbodies_);
   }
   ++timings_.factorizations;
+  if (path_linear_.reduced())
+    ++timings_.reduced_factorizations;
   timings_.analyses = path_linear_.analyses() + linear_.analyses();
   path_factor_valid_ = ok;
   path_factor_age_ = 0;

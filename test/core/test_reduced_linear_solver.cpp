@@ -158,10 +158,10 @@ TEST(ReducedLinearSolver, SolvesTheTowersDynamicNewtonMatricesThroughContact)
   EXPECT_GT(touching, 0);
 }
 
-TEST(ReducedLinearSolver, TheDynamicsSolverFactorizesMidSizeSystemsWithItAndSmallOnesWhole)
+TEST(ReducedLinearSolver, TheSolversFactorizeWithIt)
 {
-  // the tower (200 unknowns) with adaptive steps: every exact factorization has the one-body rows eliminated;
-  // the six-bar robot (48 unknowns, a dense LU as cheap as the elimination) none
+  // dynamics: the tower (200 unknowns) with adaptive steps: every exact factorization has the one-body rows
+  // eliminated; the six-bar robot (48 unknowns, a dense LU as cheap as the elimination) none
   const auto run = [](const std::string& path, const std::vector<std::string>& overrides)
   {
     std::vector<Override> parsed;
@@ -183,4 +183,9 @@ TEST(ReducedLinearSolver, TheDynamicsSolverFactorizesMidSizeSystemsWithItAndSmal
   ASSERT_TRUE(six_bar.summary.ok()) << six_bar.summary.message;
   EXPECT_GT(six_bar.timings.factorizations, 0);
   EXPECT_EQ(six_bar.timings.reduced_factorizations, 0);
+  // statics reduces every factorization it can, whatever the size (the quadruplex: 52 unknowns, 4 factorized)
+  const RunResult quadruplex = run("config/scenes/quadruplex.yaml", {});
+  ASSERT_TRUE(quadruplex.summary.ok()) << quadruplex.summary.message;
+  EXPECT_GT(quadruplex.timings.factorizations, 0);
+  EXPECT_EQ(quadruplex.timings.reduced_factorizations, quadruplex.timings.factorizations);
 }
