@@ -500,7 +500,7 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law, boo
       s.u = u;
       updateContactMemory(s, q_);
       ++factor_age_;
-      if (diverged && (reduced_current_ ? reduced_.dense() : linear_.dense()) && system_.size() <= kSmallSystem)
+      if (diverged && linear_.dense() && system_.size() <= kSmallSystem)  // (small: never reduced_)
       {
         fresh_streak_ = std::clamp(2 * fresh_streak_, kFreshStartsLeast, kFreshStartsMost);
         fresh_starts_ = fresh_streak_;

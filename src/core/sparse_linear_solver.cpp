@@ -96,7 +96,7 @@ bool SparseLinearSolver::factorize(const Eigen::SparseMatrix<double>& a)
   return factorizeApproximate(a) || factorizeExact(a);
 }
 
-bool SparseLinearSolver::factorizeApproximate(const Eigen::SparseMatrix<double>& a)
+void SparseLinearSolver::notePattern(const Eigen::SparseMatrix<double>& a)
 {
   if (a.rows() != analyzed_rows_ || a.nonZeros() != analyzed_nonzeros_)
   {
@@ -117,6 +117,11 @@ bool SparseLinearSolver::factorizeApproximate(const Eigen::SparseMatrix<double>&
       static_pivot_pattern_ = !no_diagonal_.empty();
     }
   }
+}
+
+bool SparseLinearSolver::factorizeApproximate(const Eigen::SparseMatrix<double>& a)
+{
+  notePattern(a);
   if (method_ == Method::kBodyBlocks && !body_blocks_distrusted_)
     body_block_pause_ = kBodyBlockSkip;  // the last one served until it was replaced
   body_blocks_distrusted_ = false;
@@ -139,6 +144,7 @@ bool SparseLinearSolver::factorizeApproximate(const Eigen::SparseMatrix<double>&
 
 bool SparseLinearSolver::factorizeExact(const Eigen::SparseMatrix<double>& a)
 {
+  notePattern(a);  // (a no-op after factorizeApproximate on the same matrix)
   if (static_pivot_pattern_ && approximate_)
   {
     if (static_pivot_skip_ > 0)

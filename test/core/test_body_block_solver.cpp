@@ -332,6 +332,14 @@ TEST(LinearSolver, FactorizeApproximateLeavesTheExactFactorizationToTheCaller)
   Eigen::VectorXd x;
   solver.solve(Eigen::VectorXd::Ones(a.rows()), x);
   EXPECT_LT((s.a * x - Eigen::VectorXd::Ones(a.rows())).norm(), 1e-12 * x.norm());
+  // factorizeExact() alone sees a new pattern too (the sparse LU analyzes it again)
+  SparseLinearSolver lu;
+  ASSERT_TRUE(lu.factorizeExact(a));
+  const Saddle other = makeSaddle({ 7, 7, 7, 7 }, { 1, 1, 1, 1 }, { { 0, 1 }, { 2, 3 } }, {}, 0.1, 0.0, rng);
+  ASSERT_TRUE(lu.factorizeExact(sparse(other.a)));
+  EXPECT_EQ(lu.analyses(), 2);
+  lu.solve(Eigen::VectorXd::Ones(other.a.rows()), x);
+  EXPECT_LT((other.a * x - Eigen::VectorXd::Ones(other.a.rows())).norm(), 1e-12 * x.norm());
 }
 
 TEST(BodyBlocks, TheTowerFoldOnBodyBlocksFollowsFullNewton)

@@ -153,6 +153,8 @@ private:
     kBodyBlocks,
     kNone  // factorizeApproximate() declined: nothing factorized here
   };
+  /// A new pattern (size or number of entries): every choice made for the last one is made again.
+  void notePattern(const Eigen::SparseMatrix<double>& a);
   bool factorizeSparse(const Eigen::SparseMatrix<double>& a);
   bool factorizeStaticPivot(const Eigen::SparseMatrix<double>& a);
 
