@@ -18,6 +18,7 @@ constexpr double kKeepBand = 1.2;   // a proposal in [h, kKeepBand h] keeps h (a
 AdaptiveStepper::AdaptiveStepper(DynamicsSolver& solver, const SolverOptions& options)
   : solver_(solver), options_(options), h_(std::clamp(options.dt, options.dt_min, options.dt_max))
 {
+  solver_.setVariableSteps(true);
 }
 
 Summary AdaptiveStepper::advanceTo(State& s, double t_end, const ActuationLaw& law,

@@ -69,7 +69,7 @@ void BodyBlockSolver::chooseGroups(const Eigen::SparseMatrix<double>& a)
   const int nq = static_cast<int>(body_of_column_.size());
   std::vector<int>& group = group_of_body_wanted_;
   std::iota(group.begin(), group.end(), 0);
-  if (nq > a.cols())
+  if (nq > a.cols() || !groups_allowed_)
     return;
   body_diagonal_.assign(nb, 0.0);
   couplings_.clear();

@@ -218,6 +218,46 @@ TEST(BodyBlockSolver, StronglyCoupledBodiesAreSolvedTogether)
   EXPECT_LT(solveError(solver, weak, rng), 1e-12);
 }
 
+TEST(BodyBlockSolver, GroupsCanBeTurnedOff)
+{
+  // the strongly coupled pair of the test above (bodies 1 and 2 at 40 % of their diagonals): with groups off
+  // every body is alone, and the solve is that of the matrix without any coupling between bodies
+  std::mt19937 rng(5);
+  std::vector<int> sizes(6, 7), own(6, 1);
+  const std::vector<std::pair<int, int>> joints = { { 0, 1 }, { 1, 2 }, { 2, 3 }, { 3, 4 }, { 4, 5 } };
+  Saddle s = makeSaddle(sizes, own, joints, {}, 0.3, 0.1, rng);
+  s.a.block(7, 14, 7, 7).setConstant(4.0);
+  s.a.block(14, 7, 7, 7).setConstant(4.0);
+  const Eigen::VectorXd b = Eigen::VectorXd::Ones(s.a.rows());
+  const Eigen::VectorXd alone = withoutCouplings(s).partialPivLu().solve(b);
+  Eigen::VectorXd x;
+
+  BodyBlockSolver solver(s.sizes);
+  solver.allowGroups(false);
+  ASSERT_TRUE(solver.factorize(sparse(s.a)));
+  EXPECT_EQ(solver.groupedBodies(), 0);
+  EXPECT_EQ(solver.groups(), (std::vector<int>{ 0, 1, 2, 3, 4, 5 }));
+  solver.solve(b, x);
+  EXPECT_LT((x - alone).norm(), 1e-12 * alone.norm());
+  // on again: the pair is one group (a new analysis of the same pattern)
+  const int analyses = solver.analyses();
+  solver.allowGroups(true);
+  ASSERT_TRUE(solver.factorize(sparse(s.a)));
+  EXPECT_EQ(solver.analyses(), analyses + 1);
+  EXPECT_EQ(solver.groupedBodies(), 2);
+  solver.solve(b, x);
+  EXPECT_GT((x - alone).norm(), 1e-3 * alone.norm());
+
+  // through SparseLinearSolver: the setting holds when the body blocks are (re)declared after it
+  SparseLinearSolver linear;
+  linear.allowBodyGroups(false);
+  linear.allowBodyBlocks(s.sizes);
+  ASSERT_TRUE(linear.factorize(sparse(s.a)));
+  ASSERT_TRUE(linear.bodyBlocks());
+  linear.solve(b, x);
+  EXPECT_LT((x - alone).norm(), 1e-12 * alone.norm());
+}
+
 TEST(BodyBlockSolver, FollowsAChangeOfPatternAndRefusesWhatItCannotSolve)
 {
   std::mt19937 rng(3);
@@ -340,6 +380,23 @@ TEST(LinearSolver, FactorizeApproximateLeavesTheExactFactorizationToTheCaller)
   EXPECT_EQ(lu.analyses(), 2);
   lu.solve(Eigen::VectorXd::Ones(other.a.rows()), x);
   EXPECT_LT((other.a * x - Eigen::VectorXd::Ones(other.a.rows())).norm(), 1e-12 * x.norm());
+}
+
+TEST(BodyBlocks, AdaptiveStepsSolveEveryBodyAlone)
+{
+  // With variable steps the body blocks keep every body alone: the couplings in H grow against the mass
+  // terms as h^2, and on the tower's adaptive fold the groups followed the step size (112 analyses in its
+  // first second). Alone, the pattern is analyzed once, and again when contact adds to it.
+  const Model m = loadScene(std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) + "/config/scenes/tower.yaml",
+                            { parseOverride("analysis.type=dynamic"), parseOverride("actuation.speed=0.5"),
+                              parseOverride("analysis.duration=1.0"), parseOverride("solver.adaptive=true") });
+  const RunResult r = runAnalysis(
+      m, [](const State&) {}, {}, [](const State&) {});
+  ASSERT_TRUE(r.summary.ok()) << r.summary.message;
+  EXPECT_GT(r.timings.body_block_factorizations, 10);
+  EXPECT_LE(r.timings.analyses, 3);
+  std::printf("[ measured ] tower, 1 s adaptive: %ld analyses, %ld of %ld factorizations on body blocks\n",
+              static_cast<long>(r.timings.analyses), r.timings.body_block_factorizations, r.timings.factorizations);
 }
 
 TEST(BodyBlocks, TheTowerFoldOnBodyBlocksFollowsFullNewton)

@@ -33,7 +33,10 @@ namespace active_tensegrity::core
 /// Where it is not, modified Newton's contraction test sees it (SparseLinearSolver::distrustApproximation).
 /// Bodies whose coupling in H is strong (touching steel struts: a contact tangent as large as the mass term)
 /// are joined into one block with that coupling kept (kGroupCoupling), up to kMaxGroupColumns coordinates;
-/// the groups follow the values of each factorized matrix (a change of groups is a new analysis).
+/// the groups follow the values of each factorized matrix (a change of groups is a new analysis). With
+/// variable steps they are off (allowGroups): H's couplings against its mass terms grow as h^2, so the
+/// groups followed the step size (219 analyses on the tower's adaptive fold) and served worse than single
+/// bodies there (4.19 against 3.93 Newton iterations per step).
 /// A check of A0 against A on one vector (A0^-1 A 1 against 1, as the static pivots have) says nothing
 /// here: its largest error reached 3.8 on the tower while the iteration contracted at 0.15, the multipliers'
 /// part of the vector weighing unlike the accelerations'.
@@ -50,6 +53,12 @@ public:
   /// pivot.
   bool factorize(const Eigen::SparseMatrix<double>& a);
   void solve(const Eigen::VectorXd& b, Eigen::VectorXd& x) const;
+  /// Whether strongly coupled bodies may be solved together (default true); false: one block per body.
+  /// Variable steps turn it off (DynamicsSolver::setVariableSteps): their couplings move with the step.
+  void allowGroups(bool allow)
+  {
+    groups_allowed_ = allow;
+  }
 
   /// The rows that join bodies (the Schur complement's size) in the last analyzed pattern.
   int joiningRows() const
@@ -97,6 +106,7 @@ private:
   int grouped_bodies_ = 0;
   std::vector<double> body_diagonal_;  // work of chooseGroups
   std::vector<std::pair<double, std::pair<int, int>>> couplings_;
+  bool groups_allowed_ = true;
   int n_ = 0, nq_ = 0;
   int analyses_ = 0;
   bool usable_ = false;                 // the analyzed pattern can be solved this way

@@ -44,6 +44,12 @@ public:
   /// One attempt at a step of h, never cut: on success `state` is advanced and estimate() describes
   /// the step; on failure `state` is unchanged.
   Summary tryStep(State& state, double h, const ActuationLaw& law);
+  /// Says whether the steps will vary (AdaptiveStepper sets it): the body blocks then solve every body
+  /// alone (BodyBlockSolver::allowGroups), as their groups would follow the step size.
+  void setVariableSteps(bool variable)
+  {
+    linear_.allowBodyGroups(!variable);
+  }
   /// The error estimate and contact onset of the last accepted step.
   const StepEstimate& estimate() const
   {
