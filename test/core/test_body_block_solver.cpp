@@ -175,17 +175,32 @@ TEST(BodyBlockSolver, ManyJoiningRowsGoToTheSparseSchurComplement)
   EXPECT_LT(solveError(solver, s, rng), 1e-11);
 }
 
-TEST(BodyBlockSolver, StronglyCoupledBodiesAreSolvedTogether)
+namespace
 {
-  // a chain of six struts joined end to end, couplings of 0.3 between neighbours (3 % of their diagonals of
-  // about 10: dropped); bodies 1 and 2 coupled at 4 (40 %): one group, their coupling and the joint between
-  // them kept, the rest dropped
-  std::mt19937 rng(5);
-  std::vector<int> sizes(6, 7), own(6, 1);
+/// A chain of six struts joined end to end (each with one row of its own), neighbours coupled at `coupling`
+/// against diagonals of about 10.
+Saddle strutChain(double coupling, std::mt19937& rng)
+{
+  const std::vector<int> sizes(6, 7), own(6, 1);
   const std::vector<std::pair<int, int>> joints = { { 0, 1 }, { 1, 2 }, { 2, 3 }, { 3, 4 }, { 4, 5 } };
-  Saddle s = makeSaddle(sizes, own, joints, {}, 0.3, 0.1, rng);
+  return makeSaddle(sizes, own, joints, {}, coupling, 0.1, rng);
+}
+
+/// The chain with couplings of 0.3 (3 % of the diagonals: dropped), but bodies 1 and 2 coupled at 4 (40 %).
+Saddle chainWithStrongPair(std::mt19937& rng)
+{
+  Saddle s = strutChain(0.3, rng);
   s.a.block(7, 14, 7, 7).setConstant(4.0);
   s.a.block(14, 7, 7, 7).setConstant(4.0);
+  return s;
+}
+}  // namespace
+
+TEST(BodyBlockSolver, StronglyCoupledBodiesAreSolvedTogether)
+{
+  // the strongly coupled pair is one group, their coupling and the joint between them kept, the rest dropped
+  std::mt19937 rng(5);
+  const Saddle s = chainWithStrongPair(rng);
   BodyBlockSolver solver(s.sizes);
   ASSERT_TRUE(solver.factorize(sparse(s.a)));
   EXPECT_EQ(solver.groupedBodies(), 2);
@@ -198,7 +213,7 @@ TEST(BodyBlockSolver, StronglyCoupledBodiesAreSolvedTogether)
   EXPECT_GT((x - withoutCouplings(s).partialPivLu().solve(b)).norm(), 1e-3 * x.norm()) << "the strong coupling is kept";
 
   // every neighbour strongly coupled: groups of at most four struts (kMaxGroupColumns), strongest first
-  Saddle strong = makeSaddle(sizes, own, joints, {}, 4.0, 0.1, rng);
+  Saddle strong = strutChain(4.0, rng);
   strong.a.block(28, 35, 7, 7).setConstant(6.0);  // bodies 4 and 5 the strongest pair
   strong.a.block(35, 28, 7, 7).setConstant(6.0);
   ASSERT_TRUE(solver.factorize(sparse(strong.a)));
@@ -211,7 +226,7 @@ TEST(BodyBlockSolver, StronglyCoupledBodiesAreSolvedTogether)
 
   // weak couplings again: every body alone (a new analysis)
   const int analyses = solver.analyses();
-  const Saddle weak = makeSaddle(sizes, own, joints, {}, 0.3, 0.1, rng);
+  const Saddle weak = strutChain(0.3, rng);
   ASSERT_TRUE(solver.factorize(sparse(weak.a)));
   EXPECT_EQ(solver.analyses(), analyses + 1);
   EXPECT_EQ(solver.groupedBodies(), 0);
@@ -220,14 +235,10 @@ TEST(BodyBlockSolver, StronglyCoupledBodiesAreSolvedTogether)
 
 TEST(BodyBlockSolver, GroupsCanBeTurnedOff)
 {
-  // the strongly coupled pair of the test above (bodies 1 and 2 at 40 % of their diagonals): with groups off
-  // every body is alone, and the solve is that of the matrix without any coupling between bodies
+  // the strongly coupled pair of the test above: with groups off every body is alone, and the solve is that
+  // of the matrix without any coupling between bodies
   std::mt19937 rng(5);
-  std::vector<int> sizes(6, 7), own(6, 1);
-  const std::vector<std::pair<int, int>> joints = { { 0, 1 }, { 1, 2 }, { 2, 3 }, { 3, 4 }, { 4, 5 } };
-  Saddle s = makeSaddle(sizes, own, joints, {}, 0.3, 0.1, rng);
-  s.a.block(7, 14, 7, 7).setConstant(4.0);
-  s.a.block(14, 7, 7, 7).setConstant(4.0);
+  const Saddle s = chainWithStrongPair(rng);
   const Eigen::VectorXd b = Eigen::VectorXd::Ones(s.a.rows());
   const Eigen::VectorXd alone = withoutCouplings(s).partialPivLu().solve(b);
   Eigen::VectorXd x;
