@@ -59,6 +59,10 @@ public:
   {
     groups_allowed_ = allow;
   }
+  bool groupsAllowed() const
+  {
+    return groups_allowed_;
+  }
 
   /// The rows that join bodies (the Schur complement's size) in the last analyzed pattern.
   int joiningRows() const

@@ -56,14 +56,14 @@ public:
   /// (sizes from the first column on; empty: never).
   void allowBodyBlocks(const std::vector<int>& body_sizes)
   {
+    const bool groups = body_blocks_.groupsAllowed();
     body_blocks_ = BodyBlockSolver(body_sizes);
-    body_blocks_.allowGroups(body_groups_);
+    body_blocks_.allowGroups(groups);
     allow_body_blocks_ = !body_sizes.empty();
   }
   /// Whether the body blocks may join strongly coupled bodies (BodyBlockSolver::allowGroups; default true).
   void allowBodyGroups(bool allow)
   {
-    body_groups_ = allow;
     body_blocks_.allowGroups(allow);
   }
   /// Suspends (false) or restores (true) the approximate methods, static pivots and body blocks, as allowed.
@@ -183,7 +183,6 @@ private:
   StaticPivotLU static_lu_;
   bool approximate_ = true;
   bool allow_body_blocks_ = false;
-  bool body_groups_ = true;
   int body_block_skip_ = 0;              // factorizations left before the body blocks are tried again
   int body_block_pause_ = 4;             // the skip after the next distrust
   bool body_blocks_distrusted_ = false;  // the current factorization is distrusted body blocks
