@@ -71,6 +71,10 @@ public:
   {
     approximate_ = allow;
   }
+  bool approximateAllowed() const
+  {
+    return approximate_;
+  }
   /// The caller found the last factorization, when it is the body blocks, too far off (modified Newton did
   /// not contract with it): the next factorizations use the other methods (4, doubled with each distrust
   /// while they keep failing, up to 256; back to 4 once a body-block factorization serves until the next

@@ -39,7 +39,8 @@ struct Summary
 
 /// Wall time (s) a solver spent in each part of its steps (DynamicsSolver: time steps; StaticSolver: load
 /// increments), summed since construction (or DynamicsSolver::resetTimings()). Measured with steady_clock around each
-/// part: about ten clock reads per Newton iteration, well under 0.1 % of a step on the shipped scenes.
+/// part: about ten clock reads per Newton iteration, about 4 % of the tower's step at dt = 2e-4 s (the whole fold 0.80
+/// s with the clock reads, 0.77 s without them, on the AMD EPYC VM of docs/benchmarks.md).
 struct StepTimings
 {
   double forces = 0.0;         // inertial and applied (cable, spring, actuator) forces with their tangents
@@ -56,7 +57,9 @@ struct StepTimings
   long reduced_factorizations = 0;       // of them, exact ones with the one-body rows eliminated (ReducedLinearSolver)
   long full_newton_retries = 0;   // dynamics: steps retried in full Newton after modified Newton ran out of iterations
   long contact_reach_misses = 0;  // dynamics: converged iterates that moved beyond the contact slots' reach
-  long fresh_starts = 0;  // dynamics: steps begun with a new matrix because kept ones had diverged (modified Newton)
+  long fresh_starts = 0;     // dynamics: steps begun with a new matrix because kept ones had diverged (modified Newton)
+  long newton_switches = 0;  // dynamics: steps that went on in full Newton when modified Newton did not contract with a
+                             // matrix exact at one of their own iterates
 
   StepTimings& operator+=(const StepTimings& o)
   {
@@ -75,6 +78,7 @@ struct StepTimings
     full_newton_retries += o.full_newton_retries;
     contact_reach_misses += o.contact_reach_misses;
     fresh_starts += o.fresh_starts;
+    newton_switches += o.newton_switches;
     return *this;
   }
 };
