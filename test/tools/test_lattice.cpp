@@ -32,6 +32,16 @@ at::Model lattice(int nx, int ny, tl::LatticePairs pairs = tl::LatticePairs::kAu
   return at::loadSceneFromString(tl::quadruplexLatticeYaml(o), "lattice");
 }
 
+// the lattice's dynamic fold (bracings pulled in) over `duration` seconds
+at::Model folding(int nx, int ny, double duration)
+{
+  tl::LatticeOptions o;
+  o.nx = nx;
+  o.ny = ny;
+  o.duration = duration;
+  return at::loadSceneFromString(tl::quadruplexLatticeYaml(o), "lattice");
+}
+
 // both end points of every strut at q0 (world)
 std::vector<std::pair<at::Vec3, at::Vec3>> strutEnds(const at::Model& m)
 {
@@ -284,11 +294,7 @@ TEST(Lattice, ModifiedNewtonOnApproximateFactorsFollowsFullNewton)
   // between bodies dropped) and, where they fail, with static pivots (shifted), while full Newton keeps the
   // exact sparse LU. Over 500 steps of 0.2 ms with the bracings pulled in, the two stay within a small
   // multiple of the Newton tolerance of each other.
-  tl::LatticeOptions o;
-  o.nx = 3;
-  o.ny = 4;
-  o.duration = 0.1;
-  at::Model m = at::loadSceneFromString(tl::quadruplexLatticeYaml(o), "lattice");
+  at::Model m = folding(3, 4, 0.1);
   ASSERT_GT(m.nq + m.n_lambda, 400);
   m.solver.newton_tolerance = 1e-8;
   const auto run = [&m](bool reuse)
@@ -323,11 +329,7 @@ TEST(Lattice, ModifiedNewtonOnBodyBlocksFollowsFullNewtonThroughContact)
   // a contact's impact speed taken at a different onset step would do it). Measured: 1.7e-3, 2.7e-7, 5.0e-8 m at
   // 1e-6, 1e-8, 1e-10 and a floor of 4.2e-8; on the generic x86-64 build 1.7e-3, 2.9e-7, 1.2e-7, floor 2.7e-8
   // (without the groups 7.6e-4, 1.6e-5, 1.6e-7; on the whole matrix 6.5e-3, 2.0e-4, 1.5e-6).
-  tl::LatticeOptions o;
-  o.nx = 1;
-  o.ny = 2;
-  o.duration = 0.4;
-  const at::Model m = at::loadSceneFromString(tl::quadruplexLatticeYaml(o), "lattice");
+  const at::Model m = folding(1, 2, 0.4);
   int touched = 0;
   const auto run = [&m, &touched](bool reuse, double tolerance)
   {
@@ -374,11 +376,7 @@ TEST(Lattice, ModifiedNewtonGoesOnInFullNewtonWhereItsOwnMatrixDoesNotContract)
   // step's own iterates, stops contracting: the iterates cycle between two points. Those steps go on in full
   // Newton and converge there; without the switch they ran out of iterations and were retried from the start in
   // full Newton (10 retries up to 0.6 s).
-  tl::LatticeOptions o;
-  o.nx = 3;
-  o.ny = 3;
-  o.duration = 0.6;
-  const at::Model m = at::loadSceneFromString(tl::quadruplexLatticeYaml(o), "lattice");
+  const at::Model m = folding(3, 3, 0.6);
   ASSERT_TRUE(m.solver.reuse_jacobian);
   const at::RunResult r = at::runAnalysis(
       m, [](const at::State&) {}, {}, [](const at::State&) {});
