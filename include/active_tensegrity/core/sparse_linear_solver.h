@@ -71,6 +71,7 @@ public:
   {
     approximate_ = allow;
   }
+  /// Whether the approximate methods are allowed (allowApproximate), so that a caller can restore the setting.
   bool approximateAllowed() const
   {
     return approximate_;
