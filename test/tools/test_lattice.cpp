@@ -329,7 +329,8 @@ TEST(Lattice, ModifiedNewtonOnBodyBlocksFollowsFullNewtonThroughContact)
   // a contact's impact speed taken at a different onset step would do it). Measured: 1.7e-3, 2.7e-7, 5.0e-8 m at
   // 1e-6, 1e-8, 1e-10 and a floor of 4.2e-8 (later runs of the native build print 1.7e-3, 2.8e-7, 2.3e-7 and a
   // floor of 3.3e-8: the distance at 1e-10 passes through the bound of ten floors); on the generic x86-64 build
-  // 1.7e-3, 2.9e-7, 1.2e-7, floor 2.7e-8 (without the groups 7.6e-4, 1.6e-5, 1.6e-7; on the whole matrix 6.5e-3, 2.0e-4, 1.5e-6).
+  // 1.7e-3, 2.9e-7, 1.2e-7, floor 2.7e-8 (without the groups 7.6e-4, 1.6e-5, 1.6e-7; on the whole matrix 6.5e-3,
+  // 2.0e-4, 1.5e-6).
   const at::Model m = folding(1, 2, 0.4);
   int touched = 0;
   const auto run = [&m, &touched](bool reuse, double tolerance)
