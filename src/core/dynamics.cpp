@@ -106,7 +106,8 @@ void DynamicsSolver::findNearContacts(const State& s, double motion)
 {
   const Model& model = system_.model();
   near_motion_ = motion;
-  system_.nearContacts(s.q, motion, near_);
+  // (at the last accepted step's end, the gaps evaluated there: most of the kept slots' narrow phase)
+  system_.nearContacts(s.q, motion, near_, start_at_end_ ? &end_gap_ : nullptr);
   // the slots the last accepted step evaluated at its end, which is this start: their approach rates
   const bool at_end = start_at_end_;
   for (int i : near_)
@@ -167,10 +168,16 @@ void DynamicsSolver::updateContactMemory(State& s, const Eigen::VectorXd& q_star
   estimate_.onset_gap = 0.0;
   estimate_.onset_pair = -1;
   // the end's evaluation (contactsAt, and the next step's approach rates): the earlier one's slots forgotten
-  if (end_rate_.size() != static_cast<size_t>(model.contactSlots()))
-    end_rate_.assign(model.contactSlots(), std::numeric_limits<double>::quiet_NaN());
+  if (end_rate_.size() != slots)
+  {
+    end_rate_.assign(slots, std::numeric_limits<double>::quiet_NaN());
+    end_gap_.assign(slots, std::numeric_limits<double>::quiet_NaN());
+  }
   for (int i : end_slots_)
+  {
     end_rate_[i] = std::numeric_limits<double>::quiet_NaN();
+    end_gap_[i] = std::numeric_limits<double>::quiet_NaN();
+  }
   end_slots_.clear();
   end_memory_.clear();
   end_contacts_.clear();
@@ -186,6 +193,7 @@ void DynamicsSolver::updateContactMemory(State& s, const Eigen::VectorXd& q_star
     const int i = near_[k];
     const ContactPairState st = evaluateContact(model, i, s.q, s.qd, step_speeds_[i], ContactMode::kDynamic, nullptr);
     end_rate_[i] = st.penetration_rate;
+    end_gap_[i] = st.gap;
     end_slots_.push_back(i);
     if (st.active)
       end_contacts_.push_back(st);

@@ -166,31 +166,41 @@ void contactCandidates(const Model& model, const BroadPhase& broad, const Eigen:
   appendGroundCandidates(model, q, margin, out);
 }
 
+namespace
+{
+double gapAt(const Model& model, int slot, const Eigen::VectorXd& q, const std::vector<double>* known_gap)
+{
+  if (known_gap && !std::isnan((*known_gap)[slot]))
+    return (*known_gap)[slot];
+  return contactGeometry(model, slot, q).gap;
+}
+}  // namespace
+
 void nearContactSlots(const Model& model, const BroadPhase& broad, const Eigen::VectorXd& q, double reach,
-                      std::vector<int>& candidates, std::vector<int>& out)
+                      std::vector<int>& candidates, std::vector<int>& out, const std::vector<double>* known_gap)
 {
   contactCandidates(model, broad, q, reach, candidates);
   out.clear();
   for (int i : candidates)
-    if (contactGeometry(model, i, q).gap <= 2.0 * reach)
+    if (gapAt(model, i, q, known_gap) <= 2.0 * reach)
       out.push_back(i);
 }
 
 void NearSlotCache::find(const Model& model, const BroadPhase& broad, const Eigen::VectorXd& q, double reach,
-                         std::vector<int>& out)
+                         std::vector<int>& out, const std::vector<double>* known_gap)
 {
   const bool kept = kept_reach_ >= 0.0 && reference_q_.size() == q.size() &&
                     reach + largestMotion(model, reference_q_, q) <= kept_reach_;
   if (!kept)
   {
     kept_reach_ = kSkin * reach;
-    nearContactSlots(model, broad, q, kept_reach_, candidates_, kept_);
+    nearContactSlots(model, broad, q, kept_reach_, candidates_, kept_, known_gap);
     reference_q_ = q;
     ++rebuilds_;
   }
   out.clear();
   for (int i : kept_)
-    if (contactGeometry(model, i, q).gap <= 2.0 * reach)
+    if (gapAt(model, i, q, known_gap) <= 2.0 * reach)
       out.push_back(i);
 }
 
@@ -212,9 +222,10 @@ void System::contactCandidates(const Eigen::VectorXd& q, double margin, std::vec
   core::contactCandidates(model_, broad_phase_, q, margin, out);
 }
 
-void System::nearContacts(const Eigen::VectorXd& q, double reach, std::vector<int>& out) const
+void System::nearContacts(const Eigen::VectorXd& q, double reach, std::vector<int>& out,
+                          const std::vector<double>* known_gap) const
 {
-  near_slots_.find(model_, broad_phase_, q, reach, out);
+  near_slots_.find(model_, broad_phase_, q, reach, out, known_gap);
 }
 
 int System::firstPassedThrough(const Eigen::VectorXd& q0, const Eigen::VectorXd& q1) const

@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <random>
 #include <set>
 #include <string>
@@ -407,4 +408,52 @@ TEST(NearSlotCache, GivesTheNearSlotsOfEveryConfigurationAlongARandomWalk)
               static_cast<double>(near_total) / compared, cache.rebuilds(), calls);
   EXPECT_LT(cache.rebuilds(), calls / 4);
   EXPECT_GE(cache.rebuilds(), 4);  // at least the first list and one per jump
+}
+
+TEST(NearSlotCache, TakesTheGapsItIsGivenForTheSlotsThatHaveThem)
+{
+  // the gaps of about half the slots given (evaluated at q, as the dynamics gives those of the last step's end):
+  // the same slots as from scratch; a given gap is taken as it is (a slot far apart listed when told it touches)
+  std::mt19937 rng(5);
+  Model m = randomScene({ 50, 1.8 }, rng);
+  m.contact.enabled = true;
+  const BroadPhase broad(m);
+  NearSlotCache cache, told;
+  std::vector<int> fresh, kept, scratch, candidates;
+  const int slots = m.contactSlots();
+  std::vector<double> known(slots, std::numeric_limits<double>::quiet_NaN());
+  std::bernoulli_distribution half(0.5);
+  Eigen::VectorXd q = m.q0;
+  const double reach = 1e-3;
+  int given = 0;
+  for (int k = 0; k < 20; ++k)
+  {
+    for (const Body& b : m.bodies)
+      q.segment<3>(b.offset) += 0.3 * reach * randomUnit(rng);
+    std::fill(known.begin(), known.end(), std::numeric_limits<double>::quiet_NaN());
+    for (int i = 0; i < slots; ++i)
+      if (half(rng))
+      {
+        known[i] = contactGeometry(m, i, q).gap;
+        ++given;
+      }
+    nearContactSlots(m, broad, q, reach, scratch, fresh);
+    cache.find(m, broad, q, reach, kept, &known);
+    ASSERT_EQ(kept, fresh) << "call " << k;
+    nearContactSlots(m, broad, q, reach, scratch, kept, &known);
+    ASSERT_EQ(kept, fresh) << "call " << k;
+  }
+  EXPECT_GT(given, 0);
+  // a candidate of the grown boxes that is apart beyond 2 reach, told it touches
+  contactCandidates(m, broad, q, 16.0 * reach, candidates);
+  int far = -1;
+  for (int i : candidates)
+    if (contactGeometry(m, i, q).gap > 2.0 * reach)
+      far = i;
+  ASSERT_GE(far, 0);
+  std::fill(known.begin(), known.end(), std::numeric_limits<double>::quiet_NaN());
+  known[far] = -1e-3;
+  told.find(m, broad, q, reach, kept, &known);
+  EXPECT_NE(std::find(kept.begin(), kept.end(), far), kept.end());
+  EXPECT_EQ(kept.size(), fresh.size() + 1);
 }

@@ -153,14 +153,15 @@ private:
   bool start_at_end_ = false;          // the step being solved starts where the last accepted one ended (atEnd)
   std::vector<double> near_previous_;  // contact memory at the start of the step being accepted, per near_ slot
   // the near slots evaluated where the last accepted step ended (end_q_, end_qd_; end_slots_ with their
-  // contact memory end_memory_, every other slot apart there): their approach rates (per slot, NaN: not
-  // evaluated) for the next step's impact speeds, and the active contacts (no copy of the whole memory: a
-  // lattice of 2000 struts has 2 million slots)
+  // contact memory end_memory_, every other slot apart there): their approach rates and gaps (per slot, NaN:
+  // not evaluated) for the next step's impact speeds and near slots, and the active contacts (no copy of the
+  // whole memory: a lattice of 2000 struts has 2 million slots)
   bool end_valid_ = false;
   Eigen::VectorXd end_q_, end_qd_;
   std::vector<int> end_slots_;
   std::vector<double> end_memory_;
   std::vector<double> end_rate_;
+  std::vector<double> end_gap_;
   std::vector<ContactPairState> end_contacts_;
   /// Whether `s` is the state the last accepted step ended in (end_*).
   bool atEnd(const State& s) const;

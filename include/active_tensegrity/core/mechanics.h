@@ -33,9 +33,11 @@ void contactCandidates(const Model& model, const BroadPhase& broad, const Eigen:
 
 /// The contact slots within 2 reach (m) of touching at q: contactCandidates with boxes grown by reach, kept when
 /// their gap is at most 2 reach. While no body point moves by more than reach from q, every slot that touches
-/// is among them (two bodies close their distance by at most twice that). `candidates`: scratch.
+/// is among them (two bodies close their distance by at most twice that). `candidates`: scratch. `known_gap`
+/// (optional, per slot): gaps already evaluated at this q (NaN: not evaluated), taken instead of the narrow phase.
 void nearContactSlots(const Model& model, const BroadPhase& broad, const Eigen::VectorXd& q, double reach,
-                      std::vector<int>& candidates, std::vector<int>& out);
+                      std::vector<int>& candidates, std::vector<int>& out,
+                      const std::vector<double>* known_gap = nullptr);
 
 /// nearContactSlots with a kept list (a Verlet list): the list is nearContactSlots at a reference q for kSkin
 /// times the reach of the call that made it, R = kSkin reach_0. It serves every later call whose reach plus
@@ -46,7 +48,8 @@ class NearSlotCache
 {
 public:
   static constexpr double kSkin = 16.0;
-  void find(const Model& model, const BroadPhase& broad, const Eigen::VectorXd& q, double reach, std::vector<int>& out);
+  void find(const Model& model, const BroadPhase& broad, const Eigen::VectorXd& q, double reach, std::vector<int>& out,
+            const std::vector<double>* known_gap = nullptr);
   /// Lists built so far (one per call that found the kept list too far from q).
   long rebuilds() const
   {
@@ -132,8 +135,9 @@ public:
   /// Contact slots that can touch at q with boxes grown by margin (m): checked strut pairs (when strut contact is
   /// on), then ground contacts within margin of the ground.
   void contactCandidates(const Eigen::VectorXd& q, double margin, std::vector<int>& out) const;
-  /// The contact slots within 2 reach (m) of touching at q (nearContactSlots below).
-  void nearContacts(const Eigen::VectorXd& q, double reach, std::vector<int>& out) const;
+  /// The contact slots within 2 reach (m) of touching at q (nearContactSlots above; `known_gap` as there).
+  void nearContacts(const Eigen::VectorXd& q, double reach, std::vector<int>& out,
+                    const std::vector<double>* known_gap = nullptr) const;
   /// M(q) qdd + Qv(q, qd). Adds m_weight M + k_weight d(M qdd + Qv)/dq + c_weight dQv/dqd into jac.
   void inertialForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd,
                      Eigen::VectorXd& out, BlockSparseMatrix* jac, double m_weight, double k_weight,
