@@ -49,12 +49,6 @@ Mat3 rotationMatrixRate(const Vec4& theta, const Vec4& x)
   return r;
 }
 
-Vec3 bodyZAxis(const Vec4& theta)
-{
-  const double e0 = theta(0), e1 = theta(1), e2 = theta(2), e3 = theta(3);
-  return Vec3(2.0 * (e1 * e3 + e0 * e2), 2.0 * (e2 * e3 - e0 * e1), e0 * e0 - e1 * e1 - e2 * e2 + e3 * e3);
-}
-
 Mat34 lMatrix(const Vec4& theta)
 {
   Mat34 l;

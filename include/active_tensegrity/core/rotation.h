@@ -25,7 +25,11 @@ Mat3 rotationMatrix(const Vec4& theta);
 Mat3 rotationMatrixRate(const Vec4& theta, const Vec4& x);
 /// rotationMatrix(theta) * (0, 0, 1): the body z axis in the world (the same quadratic form, so it is
 /// scaled by |theta|^2 when theta is not unit).
-Vec3 bodyZAxis(const Vec4& theta);
+inline Vec3 bodyZAxis(const Vec4& theta)
+{
+  const double e0 = theta(0), e1 = theta(1), e2 = theta(2), e3 = theta(3);
+  return Vec3(2.0 * (e1 * e3 + e0 * e2), 2.0 * (e2 * e3 - e0 * e1), e0 * e0 - e1 * e1 - e2 * e2 + e3 * e3);
+}
 
 /// L(Theta) = [-e, -skew(e) + e0 I] (3x4); body angular velocity omega_bar = 2 L(Theta) Theta_dot.
 Mat34 lMatrix(const Vec4& theta);
