@@ -26,6 +26,32 @@ constexpr int kSmallSystem = 64;
 /// The tower's adaptive fold (200 unknowns, 120 factorized): 119-172 -> 98-132 us per step; the six-bar robot (48
 /// unknowns, only its 6 quaternion norms to eliminate) went from 33.2-34.0 to 36.2-36.7 us per step with it.
 constexpr int kReducedMost = 400;
+
+/// Whether two vectors hold the same bits (memcmp: Eigen's == compares coefficient by coefficient, 1.3 % of the
+/// tower's step where atEnd used it, 0.7 % in continuesHistory).
+bool sameBits(const Eigen::VectorXd& a, const Eigen::VectorXd& b)
+{
+  return a.size() == b.size() &&
+         (a.size() == 0 || std::memcmp(a.data(), b.data(), static_cast<size_t>(a.size()) * sizeof(double)) == 0);
+}
+
+/// Gives the linear solver back the approximate-factorization setting it had when made (an attempt that
+/// suspends the approximate methods has many returns).
+class ApproximateSetting
+{
+public:
+  explicit ApproximateSetting(SparseLinearSolver& linear) : linear_(linear), allowed_(linear.approximateAllowed()) {}
+  ~ApproximateSetting()
+  {
+    linear_.allowApproximate(allowed_);
+  }
+  ApproximateSetting(const ApproximateSetting&) = delete;
+  ApproximateSetting& operator=(const ApproximateSetting&) = delete;
+
+private:
+  SparseLinearSolver& linear_;
+  bool allowed_;
+};
 }  // namespace
 
 DynamicsSolver::DynamicsSolver(const Model& model, const SolverOptions& options)
@@ -128,13 +154,8 @@ void DynamicsSolver::findNearContacts(const State& s, double motion)
 bool DynamicsSolver::atEnd(const State& s) const
 {
   // (not the time: callers round it to their step grid; the contacts depend on q, qd and the memory of the
-  // evaluated slots, no other slot touching there) Bitwise (memcmp: Eigen's == compares coefficient by
-  // coefficient, 1.3 % of the tower's step)
-  const auto same = [](const double* a, const double* b, size_t n)
-  { return n == 0 || std::memcmp(a, b, n * sizeof(double)) == 0; };
-  if (!end_valid_ || s.q.size() != end_q_.size() || s.qd.size() != end_qd_.size() ||
-      s.contact_speed.size() != end_rate_.size() || !same(s.q.data(), end_q_.data(), end_q_.size()) ||
-      !same(s.qd.data(), end_qd_.data(), end_qd_.size()))
+  // evaluated slots, no other slot touching there) Bitwise.
+  if (!end_valid_ || s.contact_speed.size() != end_rate_.size() || !sameBits(s.q, end_q_) || !sameBits(s.qd, end_qd_))
     return false;
   for (size_t k = 0; k < end_slots_.size(); ++k)
     if (s.contact_speed[end_slots_[k]] != end_memory_[k])
@@ -268,10 +289,7 @@ void DynamicsSolver::residual(const State& s, double h, const ActuationValues& u
 
 bool DynamicsSolver::continuesHistory(const State& s) const
 {
-  // (bitwise, as atEnd: Eigen's == compares coefficient by coefficient, 0.7 % of the tower's step)
-  return history_count_ > 0 && s.t == last_end_t_ && s.qdd.size() == last_end_qdd_.size() &&
-         (s.qdd.size() == 0 ||
-          std::memcmp(s.qdd.data(), last_end_qdd_.data(), sizeof(double) * static_cast<size_t>(s.qdd.size())) == 0);
+  return history_count_ > 0 && s.t == last_end_t_ && sameBits(s.qdd, last_end_qdd_);
 }
 
 void DynamicsSolver::firstGuess(const State& s, double h, Eigen::VectorXd& qdd, Eigen::VectorXd& lambda) const
@@ -336,9 +354,11 @@ Summary DynamicsSolver::attemptOrFullNewton(State& s, double h, const ActuationL
   if (sum.ok() || sum.status == SolveStatus::kPassedThrough || !options_.reuse_jacobian)
     return sum;
   const int spent = sum.iterations;
-  linear_.allowApproximate(false);  // Newton's own matrices, factorized exactly
-  sum = attempt(s, h, law, true);
-  linear_.allowApproximate(true);
+  {
+    const ApproximateSetting restore(linear_);
+    linear_.allowApproximate(false);  // Newton's own matrices, factorized exactly
+    sum = attempt(s, h, law, true);
+  }
   factor_valid_ = false;  // the kept factorization is gone
   sum.iterations += spent;
   ++timings_.full_newton_retries;
@@ -380,15 +400,7 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law, boo
   bool built_this_step = false;
   bool newton_each = !reuse;  // a new matrix at every iteration (full Newton, or modified Newton switched to it)
   // (the switch suspends the approximate factorizations for the rest of this attempt only)
-  struct Restore
-  {
-    SparseLinearSolver& linear;
-    bool approximate;
-    ~Restore()
-    {
-      linear.allowApproximate(approximate);
-    }
-  } const restore{ linear_, linear_.approximateAllowed() };
+  const ApproximateSetting restore(linear_);
   for (int it = 0; it < options_.max_iterations; ++it)
   {
     const bool build = rebuild;
