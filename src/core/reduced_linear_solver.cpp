@@ -317,7 +317,7 @@ void ReducedLinearSolver::analyze(const BlockSparseMatrix& m, int coordinate_gro
 
 bool ReducedLinearSolver::bases(const BlockSparseMatrix& m)
 {
-  Eigen::MatrixXd& block = block_;
+  auto& block = block_;  // (fixed-size storage: no allocation)
   for (Cluster& cl : clusters_)
   {
     if (cl.rows.empty())

@@ -146,7 +146,7 @@ private:
   BlockSparseMatrix reduced_;
   SparseLinearSolver reduced_solver_, full_solver_;
   std::vector<std::pair<int, int>> blocks_;  // A's blocks (its pattern analyzed)
-  Eigen::MatrixXd block_;                    // bases()' workspace
+  Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::ColMajor, kMaxGroup, kMaxGroup> block_;  // bases()'
   mutable Eigen::VectorXd rhs_, xr_;
   mutable std::vector<Vec8, Eigen::aligned_allocator<Vec8>> acc_;  // per coordinate group in a cluster
   mutable std::vector<Vec8, Eigen::aligned_allocator<Vec8>> xp_;   // ... its particular solution
