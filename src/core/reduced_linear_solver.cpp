@@ -150,18 +150,18 @@ void ReducedLinearSolver::analyze(const BlockSparseMatrix& m, int coordinate_gro
   for (int g = 0; g < coordinate_groups; ++g)
     if (root(parent, g) == g)
       whole[g] = size[g] <= kMaxCluster && rows[g] <= size[g] && size[g] - rows[g] <= kMaxClusterDof;
+  // a cluster per kept component (keyed by its root) or per body of a split one
+  const auto key = [&](int g) { return whole[root(parent, g)] ? root(parent, g) : g; };
+  std::vector<int> key_cluster(coordinate_groups, -1);
   const auto cluster_of = [&](int g)
   {
-    const int key = whole[root(parent, g)] ? root(parent, g) : g;
-    if (group_cluster_[key] < 0)
+    if (key_cluster[key(g)] < 0)
     {
-      group_cluster_[key] = static_cast<int>(clusters_.size());
+      key_cluster[key(g)] = static_cast<int>(clusters_.size());
       clusters_.emplace_back();
     }
-    return group_cluster_[key];
+    return key_cluster[key(g)];
   };
-  // (group_cluster_ is keyed by the cluster's root until every group is placed below)
-  std::vector<int> key_cluster;
   std::vector<bool> eliminated(groups, false);
   for (int c = coordinate_groups; c < groups; ++c)
   {
@@ -182,19 +182,13 @@ void ReducedLinearSolver::analyze(const BlockSparseMatrix& m, int coordinate_gro
     eliminated[c] = true;
   }
   // the clusters' groups: every coordinate group of a kept component, or the body itself
-  std::vector<int> cluster(groups, -1);
   for (int g = 0; g < coordinate_groups; ++g)
   {
-    const int key = whole[root(parent, g)] ? root(parent, g) : g;
-    cluster[g] = group_cluster_[key];
-  }
-  group_cluster_.assign(groups, -1);
-  for (int g = 0; g < coordinate_groups; ++g)
-  {
-    if (cluster[g] < 0 || clusters_[cluster[g]].rows.empty())
+    const int c = key_cluster[key(g)];
+    if (c < 0 || clusters_[c].rows.empty())
       continue;
-    Cluster& cl = clusters_[cluster[g]];
-    group_cluster_[g] = cluster[g];
+    Cluster& cl = clusters_[c];
+    group_cluster_[g] = c;
     group_index_[g] = static_cast<int>(cl.groups.size());
     cl.groups.push_back(g);
     cl.local.push_back(cl.size);
@@ -357,9 +351,9 @@ bool ReducedLinearSolver::bases(const BlockSparseMatrix& m)
       for (int t = 0; t < cl.tiles; ++t)
       {
         const int cols = std::min(kMaxGroup, n - k - kMaxGroup * t);
-        Mat8& zt = cl.z_tiles[i * cl.tiles + t];
-        zt.topLeftCorner(rows, cols) = cl.z[i].block(0, kMaxGroup * t, rows, cols);
-        cl.zt_tiles[i * cl.tiles + t] = zt.transpose();
+        Mat8& z = cl.z_tiles[i * cl.tiles + t];
+        z.topLeftCorner(rows, cols) = cl.z[i].block(0, kMaxGroup * t, rows, cols);
+        cl.zt_tiles[i * cl.tiles + t] = z.transpose();
       }
     }
   }

@@ -105,7 +105,9 @@ private:
     std::vector<ZRows, Eigen::aligned_allocator<ZRows>> z;     // per group: its rows of Z
     std::vector<ZRowsT, Eigen::aligned_allocator<ZRowsT>> zt;  // ... transposed
     int tiles = 0;                                             // ceil((n - k) / 8)
-    // per group, its rows of Z in 8 x 8 tiles (`tiles` of them, by columns of Z), and each transposed
+    // per group, its rows of Z in 8 x 8 tiles (`tiles` of them, by columns of Z), and each transposed: for
+    // factorize()'s fixed-size products; solve() uses z and zt, whose width is the cluster's (solving with the
+    // padded tiles instead took 3-6 % longer on the tower's adaptive fold)
     std::vector<Mat8, Eigen::aligned_allocator<Mat8>> z_tiles, zt_tiles;
   };
   /// A product of solve(): a block of A (padded) times a piece of x, from group `from` into group `to`
