@@ -824,6 +824,50 @@ TEST(LinearSolver, StaticPivotsOfALargeSaddleMatrixNearlySolveItAndAnUnstableOne
   EXPECT_FALSE(small.staticPivot());
 }
 
+TEST(LinearSolver, WithApproximationsSuspendedStaticPivotsAreRefinedToRoundOffOrRefused)
+{
+  // full Newton suspends the approximate methods: a large saddle matrix still gets the static pivots, but
+  // every solve is refined against the matrix, so that it is exact (the LU's solution to round-off) in one
+  // call; a matrix whose refinement does not reach round-off gets the sparse LU
+  std::mt19937 rng(5);
+  const Eigen::SparseMatrix<double> a = saddleMatrix(450, 150, 1.0, rng);
+  const Eigen::VectorXd b = Eigen::VectorXd::Random(a.rows());
+  SparseLinearSolver lu, refined;
+  refined.allowStaticPivot(true);
+  refined.allowApproximate(false);
+  ASSERT_TRUE(lu.factorize(a));
+  ASSERT_TRUE(refined.factorize(a));
+  EXPECT_TRUE(refined.staticPivotRefined());
+  EXPECT_FALSE(refined.staticPivot());
+  EXPECT_TRUE(refined.exact());
+  EXPECT_EQ(refined.staticPivotRefusals(), 0);
+  EXPECT_EQ(refined.determinantSign(), lu.determinantSign());
+  Eigen::VectorXd exact, x;
+  lu.solve(b, exact);
+  refined.solve(b, x);
+  EXPECT_LT((x - exact).lpNorm<Eigen::Infinity>(), 1e-10 * (1.0 + exact.lpNorm<Eigen::Infinity>()));
+  EXPECT_LT((a * x - b).lpNorm<Eigen::Infinity>(), 1e-10);
+  // the same factors without refinement are off by the shift (the approximate method, restored)
+  refined.allowApproximate(true);
+  ASSERT_TRUE(refined.factorize(a));
+  EXPECT_TRUE(refined.staticPivot());
+  refined.solve(b, x);
+  EXPECT_GT((x - exact).lpNorm<Eigen::Infinity>(), 1e-10 * (1.0 + exact.lpNorm<Eigen::Infinity>()));
+
+  // pivots near zero (diagonal 1e-12 of its neighbours): refused, the sparse LU instead, exact
+  std::mt19937 same(11);
+  const Eigen::SparseMatrix<double> unstable = saddleMatrix(450, 150, 1.0, same, 0.0);
+  SparseLinearSolver fallback;
+  fallback.allowStaticPivot(true);
+  fallback.allowApproximate(false);
+  ASSERT_TRUE(fallback.factorize(unstable));
+  EXPECT_FALSE(fallback.staticPivotRefined());
+  EXPECT_TRUE(fallback.exact());
+  EXPECT_EQ(fallback.staticPivotRefusals(), 1);
+  fallback.solve(b, x);
+  EXPECT_LT((unstable * x - b).lpNorm<Eigen::Infinity>(), 1e-8 * (1.0 + x.lpNorm<Eigen::Infinity>()));
+}
+
 TEST(StaticPivotLU, SolvesANonsymmetricMatrixWithSymmetricPatternExactlyAndReportsAZeroPivot)
 {
   // diagonally dominant, pattern symmetric, values not: L D U without pivoting is exact to round-off
