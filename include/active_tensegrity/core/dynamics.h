@@ -45,9 +45,11 @@ public:
   /// the step; on failure `state` is unchanged.
   Summary tryStep(State& state, double h, const ActuationLaw& law);
   /// Says whether the steps will vary (AdaptiveStepper sets it): the body blocks then solve every body
-  /// alone (BodyBlockSolver::allowGroups), as their groups would follow the step size.
+  /// alone (BodyBlockSolver::allowGroups), as their groups would follow the step size, and body blocks that
+  /// stop contracting in the step that built them are distrusted even when they contracted at first.
   void setVariableSteps(bool variable)
   {
+    variable_steps_ = variable;
     linear_.allowBodyGroups(!variable);
   }
   /// The error estimate and contact onset of the last accepted step.
@@ -174,6 +176,7 @@ private:
   std::vector<int> factor_contacts_;  // slots touching when it was built (ascending)
   std::vector<int> touching_;         // slots touching at the start of the step being solved (ascending)
   double theta_ = 0.0;                // largest contraction rate seen with it
+  bool variable_steps_ = false;       // setVariableSteps
   bool theta_known_ = false;          // whether theta_ was measured (two increments above round-off)
   // after a kept matrix diverged (theta > 0.5): steps still to start with a new matrix, and how many the next
   // divergence orders (doubling while kept matrices keep failing, back to the least once one serves a step)

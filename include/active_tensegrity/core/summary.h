@@ -60,6 +60,10 @@ struct StepTimings
   long fresh_starts = 0;     // dynamics: steps begun with a new matrix because kept ones had diverged (modified Newton)
   long newton_switches = 0;  // dynamics: steps that went on in full Newton when modified Newton did not contract with a
                              // matrix exact at one of their own iterates
+  long body_block_distrusts = 0;  // dynamics: body-block matrices that did not contract in the step that built them,
+                                  // followed by exact factorizations (SparseLinearSolver::distrustBodyBlocks)
+  long body_block_rebuilds = 0;   // dynamics, fixed steps: such matrices that had contracted at first, rebuilt as body
+                                  // blocks at the iterate reached
 
   StepTimings& operator+=(const StepTimings& o)
   {
@@ -79,6 +83,8 @@ struct StepTimings
     contact_reach_misses += o.contact_reach_misses;
     fresh_starts += o.fresh_starts;
     newton_switches += o.newton_switches;
+    body_block_distrusts += o.body_block_distrusts;
+    body_block_rebuilds += o.body_block_rebuilds;
     return *this;
   }
 };

@@ -76,10 +76,14 @@ int steps(const std::string& scene, const std::vector<at::Override>& overrides, 
               static_cast<double>(last.timings.reduced_factorizations) / std::max(1, last.solver_steps),
               last.timings.analyses);
   if (dynamic)
+  {
     std::printf("full-Newton retries: %ld, switches to full Newton: %ld, iterates beyond the contact reach: %ld, "
                 "fresh starts: %ld\n",
                 last.timings.full_newton_retries, last.timings.newton_switches, last.timings.contact_reach_misses,
                 last.timings.fresh_starts);
+    std::printf("body blocks distrusted: %ld, rebuilt where they slowed: %ld\n", last.timings.body_block_distrusts,
+                last.timings.body_block_rebuilds);
+  }
   std::printf("where the time goes (last run, us per step, share of its wall time):\n");
   const int n = std::max(1, last.solver_steps);
   for (const auto& [part, seconds] : at::timeBreakdown(last))
