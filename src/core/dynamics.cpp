@@ -26,6 +26,10 @@ constexpr int kSmallSystem = 64;
 /// The tower's adaptive fold (200 unknowns, 120 factorized): 119-172 -> 98-132 us per step; the six-bar robot (48
 /// unknowns, only its 6 quaternion norms to eliminate) went from 33.2-34.0 to 36.2-36.7 us per step with it.
 constexpr int kReducedMost = 400;
+/// With fixed steps, a body-block matrix that contracted at first and slowed later is rebuilt at the iterate
+/// (not distrusted) when the iterate moved this many Newton tolerances since the matrix was built (the sum of
+/// the position increments): far enough for the matrix, not the body blocks, to be what is off.
+constexpr double kRebuildMoved = 100.0;
 
 /// Whether two vectors hold the same bits (memcmp: Eigen's == compares coefficient by coefficient, 1.3 % of the
 /// tower's step where atEnd used it, 0.7 % in continuesHistory).
@@ -397,6 +401,7 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law, boo
   }
   bool diverged = false;
   double previous = -1.0;  // last scaled increment with this factorization
+  double moved = 0.0;      // position increments since it was built, in Newton tolerances
   bool built_this_step = false;
   bool newton_each = !reuse;  // a new matrix at every iteration (full Newton, or modified Newton switched to it)
   // (the switch suspends the approximate factorizations for the rest of this attempt only)
@@ -443,6 +448,7 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law, boo
       theta_ = 0.0;
       theta_known_ = false;
       previous = -1.0;
+      moved = 0.0;
       rebuild = newton_each;
     }
     {
@@ -473,7 +479,8 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law, boo
     if (reuse && previous > 0.0 && scaled > 1e-3)  // (not round-off)
     {
       // contraction rate of the iteration with this matrix; slow or diverging: rebuild it
-      const bool contracted = theta_known_;  // (at rates up to 0.5 so far: a larger one rebuilds the matrix)
+      // (contracted: at rates up to 0.5 so far, as a larger one rebuilds the matrix)
+      const bool moved_on = theta_known_ && moved >= kRebuildMoved;
       theta_ = std::max(theta_, scaled / previous);
       theta_known_ = true;
       if (theta_ > 0.5)
@@ -483,14 +490,14 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law, boo
         // body blocks too far off in the step that made them: the exact matrix now, and for a while (distrusting
         // them at 0.25 or 0.1 gave more exact factorizations and no fewer iterations, on the tower's fixed and
         // adaptive steps and on the lattices). With fixed steps, body blocks that contracted at first and slowed
-        // as the iterate moved away from where they were built (a contact stiffening through the step) are
-        // rebuilt there instead: on the 504-strut lattice 12 of its 12 distrusts were of such matrices, 5 of
-        // them at their first rate, and the exact factorizations they brought were 29 % of all. (With variable
-        // steps that cost the 3x3 quadruplex lattice 11 % more iterations: there the step size, not the iterate,
-        // makes body blocks fail.)
+        // after the iterate moved far from where they were built (kRebuildMoved; a contact stiffening through
+        // the step) are rebuilt there instead: on the 504-strut lattice the exact factorizations after distrusts
+        // fell from 29 % to 13 % of all. (With variable steps that cost the 3x3 quadruplex lattice 11 % more
+        // iterations: there the step size, not the iterate, makes body blocks fail; without the distance, the
+        // tower's fold at fixed steps of 2 ms took 11 % more.)
         if (built_this_step && linear_.bodyBlocks())
         {
-          if (!contracted || variable_steps_)
+          if (!moved_on || variable_steps_)
           {
             linear_.distrustBodyBlocks();
             ++timings_.body_block_distrusts;
@@ -513,6 +520,7 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law, boo
       }
     }
     previous = scaled;
+    moved += q_part;
     // Full Newton, or a matrix built in this step (Newton's own step): the increment is the error
     // measure, and the multipliers are as good as the position increment says (at very small h their
     // round-off would fail their test). Modified Newton with an older matrix: the error left in the iterate

@@ -395,9 +395,10 @@ TEST(Lattice, ModifiedNewtonGoesOnInFullNewtonWhereItsOwnMatrixDoesNotContract)
 TEST(Lattice, FixedStepsRebuildBodyBlocksThatSlowedWhereVariableStepsDistrustThem)
 {
   // 36 struts folding into steel contact. A body-block matrix built in a step that contracted at first and then
-  // slowed beyond a rate of 0.5 (a contact stiffening as the iterate moves): with fixed steps it is rebuilt as
-  // body blocks at the iterate reached, and only one that fails at its first rate is distrusted (exact
-  // factorizations follow); with variable steps every failing one is distrusted. Both runs converge.
+  // slowed beyond a rate of 0.5 after the iterate moved 100 Newton tolerances or more (a contact stiffening
+  // through the step): with fixed steps it is rebuilt as body blocks at the iterate reached, and the others are
+  // distrusted (exact factorizations follow); with variable steps every failing one is distrusted. Both runs
+  // converge.
   at::Model m = folding(3, 3, 0.6);
   ASSERT_TRUE(m.solver.reuse_jacobian);
   const at::RunResult fixed = at::runAnalysis(

@@ -46,7 +46,8 @@ public:
   Summary tryStep(State& state, double h, const ActuationLaw& law);
   /// Says whether the steps will vary (AdaptiveStepper sets it): the body blocks then solve every body
   /// alone (BodyBlockSolver::allowGroups), as their groups would follow the step size, and body blocks that
-  /// stop contracting in the step that built them are distrusted even when they contracted at first.
+  /// stop contracting in the step that built them are distrusted even when they contracted at first and the
+  /// iterate moved far since.
   void setVariableSteps(bool variable)
   {
     variable_steps_ = variable;

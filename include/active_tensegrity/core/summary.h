@@ -62,8 +62,9 @@ struct StepTimings
                              // matrix exact at one of their own iterates
   long body_block_distrusts = 0;  // dynamics: body-block matrices that did not contract in the step that built them,
                                   // followed by exact factorizations (SparseLinearSolver::distrustBodyBlocks)
-  long body_block_rebuilds = 0;   // dynamics, fixed steps: such matrices that had contracted at first, rebuilt as body
-                                  // blocks at the iterate reached
+  long body_block_rebuilds = 0;   // dynamics, fixed steps: such matrices that had contracted at first, the iterate
+                                  // 100 Newton tolerances or more from where they were built: rebuilt there as body
+                                  // blocks
 
   StepTimings& operator+=(const StepTimings& o)
   {
