@@ -479,7 +479,8 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law, boo
     if (reuse && previous > 0.0 && scaled > 1e-3)  // (not round-off)
     {
       // contraction rate of the iteration with this matrix; slow or diverging: rebuild it
-      // (contracted: at rates up to 0.5 so far, as a larger one rebuilds the matrix)
+      // (moved_on: the matrix contracted at its rates so far, a rate above 0.5 having rebuilt it, and the iterate
+      // moved kRebuildMoved tolerances since it was built)
       const bool moved_on = theta_known_ && moved >= kRebuildMoved;
       theta_ = std::max(theta_, scaled / previous);
       theta_known_ = true;
