@@ -392,8 +392,20 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law, boo
   // After a kept matrix failed (theta > 0.5) in a small dense system, the next steps start with a new one (2, then
   // 4, 8 ... 64 steps while kept matrices go on failing; back to 2 once one serves a whole step): where a kept
   // matrix fails it fails step after step (a robot resting on the ground), and each try wastes two residuals.
+  // A change of the touching pairs asks for a new matrix, except where the kept one is the static pivots and the
+  // new one would be too (the body blocks paused): there the contraction check decides. In a lattice's rattling
+  // contact the touching pairs change at nearly every step, and a static-pivot factorization costs far more than
+  // the iterations it saves (504 struts, 0.8 s: 0.68 -> 0.39 static-pivot factorizations per step, 6.7 -> 7.4
+  // Newton iterations, 16 -> 12 ms per step); while the body blocks serve, a new matrix is theirs and cheap.
   bool rebuild = !reuse || !factor_valid_ || std::abs(h - factor_h_) > kReuseStepChange * h ||
-                 factor_age_ >= options_.max_jacobian_age || touching_ != factor_contacts_;
+                 factor_age_ >= options_.max_jacobian_age;
+  if (!rebuild && touching_ != factor_contacts_)
+  {
+    if (linear_.staticPivot() && linear_.nextIsLargeExact())
+      ++timings_.static_pivots_kept;
+    else
+      rebuild = true;
+  }
   if (!rebuild && fresh_starts_ > 0)
   {
     rebuild = true;
@@ -403,6 +415,7 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law, boo
   double previous = -1.0;  // last scaled increment with this factorization
   double moved = 0.0;      // position increments since it was built, in Newton tolerances
   bool built_this_step = false;
+  int static_failures = 0;    // static-pivot matrices built in this attempt that did not contract
   bool newton_each = !reuse;  // a new matrix at every iteration (full Newton, or modified Newton switched to it)
   // (the switch suspends the approximate factorizations for the rest of this attempt only)
   const ApproximateSetting restore(linear_);
@@ -510,9 +523,11 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law, boo
         // contact or a slack cable switches, and modified Newton can cycle there (rebuilt at x1, it goes to x2,
         // the kept matrix brings it back to x1: the 3x3 quadruplex lattice's steps of 30 iterations and a
         // full-Newton retry). Full Newton from here, exact matrices (not the body blocks) at every iteration.
-        // (Not for static pivots: an exact sparse LU of a large lattice at every iteration costs more than the
-        // retry it saves, 0.53 -> 0.73-0.86 ms per step of factorizations at 504 struts.)
-        else if (built_this_step && factorizationExact())
+        // Static pivots only at the second of this attempt's own matrices that fails: switching at the first
+        // cost more factorizations than the retries it saved (504 struts, 0.4 s: 0.53 -> 0.73-0.86 ms per step
+        // of them); the cycle, though, rebuilds them at every other iteration until the retry (a lattice's
+        // rattling contact, 504 struts, 0.8 s: 126 retries; switching at the second, 19).
+        else if (built_this_step && (factorizationExact() || (linear_.staticPivot() && ++static_failures >= 2)))
         {
           newton_each = true;
           linear_.allowApproximate(false);

@@ -352,6 +352,65 @@ TEST(LinearSolver, DistrustedBodyBlocksPauseLongerEachTimeUntilOneServes)
   EXPECT_LT((s.a * x - Eigen::VectorXd::Ones(a.rows())).norm(), 1e-12 * x.norm());
 }
 
+TEST(LinearSolver, OnLargeMatricesTheDistrustPauseStartsAtOneStaticPivotFactorization)
+{
+  // a chain of 60 struts (657 unknowns: the static pivots' range): 1, 2, 4 static-pivot factorizations after
+  // successive distrusts, back to 1 after body blocks that served; the costly exact kind is announced meanwhile
+  std::mt19937 rng(13);
+  std::vector<int> sizes(60, 7), own(60, 1);
+  std::vector<std::pair<int, int>> joints;
+  for (int b = 0; b + 1 < 60; ++b)
+    joints.emplace_back(b, b + 1);
+  const Saddle s = makeSaddle(sizes, own, joints, {}, 0.2, 0.1, rng);
+  const Eigen::SparseMatrix<double> a = sparse(s.a);
+  SparseLinearSolver solver;
+  solver.allowDense(true);
+  solver.allowStaticPivot(true);
+  solver.allowBodyBlocks(s.sizes);
+  // the static-pivot factorizations until the body blocks return, `pause` of them expected: until the last,
+  // the next factorization is announced as the large exact kind
+  const auto staticRun = [&](int pause)
+  {
+    int n = 0;
+    while (n <= pause)
+    {
+      EXPECT_TRUE(solver.factorize(a));
+      if (solver.bodyBlocks())
+        return n;
+      EXPECT_TRUE(solver.staticPivot());
+      EXPECT_FALSE(solver.exact());
+      ++n;
+      EXPECT_EQ(solver.nextIsLargeExact(), n < pause) << n;
+    }
+    return n;
+  };
+  ASSERT_TRUE(solver.factorize(a));
+  ASSERT_TRUE(solver.bodyBlocks());
+  EXPECT_FALSE(solver.nextIsLargeExact());
+  solver.distrustBodyBlocks();
+  EXPECT_TRUE(solver.nextIsLargeExact());
+  EXPECT_EQ(staticRun(1), 1);
+  solver.distrustBodyBlocks();
+  EXPECT_EQ(staticRun(2), 2);
+  solver.distrustBodyBlocks();
+  EXPECT_EQ(staticRun(4), 4);
+  ASSERT_TRUE(solver.factorize(a));  // the last body blocks served: the pause is back to 1
+  ASSERT_TRUE(solver.bodyBlocks());
+  solver.distrustBodyBlocks();
+  EXPECT_EQ(staticRun(1), 1);
+  EXPECT_FALSE(solver.nextIsLargeExact());
+  solver.allowApproximate(false);  // suspended body blocks: every factorization is the large exact kind
+  EXPECT_TRUE(solver.nextIsLargeExact());
+  // a small matrix never announces it (its exact factorizations are the dense or sparse LU)
+  const Saddle small = makeSaddle({ 7, 7, 7 }, { 1, 1, 1 }, { { 0, 1 }, { 1, 2 } }, {}, 0.1, 0.0, rng);
+  SparseLinearSolver lu;
+  lu.allowStaticPivot(true);
+  lu.allowBodyBlocks(small.sizes);
+  ASSERT_TRUE(lu.factorize(sparse(small.a)));
+  lu.distrustBodyBlocks();
+  EXPECT_FALSE(lu.nextIsLargeExact());
+}
+
 TEST(LinearSolver, FactorizeApproximateLeavesTheExactFactorizationToTheCaller)
 {
   // the two halves of factorize(): the body blocks when they serve, else nothing factorized (the dynamics

@@ -83,10 +83,17 @@ public:
     return approximate_;
   }
   /// The caller found the last factorization, when it is the body blocks, too far off (modified Newton did
-  /// not contract with it): the next factorizations use the other methods (4, doubled with each distrust
-  /// while they keep failing, up to 256; back to 4 once a body-block factorization serves until the next
-  /// factorization).
+  /// not contract with it): the next factorizations use the other methods (4, or 1 where they are the static
+  /// pivots, doubled with each distrust while the body blocks keep failing, up to 256; back to 4 or 1 once a
+  /// body-block factorization serves until the next factorization).
   void distrustBodyBlocks();
+  /// Whether the next factorization would be an exact one of a large matrix (the static pivots' pattern, the body
+  /// blocks not allowed, suspended or in their pause): the costly kind, which DynamicsSolver does not make only
+  /// because the touching pairs changed.
+  bool nextIsLargeExact() const
+  {
+    return static_pivot_pattern_ && (!allow_body_blocks_ || !approximate_ || body_block_skip_ > 0);
+  }
   /// False when the matrix is singular: sparse, an exact zero pivot (round-off can hide a numerically
   /// singular matrix); dense, a reciprocal condition estimate below 1e-14; static pivots, a zero pivot
   /// in both them and the sparse LU.
@@ -208,7 +215,7 @@ private:
   bool approximate_ = true;
   bool allow_body_blocks_ = false;
   int body_block_skip_ = 0;              // factorizations left before the body blocks are tried again
-  int body_block_pause_ = 4;             // the skip after the next distrust
+  int body_block_doublings_ = 0;         // of the skip after the next distrust (kBodyBlockSkip or 1 at first)
   bool body_blocks_distrusted_ = false;  // the current factorization is distrusted body blocks
   int body_block_refusals_ = 0;
   BodyBlockSolver body_blocks_;

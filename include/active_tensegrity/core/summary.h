@@ -65,6 +65,8 @@ struct StepTimings
   long body_block_rebuilds = 0;   // dynamics, fixed steps: such matrices that had contracted at first, the iterate
                                   // 100 Newton tolerances or more from where they were built: rebuilt there as body
                                   // blocks
+  long static_pivots_kept = 0;    // dynamics: steps that kept a static-pivot matrix though the touching pairs had
+                                  // changed, the next factorization being static pivots too (the body blocks paused)
 
   StepTimings& operator+=(const StepTimings& o)
   {
@@ -86,6 +88,7 @@ struct StepTimings
     newton_switches += o.newton_switches;
     body_block_distrusts += o.body_block_distrusts;
     body_block_rebuilds += o.body_block_rebuilds;
+    static_pivots_kept += o.static_pivots_kept;
     return *this;
   }
 };

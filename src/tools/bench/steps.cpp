@@ -81,8 +81,9 @@ int steps(const std::string& scene, const std::vector<at::Override>& overrides, 
                 "fresh starts: %ld\n",
                 last.timings.full_newton_retries, last.timings.newton_switches, last.timings.contact_reach_misses,
                 last.timings.fresh_starts);
-    std::printf("body blocks distrusted: %ld, rebuilt where they slowed: %ld\n", last.timings.body_block_distrusts,
-                last.timings.body_block_rebuilds);
+    std::printf("body blocks distrusted: %ld, rebuilt where they slowed: %ld; static pivots kept through a change of "
+                "touching pairs: %ld\n",
+                last.timings.body_block_distrusts, last.timings.body_block_rebuilds, last.timings.static_pivots_kept);
   }
   std::printf("where the time goes (last run, us per step, share of its wall time):\n");
   const int n = std::max(1, last.solver_steps);
