@@ -526,7 +526,7 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law, boo
         // Static pivots only at the second of this attempt's own matrices that fails: switching at the first
         // cost more factorizations than the retries it saved (504 struts, 0.4 s: 0.53 -> 0.73-0.86 ms per step
         // of them); the cycle, though, rebuilds them at every other iteration until the retry (a lattice's
-        // rattling contact, 504 struts, 0.8 s: 126 retries; switching at the second, 19).
+        // rattling contact, 504 struts, 0.8 s: 85 retries; switching at the second, 19).
         else if (built_this_step && (factorizationExact() || (linear_.staticPivot() && ++static_failures >= 2)))
         {
           newton_each = true;
