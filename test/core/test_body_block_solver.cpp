@@ -116,6 +116,15 @@ Eigen::MatrixXd withoutCouplings(const Saddle& s, const std::vector<int>& groups
   return a0;
 }
 
+/// A chain of n struts joined end to end, each with one row of its own, neighbours coupled at 0.2.
+Saddle longStrutChain(int n, std::mt19937& rng)
+{
+  std::vector<std::pair<int, int>> joints;
+  for (int b = 0; b + 1 < n; ++b)
+    joints.emplace_back(b, b + 1);
+  return makeSaddle(std::vector<int>(n, 7), std::vector<int>(n, 1), joints, {}, 0.2, 0.1, rng);
+}
+
 Eigen::SparseMatrix<double> sparse(const Eigen::MatrixXd& a)
 {
   Eigen::SparseMatrix<double> m = a.sparseView(0.0, 0.0);
@@ -163,11 +172,7 @@ TEST(BodyBlockSolver, ManyJoiningRowsGoToTheSparseSchurComplement)
 {
   // a chain of 40 struts joined end to end: 117 joining rows, beyond the dense Schur complement's 64
   std::mt19937 rng(11);
-  std::vector<int> sizes(40, 7), own(40, 1);
-  std::vector<std::pair<int, int>> joints;
-  for (int b = 0; b + 1 < 40; ++b)
-    joints.emplace_back(b, b + 1);
-  const Saddle s = makeSaddle(sizes, own, joints, {}, 0.2, 0.1, rng);
+  const Saddle s = longStrutChain(40, rng);
   BodyBlockSolver solver(s.sizes);
   ASSERT_TRUE(solver.factorize(sparse(s.a)));
   EXPECT_GT(solver.joiningRows(), BodyBlockSolver::kDenseSchurRows);
@@ -357,11 +362,7 @@ TEST(LinearSolver, OnLargeMatricesTheDistrustPauseStartsAtOneStaticPivotFactoriz
   // a chain of 60 struts (657 unknowns: the static pivots' range): 1, 2, 4 static-pivot factorizations after
   // successive distrusts, back to 1 after body blocks that served; the costly exact kind is announced meanwhile
   std::mt19937 rng(13);
-  std::vector<int> sizes(60, 7), own(60, 1);
-  std::vector<std::pair<int, int>> joints;
-  for (int b = 0; b + 1 < 60; ++b)
-    joints.emplace_back(b, b + 1);
-  const Saddle s = makeSaddle(sizes, own, joints, {}, 0.2, 0.1, rng);
+  const Saddle s = longStrutChain(60, rng);
   const Eigen::SparseMatrix<double> a = sparse(s.a);
   SparseLinearSolver solver;
   solver.allowDense(true);
