@@ -523,10 +523,11 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law, boo
         // contact or a slack cable switches, and modified Newton can cycle there (rebuilt at x1, it goes to x2,
         // the kept matrix brings it back to x1: the 3x3 quadruplex lattice's steps of 30 iterations and a
         // full-Newton retry). Full Newton from here, exact matrices (not the body blocks) at every iteration.
-        // Static pivots only at the second of this attempt's own matrices that fails: switching at the first
-        // cost more factorizations than the retries it saved (504 struts, 0.4 s: 0.53 -> 0.73-0.86 ms per step
-        // of them); the cycle, though, rebuilds them at every other iteration until the retry (a lattice's
-        // rattling contact, 504 struts, 0.8 s: 85 retries; switching at the second, 19).
+        // Static pivots only at the second of this attempt's own matrices that fails: switching at the first made
+        // about twice as many switches, each an exact factorization per iteration, for iterations within 3 % (the
+        // 4 x 5 lattice's rattling contact at three friction coefficients); without a switch such a step rebuilds
+        // its matrix at every other iteration until the retry (504 struts, 0.8 s: 85 retries; switching at the
+        // second, 19).
         else if (built_this_step && (factorizationExact() || (linear_.staticPivot() && ++static_failures >= 2)))
         {
           newton_each = true;
