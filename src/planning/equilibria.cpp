@@ -60,6 +60,14 @@ EquilibriumOracle::EquilibriumOracle(const core::Model& model, std::vector<int> 
 
 EquilibriumOracle::~EquilibriumOracle() = default;
 
+void EquilibriumOracle::restart(const Equilibrium& start)
+{
+  const std::lock_guard<std::mutex> lock(mutex_);
+  start_ = start;
+  cache_.clear();
+  cache_.push_back({ start_, values(start_.state), ~0ul });
+}
+
 std::vector<double> EquilibriumOracle::values(const core::State& s) const
 {
   std::vector<double> v;

@@ -337,6 +337,10 @@ std::string checkRequest(const core::Model& model, const PlanRequest& r, std::ve
   return "";
 }
 
+/// Searches of one request at most: a path cut when followed from the start (another branch of equilibria) is
+/// searched on from where it stopped being valid, with the next seed, while the deadline allows.
+constexpr int kSearchesMost = 8;
+
 /// The request's one deadline, its cancel and its progress reports (PlanControl). Planners may poll from
 /// several threads: the flags are atomic, the reports serialized.
 class RequestClock
@@ -390,6 +394,13 @@ public:
     answering_ = true;
     end_ = std::max(main_,
                     Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(grace)));
+  }
+  /// Back to searching (from an answer phase that found the path cut): the deadline ends the phase, and a cancel
+  /// stops it again.
+  void searching()
+  {
+    answering_ = false;
+    end_ = main_;
   }
   bool timedOut() const
   {
@@ -732,9 +743,11 @@ std::vector<Values> bestPartialPath(const ob::SpaceInformationPtr& si, const ob:
 }
 
 /// Follows the path from the start through every waypoint (the path the trajectory drives); fills the
-/// figures along it, the waypoints reached and the status. Returns the last equilibrium reached.
+/// figures along it, the waypoints reached and the status; `cut` says where the path stopped being valid (untouched
+/// when it did not; waypoints numbered from `offset`, the waypoints before this path's start). Returns the last
+/// equilibrium reached.
 Equilibrium followFromStart(const EquilibriumOracle& oracle, const PlanRequest& r, const std::vector<Values>& simple,
-                            RequestClock& clock, PlanResult& out)
+                            RequestClock& clock, PlanResult& out, std::string& cut, size_t offset = 0)
 {
   Equilibrium e = oracle.start();
   out.waypoints = { simple.front() };
@@ -763,9 +776,10 @@ Equilibrium followFromStart(const EquilibriumOracle& oracle, const PlanRequest& 
     if (!oracle.follow(e, simple[k], end, true, visit))
     {
       oracle.valid(end, &why);
+      cut = "before waypoint " + std::to_string(k + offset) + " (" + why + ")";
       out.message = (clock.stop() ? "following the path from the start was stopped by the time limit before waypoint " :
                                     "followed from the start, the path stops being valid before waypoint ") +
-                    std::to_string(k) + " (" + why + "); the trajectory ends at the last valid waypoint";
+                    std::to_string(k + offset) + " (" + why + "); the trajectory ends at the last valid waypoint";
       break;
     }
     keep();
@@ -1040,7 +1054,6 @@ PlanResult planFolding(const core::Model& model, const core::State& given, const
     return finish();
   }
 
-  auto space = std::make_shared<ob::RealVectorStateSpace>(static_cast<unsigned>(n));
   ob::RealVectorBounds bounds(static_cast<unsigned>(n));
   double extent = 0.0;
   std::vector<double> upper(n);
@@ -1061,81 +1074,127 @@ PlanResult planFolding(const core::Model& model, const core::State& given, const
       return finish();
     }
   }
-  space->setBounds(bounds);
-  const unsigned seed = r.seed;
-  space->setStateSamplerAllocator([seed](const ob::StateSpace* sp)
-                                  { return std::make_shared<SeededSampler>(sp, seed); });
-  auto si = std::make_shared<ob::SpaceInformation>(space);
-  si->setStateValidityChecker(std::make_shared<EquilibriumChecker>(si, oracle, n));
-  si->setMotionValidator(std::make_shared<ContinuationValidator>(si, oracle, n));
-  si->setup();
 
-  auto pdef = std::make_shared<ob::ProblemDefinition>(si);
-  ob::ScopedState<> s0(space);
-  setStateValues(s0.get(), oracle.values(start));
-  pdef->addStartState(s0);
-  if (r.target_values.empty())
-    pdef->setGoal(std::make_shared<HeightGoal>(si, oracle, n, r.target_height, r.seed));
-  else
+  // Search, shortcut, follow from the start. A path valid edge by edge can still stop being valid when it is
+  // followed from the start: a bidirectional tree joins branches of equilibria that continuation from the start
+  // does not connect, and near a bifurcation the branch taken depends on the increments. While the deadline
+  // allows, the search then starts again from the last equilibrium the followed path reached (the oracle's
+  // cache emptied down to it), with the next seed, and the paths are joined.
+  const Equilibrium first = oracle.start();
+  std::vector<std::string> cuts;  // why each earlier search's path stopped being valid
+  int searches = 0;
+  Equilibrium end;
+  for (int search = 0;; ++search)
   {
-    auto goal = std::make_shared<ob::GoalState>(si);
-    ob::ScopedState<> g(space);
-    setStateValues(g.get(), r.target_values);
-    goal->setState(g);
-    pdef->setGoal(goal);
-  }
-  auto objective = std::make_shared<ob::MultiOptimizationObjective>(si);
-  objective->addObjective(std::make_shared<ob::PathLengthOptimizationObjective>(si), 1.0);
-  objective->addObjective(std::make_shared<ob::MaximizeMinClearanceObjective>(si), 0.1);
-  pdef->setOptimizationObjective(objective);
+    const unsigned seed = r.seed + static_cast<unsigned>(search);
+    auto space = std::make_shared<ob::RealVectorStateSpace>(static_cast<unsigned>(n));
+    space->setBounds(bounds);
+    space->setStateSamplerAllocator([seed](const ob::StateSpace* sp)
+                                    { return std::make_shared<SeededSampler>(sp, seed); });
+    auto si = std::make_shared<ob::SpaceInformation>(space);
+    si->setStateValidityChecker(std::make_shared<EquilibriumChecker>(si, oracle, n));
+    si->setMotionValidator(std::make_shared<ContinuationValidator>(si, oracle, n));
+    si->setup();
 
-  ob::PlannerPtr planner = planners().at(r.planner)(si);
-  const double range = r.range > 0.0 ? r.range : 0.2 * extent;
-  if (auto rrtc = std::dynamic_pointer_cast<og::RRTConnect>(planner))
-  {
-    rrtc->setRange(range);
-    rrtc->setNearestNeighbors<ompl::NearestNeighborsLinear>();  // deterministic
-  }
-  else if (auto rrt = std::dynamic_pointer_cast<og::RRT>(planner))
-  {
-    rrt->setRange(range);
-    rrt->setNearestNeighbors<ompl::NearestNeighborsLinear>();
-  }
-  planner->setProblemDefinition(pdef);  // solve() runs setup()
-  clock.phase("search");
-  const ob::PlannerStatus status = planner->solve(ob::PlannerTerminationCondition([&clock] { return clock.stop(); }));
-  std::vector<Values> raw;
-  if (pdef->hasSolution())
-  {
-    auto path = pdef->getSolutionPath()->as<og::PathGeometric>();
-    for (size_t k = 0; k < path->getStateCount(); ++k)
-      raw.push_back(stateValues(path->getState(k), n));
-  }
-  else if (clock.out())
-    raw = bestPartialPath(si, *planner, oracle, r, n);  // stopped: the best the search has, as an approximation
-  if (raw.size() < 2)
-  {
-    out.status = static_cast<PlanStatus>(static_cast<int>(ob::PlannerStatus::StatusType(status)));
-    // a planner that found no valid goal (or start) state before the deadline or the cancel says
-    // invalid_goal: it ran out of time, the goal is not known to be invalid
-    if (clock.out() && (out.status == PlanStatus::kInvalidGoal || out.status == PlanStatus::kInvalidStart))
-      out.status = PlanStatus::kTimeout;
-    out.message = std::string("no path: ") + (clock.cancelled() ? "cancelled" :
-                                              clock.timedOut()  ? "the time limit ended the search" :
-                                                                  status.asString());
-    return finish();
-  }
-  std::vector<Values> simple = raw;
-  if (pdef->hasSolution())
-  {
-    clock.phase("shortcut");
-    simple = shortcut(si, raw, clock);
-  }
+    auto pdef = std::make_shared<ob::ProblemDefinition>(si);
+    ob::ScopedState<> s0(space);
+    setStateValues(s0.get(), oracle.values(oracle.start().state));
+    pdef->addStartState(s0);
+    if (r.target_values.empty())
+      pdef->setGoal(std::make_shared<HeightGoal>(si, oracle, n, r.target_height, seed));
+    else
+    {
+      auto goal = std::make_shared<ob::GoalState>(si);
+      ob::ScopedState<> g(space);
+      setStateValues(g.get(), r.target_values);
+      goal->setState(g);
+      pdef->setGoal(goal);
+    }
+    auto objective = std::make_shared<ob::MultiOptimizationObjective>(si);
+    objective->addObjective(std::make_shared<ob::PathLengthOptimizationObjective>(si), 1.0);
+    objective->addObjective(std::make_shared<ob::MaximizeMinClearanceObjective>(si), 0.1);
+    pdef->setOptimizationObjective(objective);
 
-  // the answer from here: the path as it will be followed, within the deadline or, past it, a grace period
-  clock.answering(0.3);
-  clock.phase("follow");
-  const Equilibrium end = followFromStart(oracle, r, simple, clock, out);
+    ob::PlannerPtr planner = planners().at(r.planner)(si);
+    const double range = r.range > 0.0 ? r.range : 0.2 * extent;
+    if (auto rrtc = std::dynamic_pointer_cast<og::RRTConnect>(planner))
+    {
+      rrtc->setRange(range);
+      rrtc->setNearestNeighbors<ompl::NearestNeighborsLinear>();  // deterministic
+    }
+    else if (auto rrt = std::dynamic_pointer_cast<og::RRT>(planner))
+    {
+      rrt->setRange(range);
+      rrt->setNearestNeighbors<ompl::NearestNeighborsLinear>();
+    }
+    planner->setProblemDefinition(pdef);  // solve() runs setup()
+    clock.phase("search");
+    const ob::PlannerStatus status = planner->solve(ob::PlannerTerminationCondition([&clock] { return clock.stop(); }));
+    std::vector<Values> raw;
+    if (pdef->hasSolution())
+    {
+      auto path = pdef->getSolutionPath()->as<og::PathGeometric>();
+      for (size_t k = 0; k < path->getStateCount(); ++k)
+        raw.push_back(stateValues(path->getState(k), n));
+    }
+    else if (clock.out())
+      raw = bestPartialPath(si, *planner, oracle, r, n);  // stopped: the best the search has, as an approximation
+    const std::string why_none = std::string("no path: ") + (clock.cancelled() ? "cancelled" :
+                                                             clock.timedOut()  ? "the time limit ended the search" :
+                                                                                 status.asString());
+    ++searches;
+    if (raw.size() < 2 && search > 0)
+    {
+      // the path of the earlier searches stands, cut where it stopped being valid
+      out.message += "; searched again from there: " + why_none;
+      break;
+    }
+    if (raw.size() < 2)
+    {
+      out.status = static_cast<PlanStatus>(static_cast<int>(ob::PlannerStatus::StatusType(status)));
+      // a planner that found no valid goal (or start) state before the deadline or the cancel says
+      // invalid_goal: it ran out of time, the goal is not known to be invalid
+      if (clock.out() && (out.status == PlanStatus::kInvalidGoal || out.status == PlanStatus::kInvalidStart))
+        out.status = PlanStatus::kTimeout;
+      out.message = why_none;
+      return finish();
+    }
+    std::vector<Values> simple = raw;
+    if (pdef->hasSolution())
+    {
+      clock.phase("shortcut");
+      simple = shortcut(si, raw, clock);
+    }
+
+    // the answer from here: the path as it will be followed, within the deadline or, past it, a grace period
+    clock.answering(0.3);
+    clock.phase("follow");
+    const std::vector<Values> before = out.waypoints;  // followed by the earlier searches, ending at this start
+    std::string cut_at;
+    end = followFromStart(oracle, r, simple, clock, out, cut_at, before.empty() ? 0 : before.size() - 1);
+    const bool cut = out.waypoints.size() < simple.size();
+    if (search > 0)
+    {
+      std::vector<Values> joined = before;
+      joined.insert(joined.end(), out.waypoints.begin() + 1, out.waypoints.end());
+      out.waypoints = std::move(joined);
+    }
+    if (!cut || out.status == PlanStatus::kExactSolution || clock.out() || search + 1 >= kSearchesMost)
+      break;
+    cuts.push_back("search " + std::to_string(search + 1) + "'s path, followed from its start, stopped being valid " +
+                   cut_at);
+    clock.searching();
+    oracle.restart(end);
+  }
+  if (!cuts.empty())
+  {
+    oracle.restart(first);  // what follows (blend) follows the whole path from the request's start
+    out.message += " (" + std::to_string(searches) + " searches, seeds " + std::to_string(r.seed) + " to " +
+                   std::to_string(r.seed + static_cast<unsigned>(searches - 1)) + ": ";
+    for (size_t k = 0; k < cuts.size(); ++k)
+      out.message += (k ? "; " : "") + cuts[k];
+    out.message += ")";
+  }
   if (out.waypoints.size() < 2 && out.status != PlanStatus::kExactSolution && clock.out())
   {
     // the best path of a stopped search could not be followed one waypoint from the start: there is nothing to

@@ -577,7 +577,7 @@ TEST(FoldingPlanner, TheEquilibriumCacheIsBounded)
   const at::Model model = scene("masts.yaml");
   const at::State start = startEquilibrium(model);
   const std::vector<int> idx = { model.findActuator("tiltA"), model.findActuator("tiltB") };
-  const ap::EquilibriumOracle oracle(model, idx, start, {}, 0.02);
+  ap::EquilibriumOracle oracle(model, idx, start, {}, 0.02);
   std::mt19937 gen(5);
   std::uniform_real_distribution<double> u(0.0, 1.0);
   size_t largest = 0;
@@ -593,6 +593,16 @@ TEST(FoldingPlanner, TheEquilibriumCacheIsBounded)
   const ap::Equilibrium e = oracle.at({ 0.0, 0.0 });
   EXPECT_EQ(oracle.solves(), before);
   EXPECT_EQ(e.state.q, oracle.start().state.q);
+  // a restart empties the cache down to its new start; the solves carry on
+  const ap::Equilibrium mid = oracle.at({ 0.3, 0.2 });
+  oracle.restart(mid);
+  EXPECT_EQ(oracle.cached(), 1u);
+  EXPECT_EQ(oracle.start().state.q, mid.state.q);
+  const long solves = oracle.solves();
+  EXPECT_EQ(oracle.at({ 0.3, 0.2 }).state.q, mid.state.q);
+  EXPECT_EQ(oracle.solves(), solves);
+  EXPECT_TRUE(oracle.at({ 0.0, 0.0 }).converged);  // no longer known: reached by continuation from the new start
+  EXPECT_GT(oracle.solves(), solves);
 }
 
 namespace
@@ -852,4 +862,46 @@ TEST(FoldingPlanner, SpeedLimitSlowsTheTrajectoryUntilTheDynamicGapKeepsTheClear
   EXPECT_GT(slowed.time_scale, 1.0);
   EXPECT_GE(slowed.dynamic_min_gap, req.limits.min_clearance);
   EXPECT_EQ(slowed.dynamic_peak_contact_force, 0.0);
+}
+
+TEST(FoldingPlanner, APathCutWhenFollowedFromTheStartIsSearchedOnFromWhereItStops)
+{
+  // The node plans from its live state, which differs from run to run by round-off. Planning the tower down to
+  // 0.5 m from such starts (positions perturbed by 1e-6 m, then relaxed as the node does), the first search's
+  // path sometimes crosses to another branch of equilibria when it is followed from the start (in one build,
+  // 2 of these 20 starts, cut before waypoint 1): those plans search on from where the path stopped and still
+  // end exact. (Not rechecked by an independent continuation with other increments: from these starts, near the
+  // symmetric fold's bifurcation, 0.01 m increments flag a jump on some paths that 0.02 m increments follow.)
+  const at::Model model = scene("tower.yaml");
+  const at::State base = startEquilibrium(model);
+  std::mt19937 gen(5);
+  std::normal_distribution<double> noise(0.0, 1e-6);
+  int repaired = 0;
+  for (int k = 0; k < 20; ++k)
+  {
+    at::State s = base;
+    for (long i = 0; i < s.q.size(); ++i)
+      s.q[i] += noise(gen);
+    ap::PlanRequest req = towerRequest();
+    req.target_height = 0.5;
+    req.limits.allow_contact = true;
+    req.limits.max_contact_force = 400.0;
+    req.relax_start = true;
+    const ap::PlanResult p = ap::planFolding(model, s, req);
+    ASSERT_EQ(p.status, ap::PlanStatus::kExactSolution) << "start " << k << ": " << p.message;
+    EXPECT_LE(p.final_height, req.target_height);
+    EXPECT_LE(p.peak_contact_force, req.limits.max_contact_force);
+    ASSERT_GE(p.waypoints.size(), 2u);
+    for (size_t i = 0; i < 4; ++i)
+      EXPECT_EQ(p.waypoints.front()[i], 0.0);
+    EXPECT_EQ(p.positions.front(), p.waypoints.front());
+    EXPECT_EQ(p.positions.back(), p.waypoints.back());
+    if (p.message.find("searches") != std::string::npos)
+    {
+      ++repaired;
+      std::printf("[ measured ] start %d: %s\n", k, p.message.c_str());
+      EXPECT_NE(p.message.find("stopped being valid before waypoint"), std::string::npos) << p.message;
+    }
+  }
+  std::printf("[ measured ] %d of 20 plans searched on from where their first path stopped\n", repaired);
 }

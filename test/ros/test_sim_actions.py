@@ -78,8 +78,10 @@ class TestSimActions(unittest.TestCase):
                                                max_contact_force=400.0, time_limit=300.0, seed=1),
                                feedback_cb=feedback)
         self.assertTrue(self.planner.wait_for_result(rospy.Duration(600)))
-        self.assertEqual(self.planner.get_state(), GoalStatus.SUCCEEDED)
         res = self.planner.get_result()
+        self.assertEqual(self.planner.get_state(), GoalStatus.SUCCEEDED,
+                         "status %s after %.2f s, %d solves: %s" % (res.status, res.planning_time,
+                                                                    res.equilibrium_solves, res.message))
         self.assertEqual(res.status, PlanFoldingResult.EXACT_SOLUTION, res.message)
         self.assertLessEqual(res.final_height, 0.5)
         self.assertFalse(res.cancelled)

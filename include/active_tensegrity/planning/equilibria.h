@@ -83,6 +83,10 @@ public:
   {
     return step_;
   }
+  /// Plans on from `start` (a converged equilibrium, e.g. the last one a path reached): it becomes the start,
+  /// and the cache is emptied down to it, so that every later equilibrium is reached by continuation from it
+  /// (none from the branches the old cache held). The solves, the timings and the best equilibrium carry on.
+  void restart(const Equilibrium& start);
   /// Static solves (continuation increments) done so far.
   long solves() const;
   /// Equilibria in the cache.
