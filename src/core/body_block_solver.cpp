@@ -368,8 +368,12 @@ bool BodyBlockSolver::factorize(const Eigen::SparseMatrix<double>& a)
     if (!(pivots.minCoeff() > 1e-8 * pivots.maxCoeff()) && !(lu.rcond() > kMinRcond))
       return false;
     Eigen::Map<RowMajor> kinv(kinv_.data() + bb.k_start, bb.size, bb.size);
-    kinv.setIdentity();
-    kinv = lu.permutationP() * kinv;
+    // P (the identity with its rows permuted), written directly: P * I on a map permutes in place through an
+    // allocated mask
+    kinv.setZero();
+    const auto& perm = lu.permutationP().indices();
+    for (int i = 0; i < bb.size; ++i)
+      kinv(perm[i], i) = 1.0;
     lu.matrixLU().triangularView<Eigen::UnitLower>().solveInPlace(kinv);
     lu.matrixLU().triangularView<Eigen::Upper>().solveInPlace(kinv);
     if (bb.joins == 0)
