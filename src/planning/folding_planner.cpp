@@ -21,6 +21,7 @@
 #include <ompl/base/goals/GoalState.h>
 #include <ompl/base/objectives/MaximizeMinClearanceObjective.h>
 #include <ompl/base/objectives/PathLengthOptimizationObjective.h>
+#include <ompl/base/spaces/RealVectorStateProjections.h>
 #include <ompl/base/spaces/RealVectorStateSpace.h>
 #include <ompl/datastructures/NearestNeighborsLinear.h>
 #include <ompl/geometric/PathGeometric.h>
@@ -1089,6 +1090,22 @@ PlanResult planFolding(const core::Model& model, const core::State& given, const
     const unsigned seed = r.seed + static_cast<unsigned>(search);
     auto space = std::make_shared<ob::RealVectorStateSpace>(static_cast<unsigned>(n));
     space->setBounds(bounds);
+    if (n <= 2)
+    {
+      // OMPL 1.5's default projection below three dimensions (the identity) copies as many values as its byte
+      // count and fails Eigen's size check, which aborts the process: the planners that project (KPIECE1,
+      // BKPIECE1, LBKPIECE1, SBL ...) get an orthogonal projection on every value instead, its cells a tenth of
+      // each range (OMPL's default), set explicitly so that the space's setup keeps it
+      std::vector<unsigned> components(n);
+      std::vector<double> cells(n);
+      for (size_t i = 0; i < n; ++i)
+      {
+        components[i] = static_cast<unsigned>(i);
+        cells[i] = std::max(0.1 * (bounds.high[i] - bounds.low[i]), 1e-9);
+      }
+      space->registerDefaultProjection(
+          std::make_shared<ob::RealVectorOrthogonalProjectionEvaluator>(space, cells, components));
+    }
     space->setStateSamplerAllocator([seed](const ob::StateSpace* sp)
                                     { return std::make_shared<SeededSampler>(sp, seed); });
     auto si = std::make_shared<ob::SpaceInformation>(space);
