@@ -743,6 +743,95 @@ std::vector<Values> bestPartialPath(const ob::SpaceInformationPtr& si, const ob:
   return path;
 }
 
+/// One search from the oracle's start: the OMPL problem, its sampler and goal seeded by `seed`, solved within the
+/// clock. `raw` is the solution path (`solved`), or, when the clock stopped a search without one, the best path
+/// in the planner's graph (bestPartialPath); empty when there is none.
+struct Search
+{
+  ob::PlannerStatus status;
+  ob::SpaceInformationPtr si;
+  bool solved = false;
+  std::vector<Values> raw;
+};
+
+Search searchOnce(const EquilibriumOracle& oracle, const PlanRequest& r, const ob::RealVectorBounds& bounds,
+                  double extent, unsigned seed, RequestClock& clock)
+{
+  const size_t n = bounds.low.size();
+  auto space = std::make_shared<ob::RealVectorStateSpace>(static_cast<unsigned>(n));
+  space->setBounds(bounds);
+  if (n <= 2)
+  {
+    // OMPL 1.5's default projection below three dimensions (the identity) copies as many values as its byte
+    // count and fails Eigen's size check, which aborts the process: the planners that project (KPIECE1,
+    // BKPIECE1, LBKPIECE1, SBL ...) get an orthogonal projection on every value instead, its cells a tenth of
+    // each range (OMPL's default), set explicitly so that the space's setup keeps it
+    std::vector<unsigned> components(n);
+    std::vector<double> cells(n);
+    for (size_t i = 0; i < n; ++i)
+    {
+      components[i] = static_cast<unsigned>(i);
+      cells[i] = std::max(0.1 * (bounds.high[i] - bounds.low[i]), 1e-9);
+    }
+    space->registerDefaultProjection(
+        std::make_shared<ob::RealVectorOrthogonalProjectionEvaluator>(space, cells, components));
+  }
+  space->setStateSamplerAllocator([seed](const ob::StateSpace* sp)
+                                  { return std::make_shared<SeededSampler>(sp, seed); });
+  auto si = std::make_shared<ob::SpaceInformation>(space);
+  si->setStateValidityChecker(std::make_shared<EquilibriumChecker>(si, oracle, n));
+  si->setMotionValidator(std::make_shared<ContinuationValidator>(si, oracle, n));
+  si->setup();
+
+  auto pdef = std::make_shared<ob::ProblemDefinition>(si);
+  ob::ScopedState<> s0(space);
+  setStateValues(s0.get(), oracle.values(oracle.start().state));
+  pdef->addStartState(s0);
+  if (r.target_values.empty())
+    pdef->setGoal(std::make_shared<HeightGoal>(si, oracle, n, r.target_height, seed));
+  else
+  {
+    auto goal = std::make_shared<ob::GoalState>(si);
+    ob::ScopedState<> g(space);
+    setStateValues(g.get(), r.target_values);
+    goal->setState(g);
+    pdef->setGoal(goal);
+  }
+  auto objective = std::make_shared<ob::MultiOptimizationObjective>(si);
+  objective->addObjective(std::make_shared<ob::PathLengthOptimizationObjective>(si), 1.0);
+  objective->addObjective(std::make_shared<ob::MaximizeMinClearanceObjective>(si), 0.1);
+  pdef->setOptimizationObjective(objective);
+
+  ob::PlannerPtr planner = planners().at(r.planner)(si);
+  const double range = r.range > 0.0 ? r.range : 0.2 * extent;
+  if (auto rrtc = std::dynamic_pointer_cast<og::RRTConnect>(planner))
+  {
+    rrtc->setRange(range);
+    rrtc->setNearestNeighbors<ompl::NearestNeighborsLinear>();  // deterministic
+  }
+  else if (auto rrt = std::dynamic_pointer_cast<og::RRT>(planner))
+  {
+    rrt->setRange(range);
+    rrt->setNearestNeighbors<ompl::NearestNeighborsLinear>();
+  }
+  planner->setProblemDefinition(pdef);  // solve() runs setup()
+  clock.phase("search");
+  const ob::PlannerStatus status = planner->solve(ob::PlannerTerminationCondition([&clock] { return clock.stop(); }));
+  Search out;
+  out.status = status;
+  out.si = si;
+  if (pdef->hasSolution())
+  {
+    out.solved = true;
+    auto path = pdef->getSolutionPath()->as<og::PathGeometric>();
+    for (size_t k = 0; k < path->getStateCount(); ++k)
+      out.raw.push_back(stateValues(path->getState(k), n));
+  }
+  else if (clock.out())
+    out.raw = bestPartialPath(si, *planner, oracle, r, n);  // stopped: the best the search has, as an approximation
+  return out;
+}
+
 /// Follows the path from the start through every waypoint (the path the trajectory drives); fills the
 /// figures along it, the waypoints reached and the status; `cut` says where the path stopped being valid (untouched
 /// when it did not; waypoints numbered from `offset`, the waypoints before this path's start). Returns the last
@@ -1083,83 +1172,16 @@ PlanResult planFolding(const core::Model& model, const core::State& given, const
   // cache emptied down to it), with the next seed, and the paths are joined.
   const Equilibrium first = oracle.start();
   std::vector<std::string> cuts;  // why each earlier search's path stopped being valid
-  int searches = 0;
   Equilibrium end;
-  for (int search = 0;; ++search)
+  int search = 0;  // after the loop: the last search's
+  for (;; ++search)
   {
     const unsigned seed = r.seed + static_cast<unsigned>(search);
-    auto space = std::make_shared<ob::RealVectorStateSpace>(static_cast<unsigned>(n));
-    space->setBounds(bounds);
-    if (n <= 2)
-    {
-      // OMPL 1.5's default projection below three dimensions (the identity) copies as many values as its byte
-      // count and fails Eigen's size check, which aborts the process: the planners that project (KPIECE1,
-      // BKPIECE1, LBKPIECE1, SBL ...) get an orthogonal projection on every value instead, its cells a tenth of
-      // each range (OMPL's default), set explicitly so that the space's setup keeps it
-      std::vector<unsigned> components(n);
-      std::vector<double> cells(n);
-      for (size_t i = 0; i < n; ++i)
-      {
-        components[i] = static_cast<unsigned>(i);
-        cells[i] = std::max(0.1 * (bounds.high[i] - bounds.low[i]), 1e-9);
-      }
-      space->registerDefaultProjection(
-          std::make_shared<ob::RealVectorOrthogonalProjectionEvaluator>(space, cells, components));
-    }
-    space->setStateSamplerAllocator([seed](const ob::StateSpace* sp)
-                                    { return std::make_shared<SeededSampler>(sp, seed); });
-    auto si = std::make_shared<ob::SpaceInformation>(space);
-    si->setStateValidityChecker(std::make_shared<EquilibriumChecker>(si, oracle, n));
-    si->setMotionValidator(std::make_shared<ContinuationValidator>(si, oracle, n));
-    si->setup();
-
-    auto pdef = std::make_shared<ob::ProblemDefinition>(si);
-    ob::ScopedState<> s0(space);
-    setStateValues(s0.get(), oracle.values(oracle.start().state));
-    pdef->addStartState(s0);
-    if (r.target_values.empty())
-      pdef->setGoal(std::make_shared<HeightGoal>(si, oracle, n, r.target_height, seed));
-    else
-    {
-      auto goal = std::make_shared<ob::GoalState>(si);
-      ob::ScopedState<> g(space);
-      setStateValues(g.get(), r.target_values);
-      goal->setState(g);
-      pdef->setGoal(goal);
-    }
-    auto objective = std::make_shared<ob::MultiOptimizationObjective>(si);
-    objective->addObjective(std::make_shared<ob::PathLengthOptimizationObjective>(si), 1.0);
-    objective->addObjective(std::make_shared<ob::MaximizeMinClearanceObjective>(si), 0.1);
-    pdef->setOptimizationObjective(objective);
-
-    ob::PlannerPtr planner = planners().at(r.planner)(si);
-    const double range = r.range > 0.0 ? r.range : 0.2 * extent;
-    if (auto rrtc = std::dynamic_pointer_cast<og::RRTConnect>(planner))
-    {
-      rrtc->setRange(range);
-      rrtc->setNearestNeighbors<ompl::NearestNeighborsLinear>();  // deterministic
-    }
-    else if (auto rrt = std::dynamic_pointer_cast<og::RRT>(planner))
-    {
-      rrt->setRange(range);
-      rrt->setNearestNeighbors<ompl::NearestNeighborsLinear>();
-    }
-    planner->setProblemDefinition(pdef);  // solve() runs setup()
-    clock.phase("search");
-    const ob::PlannerStatus status = planner->solve(ob::PlannerTerminationCondition([&clock] { return clock.stop(); }));
-    std::vector<Values> raw;
-    if (pdef->hasSolution())
-    {
-      auto path = pdef->getSolutionPath()->as<og::PathGeometric>();
-      for (size_t k = 0; k < path->getStateCount(); ++k)
-        raw.push_back(stateValues(path->getState(k), n));
-    }
-    else if (clock.out())
-      raw = bestPartialPath(si, *planner, oracle, r, n);  // stopped: the best the search has, as an approximation
+    const Search found = searchOnce(oracle, r, bounds, extent, seed, clock);
+    const std::vector<Values>& raw = found.raw;
     const std::string why_none = std::string("no path: ") + (clock.cancelled() ? "cancelled" :
                                                              clock.timedOut()  ? "the time limit ended the search" :
-                                                                                 status.asString());
-    ++searches;
+                                                                                 found.status.asString());
     if (raw.size() < 2 && search > 0)
     {
       // the path of the earlier searches stands, cut where it stopped being valid
@@ -1168,7 +1190,7 @@ PlanResult planFolding(const core::Model& model, const core::State& given, const
     }
     if (raw.size() < 2)
     {
-      out.status = static_cast<PlanStatus>(static_cast<int>(ob::PlannerStatus::StatusType(status)));
+      out.status = static_cast<PlanStatus>(static_cast<int>(ob::PlannerStatus::StatusType(found.status)));
       // a planner that found no valid goal (or start) state before the deadline or the cancel says
       // invalid_goal: it ran out of time, the goal is not known to be invalid
       if (clock.out() && (out.status == PlanStatus::kInvalidGoal || out.status == PlanStatus::kInvalidStart))
@@ -1177,10 +1199,10 @@ PlanResult planFolding(const core::Model& model, const core::State& given, const
       return finish();
     }
     std::vector<Values> simple = raw;
-    if (pdef->hasSolution())
+    if (found.solved)
     {
       clock.phase("shortcut");
-      simple = shortcut(si, raw, clock);
+      simple = shortcut(found.si, raw, clock);
     }
 
     // the answer from here: the path as it will be followed, within the deadline or, past it, a grace period
@@ -1189,14 +1211,13 @@ PlanResult planFolding(const core::Model& model, const core::State& given, const
     const std::vector<Values> before = out.waypoints;  // followed by the earlier searches, ending at this start
     std::string cut_at;
     end = followFromStart(oracle, r, simple, clock, out, cut_at, before.empty() ? 0 : before.size() - 1);
-    const bool cut = out.waypoints.size() < simple.size();
     if (search > 0)
     {
       std::vector<Values> joined = before;
       joined.insert(joined.end(), out.waypoints.begin() + 1, out.waypoints.end());
       out.waypoints = std::move(joined);
     }
-    if (!cut || out.status == PlanStatus::kExactSolution || clock.out() || search + 1 >= kSearchesMost)
+    if (cut_at.empty() || out.status == PlanStatus::kExactSolution || clock.out() || search + 1 >= kSearchesMost)
       break;
     cuts.push_back("search " + std::to_string(search + 1) + "'s path, followed from its start, stopped being valid " +
                    cut_at);
@@ -1206,8 +1227,8 @@ PlanResult planFolding(const core::Model& model, const core::State& given, const
   if (!cuts.empty())
   {
     oracle.restart(first);  // what follows (blend) follows the whole path from the request's start
-    out.message += " (" + std::to_string(searches) + " searches, seeds " + std::to_string(r.seed) + " to " +
-                   std::to_string(r.seed + static_cast<unsigned>(searches - 1)) + ": ";
+    out.message += " (" + std::to_string(search + 1) + " searches, seeds " + std::to_string(r.seed) + " to " +
+                   std::to_string(r.seed + static_cast<unsigned>(search)) + ": ";
     for (size_t k = 0; k < cuts.size(); ++k)
       out.message += (k ? "; " : "") + cuts[k];
     out.message += ")";
