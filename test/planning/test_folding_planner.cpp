@@ -179,6 +179,8 @@ TEST(FoldingPlanner, BadRequestsAreRefusedBeforePlanning)
       "3 max_accelerations for 2" },
     { [](ap::PlanRequest& r) { r.time_limit = 0.0; }, "time_limit must be" },
     { [](ap::PlanRequest& r) { r.planner = "Magic"; }, "unknown planner 'Magic'" },
+    { [](ap::PlanRequest& r) { r.planner = "FMT"; }, "planner 'FMT' is not offered" },
+    { [](ap::PlanRequest& r) { r.planner = "BFMT"; }, "planner 'BFMT' is not offered" },
   };
   for (const Case& c : cases)
   {
@@ -893,8 +895,9 @@ TEST(FoldingPlanner, APathCutWhenFollowedFromTheStartIsSearchedOnFromWhereItStop
   // 0.5 m from such starts (positions perturbed by 1e-6 m, then relaxed as the node does), the first search's
   // path sometimes crosses to another branch of equilibria when it is followed from the start (1 of these 10
   // starts in the native build, cut before waypoint 1; other starts in other builds): those plans search on from
-  // where the path stopped and still end exact. (Not rechecked by an independent continuation with other increments: from
-  // these starts, near the symmetric fold's bifurcation, 0.01 m increments flag a jump on some paths that 0.02 m increments follow.)
+  // where the path stopped and still end exact. (Not rechecked by an independent continuation with other increments:
+  // from these starts, near the symmetric fold's bifurcation, 0.01 m increments flag a jump on some paths that 0.02 m
+  // increments follow.)
   const at::Model model = scene("tower.yaml");
   const at::State base = startEquilibrium(model);
   std::mt19937 gen(5);
