@@ -54,8 +54,7 @@ EquilibriumOracle::EquilibriumOracle(const core::Model& model, std::vector<int> 
 {
   model_.analysis.type = core::AnalysisType::kStatic;
   core::Summary ok;
-  start_ = measure(start, ok);
-  cache_.push_back({ start_, values(start_.state), ~0ul });
+  restart(measure(start, ok));
 }
 
 EquilibriumOracle::~EquilibriumOracle() = default;
