@@ -726,9 +726,12 @@ TEST(SceneBounds, EveryIntegerKeyIsBounded)
     { "analysis.modes", "0", "at least 1" },
   };
   for (const auto& [key, value, needle] : cases)
-    EXPECT_TRUE(refused([&] { loadSceneFromString(kMini, "mini.yaml", { parseOverride(key + "=" + value) }); }, key,
+  {
+    const std::string set = key + "=" + value;  // (a lambda may not capture a structured binding before C++20)
+    EXPECT_TRUE(refused([&set] { loadSceneFromString(kMini, "mini.yaml", { parseOverride(set) }); }, key,
                         { needle, "'" + value + "'" }))
         << key;
+  }
   // the bounds themselves load
   const Model m = loadSceneFromString(
       kMini, "mini.yaml", { parseOverride("solver.max_iterations=1000"), parseOverride("solver.max_step_cuts=60") });
