@@ -143,6 +143,8 @@ MotionSpace motionSpace(const Model& model, const System& system, const Eigen::S
       if (g < 0)
         continue;
       const int b = col_body[it.col()];
+      if (m.local[b].cols() == 0)
+        continue;  // a body with no motion of its own (and Eigen's row() of an empty matrix offsets a null pointer)
       m.coupling.row(g).segment(m.offset[b], m.local[b].cols()) +=
           it.value() * m.local[b].row(it.col() - model.bodies[b].offset);
     }
