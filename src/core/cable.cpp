@@ -25,10 +25,9 @@ double elasticTension(const Cable& cable, const CableState& s)
 /// unit vector of segment k), with the points' motion and the force application supplied by the caller:
 /// motion(j, p, v) and apply(j, f).
 template <class Motion, class Apply>
-CableState cableForces(const Cable& cable, const ActuationValues& u, bool damping, bool force, Motion&& motion,
+CableState cableForces(const Cable& cable, int m, const ActuationValues& u, bool damping, bool force, Motion&& motion,
                        Apply&& apply)
 {
-  const int m = static_cast<int>(cable.points.size());
   std::array<Vec3, Cable::kMaxPoints> p, v, n;
   for (int j = 0; j < m; ++j)
     motion(j, p[j], v[j]);
@@ -89,7 +88,7 @@ CableState evaluateCable(const Model& model, const Cable& cable, const Eigen::Ve
   if (!jac)
     // forces alone (an output, a static residual): no point Jacobians formed
     return cableForces(
-        cable, u, damping, F != nullptr,
+        cable, m, u, damping, F != nullptr,
         [&](int j, Vec3& p, Vec3& v) { pointMotion(model, cable.points[j], q, qd, p, v); },
         [&](int j, const Vec3& f) { addPointForce(model, cable.points[j], q, f, *F); });
   // per-thread scratch: no allocation once a thread has seen its longest cable
@@ -192,16 +191,27 @@ CableState evaluateCable(const Model& model, const Cable& cable, const BodyFrame
                          Eigen::VectorXd& F)
 {
   return cableForces(
-      cable, u, damping, true, [&](int j, Vec3& p, Vec3& v) { frames.motion(model, cable.points[j], q, qd, p, v); },
+      cable, static_cast<int>(cable.points.size()), u, damping, true,
+      [&](int j, Vec3& p, Vec3& v) { frames.motion(model, cable.points[j], q, qd, p, v); },
       [&](int j, const Vec3& f) { sum.add(model, cable.points[j], f, F); });
+}
+
+CableState evaluateCable(const Cable& cable, const PointSlot* points, const BodyFrames& frames,
+                         const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const ActuationValues& u, bool damping,
+                         PointForceSum& sum, Eigen::VectorXd& F)
+{
+  return cableForces(
+      cable, static_cast<int>(cable.points.size()), u, damping, true,
+      [&](int j, Vec3& p, Vec3& v) { frames.motion(points[j], q, qd, p, v); },
+      [&](int j, const Vec3& f) { sum.add(points[j], f, F); });
 }
 
 CableState evaluateCable(const Model& model, const Cable& cable, const BodyFrames& frames, const Eigen::VectorXd& q,
                          const Eigen::VectorXd& qd, const ActuationValues& u, bool damping)
 {
   return cableForces(
-      cable, u, damping, false, [&](int j, Vec3& p, Vec3& v) { frames.motion(model, cable.points[j], q, qd, p, v); },
-      [](int, const Vec3&) {});
+      cable, static_cast<int>(cable.points.size()), u, damping, false,
+      [&](int j, Vec3& p, Vec3& v) { frames.motion(model, cable.points[j], q, qd, p, v); }, [](int, const Vec3&) {});
 }
 
 double cablePotentialEnergy(const Cable& cable, const CableState& s)

@@ -77,6 +77,20 @@ void addPointForce(const Model& model, const PointRef& point, const Eigen::Vecto
     F.segment<4>(b.offset + 3) += pointJacobianThetaTransposeTimes(thetaOf(q, b), point.local, f);
 }
 
+PointSlot pointSlot(const Model& model, const PointRef& point)
+{
+  PointSlot slot;
+  slot.local = point.local;
+  slot.body = point.body;
+  if (point.body >= 0)
+  {
+    const Body& b = model.bodies[point.body];
+    slot.offset = b.offset;
+    slot.strut = b.kind == BodyKind::kStrut;
+  }
+  return slot;
+}
+
 void BodyFrames::update(const Model& model, const Eigen::VectorXd& q, const Eigen::VectorXd& qd)
 {
   rotation_.resize(model.bodies.size());

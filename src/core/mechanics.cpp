@@ -26,6 +26,12 @@ System::System(const Model& model, std::vector<Constraint> extra_constraints) : 
   for (Constraint& c : extra_constraints)
     constraints_.push_back(std::move(c));
   zero_q_ = Eigen::VectorXd::Zero(model.nq);
+  for (const Cable& c : model.cables)
+  {
+    cable_first_.push_back(static_cast<int>(cable_points_.size()));
+    for (const PointRef& p : c.points)
+      cable_points_.push_back(pointSlot(model, p));
+  }
   for (const Constraint& c : constraints_)
     constraintKind(c.kind).check(c);
   constraint_rows_.reserve(constraints_.size());
@@ -83,8 +89,9 @@ void System::appliedForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, c
     // a residual without tangents: each strut's frame once, then every cable point from it
     frames_.update(model_, q, qd);
     point_sum_.reset(model_);
-    for (const Cable& c : model_.cables)
-      evaluateCable(model_, c, frames_, q, qd, u, model_.damping_enabled, point_sum_, F);
+    for (size_t c = 0; c < model_.cables.size(); ++c)
+      evaluateCable(model_.cables[c], &cable_points_[cable_first_[c]], frames_, q, qd, u, model_.damping_enabled,
+                    point_sum_, F);
     point_sum_.flush(model_, q, F);
   }
   for (const PointLoad& load : model_.loads)

@@ -36,6 +36,20 @@ Eigen::MatrixXd appliedTangent(const System& sys, const Eigen::VectorXd& q, cons
 }
 }  // namespace
 
+TEST(Cable, ResidualForcesWithoutTangentsEqualThoseWithThem)
+{
+  // the residual's loop reads the cables' points from System's own table and the struts' frames; the tangent
+  // path reads the model's point lists: on strut, point-mass and ground points alike, the same forces
+  Fixture f;
+  const System sys(f.model);
+  BlockSparseMatrix m = sys.makeMatrix();
+  Eigen::VectorXd with_tangents, without;
+  sys.appliedForce(f.q, f.qd, {}, with_tangents, &m, 1, 1);
+  sys.appliedForce(f.q, f.qd, {}, without, nullptr, 0, 0);
+  ASSERT_GT(with_tangents.norm(), 1.0);
+  EXPECT_LT((without - with_tangents).norm(), 1e-12 * with_tangents.norm());
+}
+
 TEST(Cable, TautDampedTangentsMatchFiniteDifferences)
 {
   Fixture f;

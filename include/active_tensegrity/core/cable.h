@@ -58,6 +58,10 @@ CableState evaluateCable(const Model& model, const Cable& cable, const BodyFrame
 CableState evaluateCable(const Model& model, const Cable& cable, const BodyFrames& frames, const Eigen::VectorXd& q,
                          const Eigen::VectorXd& qd, const ActuationValues& u, bool damping, PointForceSum& sum,
                          Eigen::VectorXd& F);
+/// The same with the cable's points given as slots (`points`, as many as the cable has).
+CableState evaluateCable(const Cable& cable, const PointSlot* points, const BodyFrames& frames,
+                         const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const ActuationValues& u, bool damping,
+                         PointForceSum& sum, Eigen::VectorXd& F);
 
 /// V = 1/2 k (l - l0)^2 of a cable in state s (from evaluateCable), J; 0 when slack under tension_only
 /// (l <= l0).

@@ -53,6 +53,20 @@ inline Vec4 thetaOf(const Eigen::VectorXd& x, const Body& b)
   return x.segment<4>(b.offset + 3);
 }
 
+/// A material point with its body's first coordinate and kind beside it. Residual loops read such points from
+/// one contiguous table (System's cable points) instead of each cable's own point list and the model's bodies:
+/// on a lattice of 2000 struts those scattered reads were most of the cable loop's time.
+struct PointSlot
+{
+  Vec3 local = Vec3::Zero();  // body frame (m), or the world position on the ground
+  int body = -1;              // -1: the ground
+  int offset = 0;             // the body's first coordinate in q
+  bool strut = false;
+};
+
+/// The slot of a material point of the model.
+PointSlot pointSlot(const Model& model, const PointRef& point);
+
 /// The rotation matrix A(Theta) of every strut at one configuration and its rate dA/dt, formed once so that
 /// each material point on a strut then costs two 3x3 products instead of pointMotion's quaternion forms: the
 /// cable loop of a residual visits every strut's points several times (on the tower the applied forces take
@@ -65,6 +79,25 @@ public:
   /// As pointMotion, from the frames last formed (at the same q, qd).
   void motion(const Model& model, const PointRef& point, const Eigen::VectorXd& q, const Eigen::VectorXd& qd, Vec3& p,
               Vec3& v) const;
+  /// The same for a point slot.
+  void motion(const PointSlot& point, const Eigen::VectorXd& q, const Eigen::VectorXd& qd, Vec3& p, Vec3& v) const
+  {
+    if (point.body < 0)
+    {
+      p = point.local;
+      v.setZero();
+      return;
+    }
+    p = q.segment<3>(point.offset);
+    v = qd.segment<3>(point.offset);
+    if (!point.strut)
+    {
+      p += point.local;
+      return;
+    }
+    p.noalias() += rotation_[point.body] * point.local;
+    v.noalias() += rate_[point.body] * point.local;
+  }
 
 private:
   std::vector<Mat3> rotation_;  // A(Theta) per body (unused for point masses)
@@ -87,6 +120,23 @@ public:
     const Body& b = model.bodies[point.body];
     F.segment<3>(b.offset) += f;
     if (b.kind != BodyKind::kStrut)
+      return;
+    Mat3& m = moment_[point.body];
+    if (loaded_[point.body])
+      m.noalias() += f * point.local.transpose();
+    else
+    {
+      m.noalias() = f * point.local.transpose();
+      loaded_[point.body] = 1;
+    }
+  }
+  /// The same for a point slot.
+  void add(const PointSlot& point, const Vec3& f, Eigen::VectorXd& F)
+  {
+    if (point.body < 0)
+      return;
+    F.segment<3>(point.offset) += f;
+    if (!point.strut)
       return;
     Mat3& m = moment_[point.body];
     if (loaded_[point.body])

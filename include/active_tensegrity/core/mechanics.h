@@ -194,7 +194,9 @@ private:
   int n_lambda_ = 0;
   BlockSparseMatrix pattern_;
   BroadPhase broad_phase_;
-  Eigen::VectorXd zero_q_;  // zero velocities (for positions-only point kinematics)
+  Eigen::VectorXd zero_q_;               // zero velocities (for positions-only point kinematics)
+  std::vector<PointSlot> cable_points_;  // every cable's points in one table, cable by cable
+  std::vector<int> cable_first_;         // each cable's first entry in it
   double load_factor_ = 1.0;
   mutable std::vector<int> candidates_;  // scratch of contactForce
   mutable NearSlotCache near_slots_;     // of nearContacts
