@@ -404,10 +404,12 @@ TEST(NearSlotCache, GivesTheNearSlotsOfEveryConfigurationAlongARandomWalk)
     ++compared;
   }
   EXPECT_GT(near_total, 10 * compared);  // (crowded: contacts to find at every call)
-  std::printf("near slots per call %.1f, kept lists built %ld in %d calls\n",
-              static_cast<double>(near_total) / compared, cache.rebuilds(), calls);
+  std::printf("near slots per call %.1f, kept lists built %ld in %d calls, kept slots passed over by their bound %ld\n",
+              static_cast<double>(near_total) / compared, cache.rebuilds(), calls, cache.bounded());
   EXPECT_LT(cache.rebuilds(), calls / 4);
   EXPECT_GE(cache.rebuilds(), 4);  // at least the first list and one per jump
+  // the kept slots' bounds spare narrow phases (while exact: the comparisons above)
+  EXPECT_GT(cache.bounded(), 5 * compared);
 }
 
 TEST(NearSlotCache, TakesTheGapsItIsGivenForTheSlotsThatHaveThem)

@@ -8,6 +8,7 @@
 #pragma once
 
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
@@ -22,8 +23,11 @@
 
 namespace active_tensegrity::core
 {
-/// The largest distance any point of a body moved between q0 and q1 (m): for a strut, its centre's move plus
+/// The largest distance any point of body b moved between q0 and q1 (m): for a strut, its centre's move plus
 /// half its length times its axis' turn.
+double bodyMotion(const Body& b, const Eigen::VectorXd& q0, const Eigen::VectorXd& q1);
+
+/// The largest distance any point of any body moved between q0 and q1 (m): bodyMotion's largest.
 double largestMotion(const Model& model, const Eigen::VectorXd& q0, const Eigen::VectorXd& q1);
 
 /// Contact slots that can touch at q with boxes grown by margin (m): the broad phase's strut pairs (when strut
@@ -44,10 +48,14 @@ void nearContactSlots(const Model& model, const BroadPhase& broad, const Eigen::
 /// the largest motion of a body since the reference (largestMotion) is at most R: a gap shrinks by at most
 /// twice that motion, so every slot within 2 reach of touching is in it. The sweep and the narrow phase of the
 /// far candidates thus run once in many calls; the result is the one nearContactSlots gives, in the same order.
+/// Each kept slot remembers its gap at the reference and its bodies: while that gap less the two bodies' own
+/// motions since the reference stays beyond 2 reach, the slot is not evaluated again (on a lattice most kept
+/// slots, whose evaluation read the model's pair table and the known gaps at scattered places).
 class NearSlotCache
 {
 public:
   static constexpr double kSkin = 16.0;
+  static constexpr double kBoundMargin = 1e-9;  // m: a slot is skipped by its bound only beyond 2 reach + this
   void find(const Model& model, const BroadPhase& broad, const Eigen::VectorXd& q, double reach, std::vector<int>& out,
             const std::vector<double>* known_gap = nullptr);
   /// Lists built so far (one per call that found the kept list too far from q).
@@ -55,12 +63,21 @@ public:
   {
     return rebuilds_;
   }
+  /// Kept slots passed over by their bound so far (not evaluated).
+  long bounded() const
+  {
+    return bounded_;
+  }
 
 private:
   Eigen::VectorXd reference_q_;
   double kept_reach_ = -1.0;  // R, the reach the kept list was made for
   std::vector<int> kept_, candidates_;
+  std::vector<double> kept_gap_;                  // each kept slot's gap at the reference
+  std::vector<std::pair<int, int>> kept_bodies_;  // its bodies (-1: the ground)
+  std::vector<double> motion_;                    // each body's bodyMotion since the reference
   long rebuilds_ = 0;
+  long bounded_ = 0;
 };
 
 /// The equations of one model plus optional extra constraints (e.g. statics' spin locks), with a
