@@ -58,11 +58,6 @@ void forEachBodyEnd(const Constraint& c, F&& f)
     f(c.b, -1.0);
 }
 
-double actuationValue(const Constraint& c, const ActuationValues& u)
-{
-  return c.actuator >= 0 ? u[c.actuator].value : 0.0;
-}
-
 void pointsCheck(const Constraint& c)
 {
   if (c.rows() > kMaxPointRows)
@@ -77,14 +72,13 @@ ConstraintBodies pointsBodies(const Constraint& c)
   return out;
 }
 
-void pointsValue(const Model& model, const Constraint& c, const Eigen::VectorXd& q, const ActuationValues& u,
-                 ConstraintRows phi)
+void pointsValue(const ConstraintSlot& c, const ConstraintTables& t, const Eigen::VectorXd& q, const ActuationValues& u,
+                 Eigen::VectorXd& phi)
 {
-  const Vec3 pa = pointPosition(model, c.a, q);
-  const Vec3 pb = pointPosition(model, c.b, q);
-  const double s = actuationValue(c, u);
-  for (int k = 0; k < c.rows(); ++k)
-    phi(k) = c.directions[k].dot(pa - pb) - c.offsets[k] - s;
+  const Vec3 d = slotPosition(c.a, q) - slotPosition(c.b, q);
+  const double s = c.actuator >= 0 ? u[c.actuator].value : 0.0;
+  for (int k = 0; k < c.rows; ++k)
+    phi(c.row + k) = t.directions[c.direction + k].dot(d) - t.offsets[c.direction + k] - s;
 }
 
 void pointsJacobian(const Model& model, const Constraint& c, int group, const Eigen::VectorXd& q, BlockSparseMatrix& jac)
@@ -98,11 +92,15 @@ void pointsJacobian(const Model& model, const Constraint& c, int group, const Ei
                  });
 }
 
-void pointsForce(const Model& model, const Constraint& c, const Eigen::VectorXd& q, ConstConstraintRows lambda,
-                 Eigen::VectorXd& out)
+void pointsForce(const ConstraintSlot& c, const ConstraintTables& t, const Eigen::VectorXd& q,
+                 const Eigen::VectorXd& lambda, Eigen::VectorXd& out)
 {
-  const Vec3 w = combinedDirection(c, lambda);
-  forEachBodyEnd(c, [&](const PointRef& end, double sign) { addPointForce(model, end, q, sign * w, out); });
+  // w = sum_k lambda_k d_k, the world force on end a (minus it on end b)
+  Vec3 w = Vec3::Zero();
+  for (int k = 0; k < c.rows; ++k)
+    w += lambda(c.row + k) * t.directions[c.direction + k];
+  addSlotForce(c.a, q, w, out);
+  addSlotForce(c.b, q, -w, out);
 }
 
 void pointsLambdaHessian(const Model& model, const Constraint& c, const Eigen::VectorXd& /*q*/,
@@ -177,11 +175,16 @@ void thetaRowJacobian(const Model& model, const Constraint& c, int group, const 
   jac.addTransposed(group, c.body, row);
 }
 
-template <ThetaRow theta_row>
-void thetaRowForce(const Model& model, const Constraint& c, const Eigen::VectorXd& q, ConstConstraintRows lambda,
-                   Eigen::VectorXd& out)
+void quatNormForce(const ConstraintSlot& c, const ConstraintTables& /*t*/, const Eigen::VectorXd& q,
+                   const Eigen::VectorXd& lambda, Eigen::VectorXd& out)
 {
-  out.segment<4>(model.bodies[c.body].offset + 3) += lambda(0) * theta_row(model, c, q);
+  out.segment<4>(c.theta) += 2.0 * lambda(c.row) * q.segment<4>(c.theta);  // quatNormRow's 2 Theta
+}
+
+void spinLockForce(const ConstraintSlot& c, const ConstraintTables& /*t*/, const Eigen::VectorXd& /*q*/,
+                   const Eigen::VectorXd& lambda, Eigen::VectorXd& out)
+{
+  out.segment<4>(c.theta) += lambda(c.row) * c.coefficients;  // spinLockRow's a
 }
 
 void noRhs(const Constraint& /*c*/, const ActuationValues& /*u*/, ConstraintRows rhs)
@@ -189,10 +192,10 @@ void noRhs(const Constraint& /*c*/, const ActuationValues& /*u*/, ConstraintRows
   rhs.setZero();
 }
 
-void quatNormValue(const Model& model, const Constraint& c, const Eigen::VectorXd& q, const ActuationValues& /*u*/,
-                   ConstraintRows phi)
+void quatNormValue(const ConstraintSlot& c, const ConstraintTables& /*t*/, const Eigen::VectorXd& q,
+                   const ActuationValues& /*u*/, Eigen::VectorXd& phi)
 {
-  phi(0) = thetaOf(q, model.bodies[c.body]).squaredNorm() - 1.0;
+  phi(c.row) = q.segment<4>(c.theta).squaredNorm() - 1.0;
 }
 
 void quatNormLambdaHessian(const Model& /*model*/, const Constraint& c, const Eigen::VectorXd& /*q*/,
@@ -209,10 +212,10 @@ void quatNormAccelerationRhs(const Model& model, const Constraint& c, const Eige
   rhs(0) = -2.0 * thetaOf(qd, model.bodies[c.body]).squaredNorm();
 }
 
-void spinLockValue(const Model& model, const Constraint& c, const Eigen::VectorXd& q, const ActuationValues& /*u*/,
-                   ConstraintRows phi)
+void spinLockValue(const ConstraintSlot& c, const ConstraintTables& /*t*/, const Eigen::VectorXd& q,
+                   const ActuationValues& /*u*/, Eigen::VectorXd& phi)
 {
-  phi(0) = c.coefficients.dot(thetaOf(q, model.bodies[c.body]));
+  phi(c.row) = c.coefficients.dot(q.segment<4>(c.theta));
 }
 
 void spinLockLambdaHessian(const Model& /*model*/, const Constraint& /*c*/, const Eigen::VectorXd& /*q*/,
@@ -229,23 +232,39 @@ void spinLockAccelerationRhs(const Model& /*model*/, const Constraint& /*c*/, co
 const ConstraintKindFunctions kPointsFunctions = { pointsCheck,       pointsBodies,         pointsValue,
                                                    pointsJacobian,    pointsForce,          pointsLambdaHessian,
                                                    pointsVelocityRhs, pointsAccelerationRhs };
-const ConstraintKindFunctions kQuatNormFunctions = { noCheck,
-                                                     strutBodies,
-                                                     quatNormValue,
-                                                     thetaRowJacobian<quatNormRow>,
-                                                     thetaRowForce<quatNormRow>,
-                                                     quatNormLambdaHessian,
-                                                     noRhs,
-                                                     quatNormAccelerationRhs };
-const ConstraintKindFunctions kSpinLockFunctions = { noCheck,
-                                                     strutBodies,
-                                                     spinLockValue,
-                                                     thetaRowJacobian<spinLockRow>,
-                                                     thetaRowForce<spinLockRow>,
-                                                     spinLockLambdaHessian,
-                                                     noRhs,
-                                                     spinLockAccelerationRhs };
+const ConstraintKindFunctions kQuatNormFunctions = { noCheck,       strutBodies,
+                                                     quatNormValue, thetaRowJacobian<quatNormRow>,
+                                                     quatNormForce, quatNormLambdaHessian,
+                                                     noRhs,         quatNormAccelerationRhs };
+const ConstraintKindFunctions kSpinLockFunctions = { noCheck,       strutBodies,
+                                                     spinLockValue, thetaRowJacobian<spinLockRow>,
+                                                     spinLockForce, spinLockLambdaHessian,
+                                                     noRhs,         spinLockAccelerationRhs };
 }  // namespace
+
+ConstraintSlot constraintSlot(const Model& model, const Constraint& c, int row, ConstraintTables& tables)
+{
+  ConstraintSlot slot;
+  slot.kind = c.kind;
+  slot.row = row;
+  slot.rows = c.rows();
+  slot.actuator = c.actuator;
+  slot.direction = static_cast<int>(tables.directions.size());
+  slot.coefficients = c.coefficients;
+  if (c.kind == Constraint::Kind::kPoints)
+  {
+    slot.a = pointSlot(model, c.a);
+    slot.b = pointSlot(model, c.b);
+    for (int k = 0; k < c.rows(); ++k)
+    {
+      tables.directions.push_back(c.directions[k]);
+      tables.offsets.push_back(c.offsets[k]);
+    }
+  }
+  else
+    slot.theta = model.bodies[c.body].offset + 3;
+  return slot;
+}
 
 const ConstraintKindFunctions& constraintKind(Constraint::Kind kind)
 {

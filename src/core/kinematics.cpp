@@ -91,6 +91,24 @@ PointSlot pointSlot(const Model& model, const PointRef& point)
   return slot;
 }
 
+Vec3 slotPosition(const PointSlot& point, const Eigen::VectorXd& q)
+{
+  if (point.body < 0)
+    return point.local;
+  if (!point.strut)
+    return q.segment<3>(point.offset) + point.local;
+  return q.segment<3>(point.offset) + rotate(q.segment<4>(point.offset + 3), point.local);
+}
+
+void addSlotForce(const PointSlot& point, const Eigen::VectorXd& q, const Vec3& f, Eigen::VectorXd& F)
+{
+  if (point.body < 0)
+    return;
+  F.segment<3>(point.offset) += f;
+  if (point.strut)
+    F.segment<4>(point.offset + 3) += pointJacobianThetaTransposeTimes(q.segment<4>(point.offset + 3), point.local, f);
+}
+
 void BodyFrames::update(const Model& model, const Eigen::VectorXd& q, const Eigen::VectorXd& qd)
 {
   rotation_.resize(model.bodies.size());

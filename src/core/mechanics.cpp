@@ -38,6 +38,7 @@ System::System(const Model& model, std::vector<Constraint> extra_constraints) : 
   for (const Constraint& c : constraints_)
   {
     constraint_rows_.push_back(n_lambda_);
+    constraint_slots_.push_back(constraintSlot(model, c, n_lambda_, constraint_tables_));
     n_lambda_ += c.rows();
   }
 
@@ -360,12 +361,9 @@ void System::constraintValue(const Eigen::VectorXd& q, const ActuationValues& u,
                              bool driven_only) const
 {
   phi.setZero(n_lambda_);
-  forEachConstraint(
-      [&](const Constraint& c, const ConstraintKindFunctions& kind, int row, int /*group*/)
-      {
-        if (!driven_only || c.actuator >= 0)
-          kind.value(model_, c, q, u, phi.segment(row, c.rows()));
-      });
+  for (const ConstraintSlot& c : constraint_slots_)
+    if (!driven_only || c.actuator >= 0)
+      constraintKind(c.kind).value(c, constraint_tables_, q, u, phi);
 }
 
 void System::addConstraintJacobian(const Eigen::VectorXd& q, BlockSparseMatrix& jac) const
@@ -384,8 +382,8 @@ Eigen::MatrixXd System::constraintJacobianDense(const Eigen::VectorXd& q) const
 void System::constraintForce(const Eigen::VectorXd& q, const Eigen::VectorXd& lambda, Eigen::VectorXd& out) const
 {
   out.setZero(model_.nq);
-  forEachConstraint([&](const Constraint& c, const ConstraintKindFunctions& kind, int row, int /*group*/)
-                    { kind.addForce(model_, c, q, lambda.segment(row, c.rows()), out); });
+  for (const ConstraintSlot& c : constraint_slots_)
+    constraintKind(c.kind).addForce(c, constraint_tables_, q, lambda, out);
 }
 
 void System::addLambdaHessian(const Eigen::VectorXd& q, const Eigen::VectorXd& lambda, BlockSparseMatrix& jac,

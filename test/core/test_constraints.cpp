@@ -31,14 +31,17 @@ std::string kindName(Constraint::Kind kind)
   return "?";
 }
 
-/// One constraint of mixedModel (or a spin lock on strut A) alone in a model: its functions, its matrix
-/// (groups: the bodies, then the constraint) and a random state.
+/// One constraint of mixedModel (or a spin lock on strut A) alone in a model: its functions, its slot (the
+/// residual's value and reaction read it), its matrix (groups: the bodies, then the constraint) and a random
+/// state.
 struct OneConstraint
 {
   Model model = mixedModel();
   Constraint c;
   const ConstraintKindFunctions& kind;
   int group;
+  ConstraintTables tables;
+  ConstraintSlot slot;
   std::mt19937 rng{ 17 };
   Eigen::VectorXd q, qd, qdd;
 
@@ -47,6 +50,7 @@ struct OneConstraint
   {
     model.constraints = { c };
     finalizeModel(model);
+    slot = constraintSlot(model, c, 0, tables);
     q = perturbed(model.q0, 0.05, rng);
     qd = randomVector(model.nq, 0.8, rng);
     qdd = randomVector(model.nq, 3.0, rng);
@@ -55,14 +59,14 @@ struct OneConstraint
   Eigen::VectorXd value(const Eigen::VectorXd& x, const ActuationValues& u) const
   {
     Eigen::VectorXd phi = Eigen::VectorXd::Zero(c.rows());
-    kind.value(model, c, x, u, phi);
+    kind.value(slot, tables, x, u, phi);
     return phi;
   }
 
   Eigen::VectorXd force(const Eigen::VectorXd& x, const Eigen::VectorXd& lambda) const
   {
     Eigen::VectorXd out = Eigen::VectorXd::Zero(model.nq);
-    kind.addForce(model, c, x, lambda, out);
+    kind.addForce(slot, tables, x, lambda, out);
     return out;
   }
 

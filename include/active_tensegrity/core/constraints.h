@@ -24,6 +24,7 @@
 #pragma once
 
 #include <array>
+#include <vector>
 
 #include <Eigen/Core>
 
@@ -44,6 +45,35 @@ struct ConstraintBodies
   int count = 0;
 };
 
+/// Rows a kPoints constraint may have (a ball joint has 3); check() refuses more.
+constexpr int kMaxPointRows = 6;
+
+/// The kPoints rows' directions and offsets of every constraint of a System, one after another.
+struct ConstraintTables
+{
+  std::vector<Vec3> directions;
+  std::vector<double> offsets;
+};
+
+/// A constraint as a residual reads it (System keeps one per constraint): its points as slots with their
+/// bodies' offsets, a strut's Theta offset, its rows' directions and offsets in the System's tables. A
+/// residual's loop thus reads two contiguous tables instead of the model's bodies and each Constraint's own
+/// vectors (on the tower the constraints' share of a step fell by half).
+struct ConstraintSlot
+{
+  Constraint::Kind kind = Constraint::Kind::kPoints;
+  int row = 0;  // the first row in phi and lambda
+  int rows = 0;
+  int actuator = -1;                 // as Constraint::actuator
+  int direction = 0;                 // kPoints: the first of its rows in ConstraintTables
+  int theta = 0;                     // kQuatNorm, kSpinLock: the first coordinate of the strut's Theta in q
+  PointSlot a, b;                    // kPoints
+  Vec4 coefficients = Vec4::Zero();  // kSpinLock
+};
+
+/// The slot of constraint c whose rows start at `row`; its kPoints rows appended to `tables`.
+ConstraintSlot constraintSlot(const Model& model, const Constraint& c, int row, ConstraintTables& tables);
+
 /// The functions of one constraint kind. `group` is the constraint's block row in the Newton matrix
 /// (BlockSparseMatrix groups: one per body, then one per constraint).
 struct ConstraintKindFunctions
@@ -51,15 +81,15 @@ struct ConstraintKindFunctions
   /// Refuses a constraint the functions cannot evaluate (std::invalid_argument).
   void (*check)(const Constraint& c);
   ConstraintBodies (*bodies)(const Constraint& c);
-  /// Phi(q, t).
-  void (*value)(const Model& model, const Constraint& c, const Eigen::VectorXd& q, const ActuationValues& u,
-                ConstraintRows phi);
+  /// Phi(q, t) into its rows of phi.
+  void (*value)(const ConstraintSlot& c, const ConstraintTables& t, const Eigen::VectorXd& q, const ActuationValues& u,
+                Eigen::VectorXd& phi);
   /// Adds Phi_q into the blocks (group, body) and its transpose into (body, group).
   void (*addJacobian)(const Model& model, const Constraint& c, int group, const Eigen::VectorXd& q,
                       BlockSparseMatrix& jac);
-  /// Adds Phi_q^T lambda into out (size nq).
-  void (*addForce)(const Model& model, const Constraint& c, const Eigen::VectorXd& q, ConstConstraintRows lambda,
-                   Eigen::VectorXd& out);
+  /// Adds Phi_q^T lambda (lambda: every constraint's, the slot's from its row on) into out (size nq).
+  void (*addForce)(const ConstraintSlot& c, const ConstraintTables& t, const Eigen::VectorXd& q,
+                   const Eigen::VectorXd& lambda, Eigen::VectorXd& out);
   /// Adds weight * d(Phi_q^T lambda)/dq into the body blocks of jac.
   void (*addLambdaHessian)(const Model& model, const Constraint& c, const Eigen::VectorXd& q,
                            ConstConstraintRows lambda, BlockSparseMatrix& jac, double weight);
@@ -72,8 +102,5 @@ struct ConstraintKindFunctions
 
 /// The functions of one kind: the one place where a constraint's kind is switched on.
 const ConstraintKindFunctions& constraintKind(Constraint::Kind kind);
-
-/// Rows a kPoints constraint may have (a ball joint has 3); check() refuses more.
-constexpr int kMaxPointRows = 6;
 
 }  // namespace active_tensegrity::core

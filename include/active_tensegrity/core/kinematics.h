@@ -54,8 +54,8 @@ inline Vec4 thetaOf(const Eigen::VectorXd& x, const Body& b)
 }
 
 /// A material point with its body's first coordinate and kind beside it. Residual loops read such points from
-/// one contiguous table (System's cable points) instead of each cable's own point list and the model's bodies:
-/// on a lattice of 2000 struts those scattered reads were most of the cable loop's time.
+/// contiguous tables (System's cable points, the constraints' slots) instead of each cable's own point list
+/// and the model's bodies: on a lattice of 2000 struts those scattered reads were most of the cable loop's time.
 struct PointSlot
 {
   Vec3 local = Vec3::Zero();  // body frame (m), or the world position on the ground
@@ -66,6 +66,10 @@ struct PointSlot
 
 /// The slot of a material point of the model.
 PointSlot pointSlot(const Model& model, const PointRef& point);
+/// The world position of a point slot at q (as pointPosition).
+Vec3 slotPosition(const PointSlot& point, const Eigen::VectorXd& q);
+/// Adds the generalized force of the world force f at a point slot into F (as addPointForce).
+void addSlotForce(const PointSlot& point, const Eigen::VectorXd& q, const Vec3& f, Eigen::VectorXd& F);
 
 /// The rotation matrix A(Theta) of every strut at one configuration and its rate dA/dt, formed once so that
 /// each material point on a strut then costs two 3x3 products instead of pointMotion's quaternion forms: the

@@ -208,6 +208,8 @@ private:
   const Model& model_;
   std::vector<Constraint> constraints_;
   std::vector<int> constraint_rows_;
+  std::vector<ConstraintSlot> constraint_slots_;  // the constraints as the residual's loops read them
+  ConstraintTables constraint_tables_;            // their kPoints rows' directions and offsets
   int n_lambda_ = 0;
   BlockSparseMatrix pattern_;
   BroadPhase broad_phase_;
