@@ -186,16 +186,6 @@ CableState evaluateCable(const Model& model, const Cable& cable, const Eigen::Ve
   return s;
 }
 
-CableState evaluateCable(const Model& model, const Cable& cable, const BodyFrames& frames, const Eigen::VectorXd& q,
-                         const Eigen::VectorXd& qd, const ActuationValues& u, bool damping, PointForceSum& sum,
-                         Eigen::VectorXd& F)
-{
-  return cableForces(
-      cable, static_cast<int>(cable.points.size()), u, damping, true,
-      [&](int j, Vec3& p, Vec3& v) { frames.motion(model, cable.points[j], q, qd, p, v); },
-      [&](int j, const Vec3& f) { sum.add(model, cable.points[j], f, F); });
-}
-
 CableState evaluateCable(const Cable& cable, const PointSlot* points, const BodyFrames& frames,
                          const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const ActuationValues& u, bool damping,
                          PointForceSum& sum, Eigen::VectorXd& F)

@@ -126,21 +126,7 @@ void BodyFrames::update(const Model& model, const Eigen::VectorXd& q, const Eige
 void BodyFrames::motion(const Model& model, const PointRef& point, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
                         Vec3& p, Vec3& v) const
 {
-  if (point.body < 0)
-  {
-    p = point.local;
-    v.setZero();
-    return;
-  }
-  const Body& b = model.bodies[point.body];
-  if (b.kind == BodyKind::kPointMass)
-  {
-    p = q.segment<3>(b.offset) + point.local;
-    v = qd.segment<3>(b.offset);
-    return;
-  }
-  p = q.segment<3>(b.offset) + rotation_[point.body] * point.local;
-  v = qd.segment<3>(b.offset) + rate_[point.body] * point.local;
+  motion(pointSlot(model, point), q, qd, p, v);
 }
 
 void PointForceSum::reset(const Model& model)

@@ -4,6 +4,7 @@
 // length and when slack there is no force, no energy and no power. (The force's tangents against
 // finite differences: test_mechanics, test_sliding_cable.) The law along the cable against closed forms.
 #include <random>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -264,7 +265,10 @@ TEST(CableFrames, ResidualLoopEqualsThePointwiseForms)
     int taut = 0;
     for (const Cable& c : m.cables)
     {
-      const CableState s = evaluateCable(m, c, frames, q, qd, kHeld, true, sum, F);
+      std::vector<PointSlot> slots;
+      for (const PointRef& p : c.points)
+        slots.push_back(pointSlot(m, p));
+      const CableState s = evaluateCable(c, slots.data(), frames, q, qd, kHeld, true, sum, F);
       const CableState each = evaluate(m, c, q, qd, kHeld, true, &F_each);
       EXPECT_NEAR(s.length, each.length, 1e-14 * each.length) << c.name;
       EXPECT_NEAR(s.rate, each.rate, 1e-12 * (1.0 + std::abs(each.rate))) << c.name;

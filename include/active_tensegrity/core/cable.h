@@ -54,11 +54,8 @@ CableState evaluateCable(const Model& model, const Cable& cable, const Eigen::Ve
 CableState evaluateCable(const Model& model, const Cable& cable, const BodyFrames& frames, const Eigen::VectorXd& q,
                          const Eigen::VectorXd& qd, const ActuationValues& u, bool damping);
 /// The same without tangents, the points' motion from frames formed at (q, qd) and the forces summed into
-/// `sum` and F (the caller flushes `sum` into F once all elements are added): a residual's force loop.
-CableState evaluateCable(const Model& model, const Cable& cable, const BodyFrames& frames, const Eigen::VectorXd& q,
-                         const Eigen::VectorXd& qd, const ActuationValues& u, bool damping, PointForceSum& sum,
-                         Eigen::VectorXd& F);
-/// The same with the cable's points given as slots (`points`, as many as the cable has).
+/// `sum` and F (the caller flushes `sum` into F once all elements are added): a residual's force loop. The
+/// cable's points are given as slots (`points`, as many as the cable has; System keeps them in one table).
 CableState evaluateCable(const Cable& cable, const PointSlot* points, const BodyFrames& frames,
                          const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const ActuationValues& u, bool damping,
                          PointForceSum& sum, Eigen::VectorXd& F);

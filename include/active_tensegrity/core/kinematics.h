@@ -117,24 +117,6 @@ public:
   /// Clears the moments (sized to the model's bodies).
   void reset(const Model& model);
   /// Adds the force f at a material point: its translation part into F, its moment into the sum.
-  void add(const Model& model, const PointRef& point, const Vec3& f, Eigen::VectorXd& F)
-  {
-    if (point.body < 0)
-      return;
-    const Body& b = model.bodies[point.body];
-    F.segment<3>(b.offset) += f;
-    if (b.kind != BodyKind::kStrut)
-      return;
-    Mat3& m = moment_[point.body];
-    if (loaded_[point.body])
-      m.noalias() += f * point.local.transpose();
-    else
-    {
-      m.noalias() = f * point.local.transpose();
-      loaded_[point.body] = 1;
-    }
-  }
-  /// The same for a point slot.
   void add(const PointSlot& point, const Vec3& f, Eigen::VectorXd& F)
   {
     if (point.body < 0)
