@@ -69,12 +69,7 @@ void pointMotion(const Model& model, const PointRef& point, const Eigen::VectorX
 void addPointForce(const Model& model, const PointRef& point, const Eigen::VectorXd& q, const Vec3& f,
                    Eigen::VectorXd& F)
 {
-  if (point.body < 0)
-    return;
-  const Body& b = model.bodies[point.body];
-  F.segment<3>(b.offset) += f;
-  if (b.kind == BodyKind::kStrut)
-    F.segment<4>(b.offset + 3) += pointJacobianThetaTransposeTimes(thetaOf(q, b), point.local, f);
+  addSlotForce(pointSlot(model, point), q, f, F);
 }
 
 PointSlot pointSlot(const Model& model, const PointRef& point)
@@ -158,12 +153,7 @@ void PointForceSum::flush(const Model& model, const Eigen::VectorXd& q, Eigen::V
 
 Vec3 pointPosition(const Model& model, const PointRef& point, const Eigen::VectorXd& q)
 {
-  if (point.body < 0)
-    return point.local;
-  const Body& b = model.bodies[point.body];
-  if (b.kind == BodyKind::kPointMass)
-    return q.segment<3>(b.offset) + point.local;
-  return q.segment<3>(b.offset) + rotate(thetaOf(q, b), point.local);
+  return slotPosition(pointSlot(model, point), q);
 }
 
 }  // namespace active_tensegrity::core

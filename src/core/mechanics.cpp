@@ -185,13 +185,22 @@ double gapAt(const Model& model, int slot, const Eigen::VectorXd& q, const std::
 }  // namespace
 
 void nearContactSlots(const Model& model, const BroadPhase& broad, const Eigen::VectorXd& q, double reach,
-                      std::vector<int>& candidates, std::vector<int>& out, const std::vector<double>* known_gap)
+                      std::vector<int>& candidates, std::vector<int>& out, const std::vector<double>* known_gap,
+                      std::vector<double>* gaps)
 {
   contactCandidates(model, broad, q, reach, candidates);
   out.clear();
+  if (gaps)
+    gaps->clear();
   for (int i : candidates)
-    if (gapAt(model, i, q, known_gap) <= 2.0 * reach)
-      out.push_back(i);
+  {
+    const double gap = gapAt(model, i, q, known_gap);
+    if (gap > 2.0 * reach)
+      continue;
+    out.push_back(i);
+    if (gaps)
+      gaps->push_back(gap);
+  }
 }
 
 void NearSlotCache::find(const Model& model, const BroadPhase& broad, const Eigen::VectorXd& q, double reach,
@@ -210,17 +219,10 @@ void NearSlotCache::find(const Model& model, const BroadPhase& broad, const Eige
   if (moved < 0.0 || reach + moved > kept_reach_)
   {
     kept_reach_ = kSkin * reach;
-    contactCandidates(model, broad, q, kept_reach_, candidates_);
-    kept_.clear();
-    kept_gap_.clear();
+    nearContactSlots(model, broad, q, kept_reach_, candidates_, kept_, known_gap, &kept_gap_);
     kept_bodies_.clear();
-    for (int i : candidates_)
+    for (int i : kept_)
     {
-      const double gap = gapAt(model, i, q, known_gap);
-      if (gap > 2.0 * kept_reach_)
-        continue;
-      kept_.push_back(i);
-      kept_gap_.push_back(gap);
       if (model.isGroundSlot(i))
         kept_bodies_.emplace_back(model.ground_contacts[i - model.checked_pairs.size()].body, -1);
       else

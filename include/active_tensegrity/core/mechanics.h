@@ -39,9 +39,10 @@ void contactCandidates(const Model& model, const BroadPhase& broad, const Eigen:
 /// their gap is at most 2 reach. While no body point moves by more than reach from q, every slot that touches
 /// is among them (two bodies close their distance by at most twice that). `candidates`: scratch. `known_gap`
 /// (optional, per slot): gaps already evaluated at this q (NaN: not evaluated), taken instead of the narrow phase.
+/// `gaps` (optional): the listed slots' gaps, in their order.
 void nearContactSlots(const Model& model, const BroadPhase& broad, const Eigen::VectorXd& q, double reach,
                       std::vector<int>& candidates, std::vector<int>& out,
-                      const std::vector<double>* known_gap = nullptr);
+                      const std::vector<double>* known_gap = nullptr, std::vector<double>* gaps = nullptr);
 
 /// nearContactSlots with a kept list (a Verlet list): the list is nearContactSlots at a reference q for kSkin
 /// times the reach of the call that made it, R = kSkin reach_0. It serves every later call whose reach plus
