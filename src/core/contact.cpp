@@ -193,7 +193,7 @@ ContactPairState baseState(int pair, const Closest& c, const StrutAxis& a, const
 
 const GroundContact& groundContact(const Model& model, int slot)
 {
-  return model.ground_contacts[slot - static_cast<int>(model.checked_pairs.size())];
+  return model.groundContactOf(slot);
 }
 
 PointRef groundPoint(const Model& model, int slot)

@@ -34,10 +34,9 @@ System::System(const Model& model, std::vector<Constraint> extra_constraints) : 
   }
   for (const Constraint& c : constraints_)
     constraintKind(c.kind).check(c);
-  constraint_rows_.reserve(constraints_.size());
+  constraint_slots_.reserve(constraints_.size());
   for (const Constraint& c : constraints_)
   {
-    constraint_rows_.push_back(n_lambda_);
     constraint_slots_.push_back(constraintSlot(model, c, n_lambda_, constraint_tables_));
     n_lambda_ += c.rows();
   }
@@ -135,7 +134,7 @@ void System::contactForce(const std::vector<int>& slots, const Eigen::VectorXd& 
       continue;
     if (model_.isGroundSlot(i))
     {
-      const int body = model_.ground_contacts[i - model_.checked_pairs.size()].body;
+      const int body = model_.groundContactOf(i).body;
       const Body& b = model_.bodies[body];
       F.segment(b.offset, b.nq) += contribution_.force.head(b.nq);
       if (!jac)
@@ -224,7 +223,7 @@ void NearSlotCache::find(const Model& model, const BroadPhase& broad, const Eige
     for (int i : kept_)
     {
       if (model.isGroundSlot(i))
-        kept_bodies_.emplace_back(model.ground_contacts[i - model.checked_pairs.size()].body, -1);
+        kept_bodies_.emplace_back(model.groundContactOf(i).body, -1);
       else
         kept_bodies_.emplace_back(model.checked_pairs[i].body_a, model.checked_pairs[i].body_b);
     }
@@ -355,7 +354,7 @@ void System::forEachConstraint(F&& f) const
   for (size_t i = 0; i < constraints_.size(); ++i)
   {
     const Constraint& c = constraints_[i];
-    f(c, constraintKind(c.kind), constraint_rows_[i], constraintGroup(static_cast<int>(i)));
+    f(c, constraintKind(c.kind), constraint_slots_[i].row, constraintGroup(static_cast<int>(i)));
   }
 }
 

@@ -111,7 +111,7 @@ public:
   }
   int constraintRow(int c) const
   {
-    return constraint_rows_[c];
+    return constraint_slots_[c].row;
   }
 
   /// The factor the point loads (Model::loads) are applied with: 1 unless a static path scales them
@@ -208,8 +208,7 @@ private:
 
   const Model& model_;
   std::vector<Constraint> constraints_;
-  std::vector<int> constraint_rows_;
-  std::vector<ConstraintSlot> constraint_slots_;  // the constraints as the residual's loops read them
+  std::vector<ConstraintSlot> constraint_slots_;  // the constraints as residuals read them, with their rows
   ConstraintTables constraint_tables_;            // their kPoints rows' directions and offsets
   int n_lambda_ = 0;
   BlockSparseMatrix pattern_;

@@ -328,6 +328,11 @@ struct Model
   {
     return slot >= static_cast<int>(checked_pairs.size());
   }
+  /// The ground contact of a ground slot (isGroundSlot).
+  const GroundContact& groundContactOf(int slot) const
+  {
+    return ground_contacts[slot - static_cast<int>(checked_pairs.size())];
+  }
   /// Whether any contact (strut pairs or the ground) is computed.
   bool anyContact() const
   {
