@@ -103,7 +103,7 @@ void MessageBuilder::clearMarkers()
 }
 
 Snapshot MessageBuilder::build(const core::State& state, const ros::Time& stamp,
-                               const std::vector<core::ContactPairState>* given)
+                               const std::vector<core::ContactPairState>* given, bool markers)
 {
   Snapshot out;
   const Eigen::VectorXd& q = state.q;
@@ -175,7 +175,8 @@ Snapshot MessageBuilder::build(const core::State& state, const ros::Time& stamp,
     out.actuators.effort.push_back(core::actuationForce(model_, state, static_cast<int>(i)));
   }
 
-  addMarkers(state, contacts, cables, stamp, out.markers);
+  if (markers)
+    addMarkers(state, contacts, cables, stamp, out.markers);
   return out;
 }
 

@@ -493,7 +493,7 @@ void SimNode::publishStatus()
   status_pub_.publish(s);
 }
 
-void SimNode::publishState(const core::State& state, const ros::Time& stamp)
+void SimNode::publishState(core::State& state, const ros::Time& stamp)
 {
   if (params_.publish_clock)
   {
@@ -501,13 +501,37 @@ void SimNode::publishState(const core::State& state, const ros::Time& stamp)
     c.clock = stamp;
     clock_pub_.publish(c);
   }
-  const Snapshot snap = builder_.build(state, stamp, solver_.contactsAt(state));
+  // markers are for rviz, which draws at screen rates: at most marker_rate per wall second (at a real-time
+  // factor of 50 and 100 publications per simulated second they were most of the node's wall time)
+  const WallClock::time_point now = WallClock::now();
+  const bool markers = params_.marker_rate <= 0.0 || now >= next_markers_;
+  const Snapshot snap = builder_.build(state, stamp, solver_.contactsAt(state), markers);
   tf_.sendTransform(snap.transforms);
   contacts_pub_.publish(snap.contacts);
   cables_pub_.publish(snap.cables);
   struts_pub_.publish(snap.struts);
   actuators_pub_.publish(snap.actuators);
-  markers_pub_.publish(snap.markers);
+  markers_missed_ = !markers;
+  if (markers)
+  {
+    markers_pub_.publish(snap.markers);
+    if (params_.marker_rate > 0.0)
+      next_markers_ = now + std::chrono::duration_cast<WallClock::duration>(
+                                std::chrono::duration<double>(1.0 / params_.marker_rate));
+  }
+  else
+  {
+    std::swap(last_published_, state);  // (the caller's copy: no allocation once both are sized)
+    last_stamp_ = stamp;
+  }
+}
+
+void SimNode::publishMissedMarkers()
+{
+  if (!markers_missed_)
+    return;
+  markers_missed_ = false;
+  markers_pub_.publish(builder_.build(last_published_, last_stamp_, solver_.contactsAt(last_published_)).markers);
 }
 
 void SimNode::run()
@@ -537,6 +561,8 @@ void SimNode::run()
         // after a reset: fresh markers, publish at once, pace from the new start
         builder_.clearMarkers();
         clear_markers_ = false;
+        markers_missed_ = false;  // (the missed ones are of the state before the reset)
+        next_markers_ = WallClock::time_point::min();
         next_publish = state_.t;
         was_running = false;
       }
@@ -544,13 +570,15 @@ void SimNode::run()
       {
         was_running = false;
         lock.unlock();
+        publishMissedMarkers();
         std::this_thread::sleep_for(std::chrono::milliseconds(20));
         continue;
       }
       if (!was_running)
       {
-        // (re)start: pace from here, publish at once
+        // (re)start: pace from here, publish at once (markers too)
         pace_wall = window_wall = WallClock::now();
+        next_markers_ = WallClock::time_point::min();
         pace_sim = window_sim = state_.t;
         window_publish = 0.0;
         next_publish = std::min(next_publish, state_.t);

@@ -143,6 +143,10 @@ SimParams loadSimParams(const ros::NodeHandle& nh)
   p.publish_rate = number(nh, "publish_rate", p.publish_rate);
   if (p.publish_rate <= 0.0)
     throw ParamError("~publish_rate must be > 0 Hz, got " + core::shortestNumber(p.publish_rate));
+  p.marker_rate = number(nh, "marker_rate", p.marker_rate);
+  if (!(p.marker_rate >= 0.0) || std::isinf(p.marker_rate))
+    throw ParamError("~marker_rate must be >= 0 Hz of wall time (0 = with every publication), got " +
+                     core::shortestNumber(p.marker_rate));
   p.publish_clock = boolean(nh, "publish_clock", p.publish_clock);
   p.frame_id = text(nh, "frame_id", p.frame_id);
   if (p.frame_id.empty())
@@ -181,6 +185,8 @@ std::string SimParams::describe() const
     s << "overrides: " << o.key << " = " << o.value << "\n";
   s << "real_time_factor: " << real_time_factor << (real_time_factor == 0.0 ? " (as fast as possible)" : "") << "\n"
     << "publish_rate: " << publish_rate << " Hz (simulated time)\n"
+    << "marker_rate: " << marker_rate
+    << (marker_rate == 0.0 ? " (markers with every publication)" : " Hz (wall time, at most)") << "\n"
     << "publish_clock: " << (publish_clock ? "true" : "false") << "\n"
     << "frame_id: " << frame_id << "\n"
     << "default_speed: " << default_speed << " m/s\n"

@@ -29,6 +29,7 @@ STRUTS = ["S1", "S2", "S3"]
 CABLES = ["R1", "R2", "R3", "R4", "R5", "R6", "V1", "V2", "V3"]
 RATE = 50.0  # the launch file's publish_rate (real time factor 1)
 PERIOD = 1.0 / RATE  # s of simulated time between publications
+MARKER_RATE = 30.0  # ~marker_rate's default: ~markers at most this often per wall second
 WAIT = 60.0  # s: bound on waiting for something that takes well under a second of wall time
 
 
@@ -51,7 +52,8 @@ class Recorder:
         self.frames = set()
         self.trace = []  # (stamp, position, velocity) of the first actuator
         self.statuses = []  # every ~status message, in order
-        self.marker_times = []  # (stamp in ns, monotonic wall time of arrival) of every ~markers message
+        self.cable_times = []  # (stamp in ns, monotonic wall time of arrival) of every ~cables message
+        self.marker_times = []  # the same of every ~markers message
         self.nonfinite = []
         self.subs = [
             rospy.Subscriber(ns + "/contacts", ContactArray, self.on, "contacts"),
@@ -76,6 +78,7 @@ class Recorder:
                 if not finite(*msg.position, *msg.velocity, *msg.effort):
                     self.nonfinite.append(("actuators", msg))
             elif name == "cables":
+                self.cable_times.append((msg.header.stamp.to_nsec(), time.monotonic()))
                 for c in msg.cables:
                     if not finite(c.length, c.rest_length, c.tension):
                         self.nonfinite.append(("cables", c))
@@ -185,9 +188,10 @@ class TestSimNode(unittest.TestCase):
         self.assertTrue(self.pause(False).success)
         span = 3.0  # s of simulated time
 
-        def after():
+        def after(times=None):
             with self.rec.lock:
-                return [(1e-9 * (ns - resumed_at), arrived) for ns, arrived in self.rec.marker_times
+                return [(1e-9 * (ns - resumed_at), arrived) for ns, arrived in
+                        (self.rec.cable_times if times is None else times)
                         if ns - resumed_at > 0.5e9 * PERIOD]
 
         self.assertTrue(wait_for(lambda: len(after()) > 1 and after()[-1][0] - after()[0][0] >= span, 30 * span))
@@ -211,9 +215,20 @@ class TestSimNode(unittest.TestCase):
         st = self.status()
         self.assertEqual(st.solver_status, "running")
         wall = got[-1][1] - got[0][1]
-        print("[ measured ] ~markers: %.1f per simulated second, %.1f per wall second; real-time factor %.2f "
-              "(~status)" % (per_sim_second, (len(got) - 1) / wall if wall > 0 else float("nan"),
-                             st.real_time_factor))
+        # ~markers: with published states (on the same grid), at most MARKER_RATE per wall second. The node
+        # sends them at least 1 / MARKER_RATE apart, so n of them arrive over at least (n - 1) / MARKER_RATE s
+        # less the first one's transport delay (allowed 1 s here). Sent with every publication they would be
+        # 50 per wall second: 150 over these 3 s against at most 120
+        marks = after(self.rec.marker_times)
+        self.assertGreater(len(marks), 1)
+        for t, _ in marks:
+            self.assertAlmostEqual(t, round(t / PERIOD) * PERIOD, delta=1e-6)
+        marks_wall = marks[-1][1] - marks[0][1]
+        self.assertLessEqual(len(marks) - 1, MARKER_RATE * (marks_wall + 1.0), (len(marks), marks_wall))
+        print("[ measured ] ~cables: %.1f per simulated second, %.1f per wall second; ~markers %.1f per wall "
+              "second; real-time factor %.2f (~status)"
+              % (per_sim_second, (len(got) - 1) / wall if wall > 0 else float("nan"),
+                 (len(marks) - 1) / marks_wall if marks_wall > 0 else float("nan"), st.real_time_factor))
 
     def test_02_actuation_ramps_at_the_set_speed(self):
         self.settle()
@@ -355,6 +370,7 @@ class TestSimNode(unittest.TestCase):
             (["_scene:=/no/such/scene.yaml"], "/no/such/scene.yaml"),
             (["_scene:=package://no_such_package/x.yaml"], "no_such_package"),
             (["_publish_rate:=-5.0"], "~publish_rate must be > 0"),
+            (["_marker_rate:=-1"], "~marker_rate must be >= 0 Hz of wall time (0 = with every publication), got -1"),
             (["_real_time_factor:=fast"], "~real_time_factor must be a number"),
             (["_scene:=package://active_tensegrity/config/scenes/prism.yaml", "_overrides:={solver.dt: -1}"],
              "dt"),

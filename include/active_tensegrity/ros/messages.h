@@ -48,10 +48,11 @@ public:
   MessageBuilder(const core::Model& model, std::string frame_id, MarkerOptions options);
 
   /// All messages for `state` stamped `stamp`. Markers of contacts that ended since the previous
-  /// call are deleted (the builder remembers which arrows it drew). `contacts`: the state's active contacts
-  /// when the caller has them (core::DynamicsSolver::contactsAt), else null and they are searched for here.
+  /// call with markers are deleted (the builder remembers which arrows it drew). `contacts`: the state's active
+  /// contacts when the caller has them (core::DynamicsSolver::contactsAt), else null and they are searched for
+  /// here. With `markers` false the snapshot's markers stay empty (their building is most of a snapshot's cost).
   Snapshot build(const core::State& state, const ros::Time& stamp,
-                 const std::vector<core::ContactPairState>* contacts = nullptr);
+                 const std::vector<core::ContactPairState>* contacts = nullptr, bool markers = true);
   /// Forget the drawn arrows (after a reset) and delete every marker on the next build.
   void clearMarkers();
 

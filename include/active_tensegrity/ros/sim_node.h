@@ -67,8 +67,12 @@ private:
 
   /// Logs and counts a rejected command (mutex held).
   void reject(const std::string& what, const std::string& reason);
-  /// Builds and publishes every topic for `state` (loop thread only).
-  void publishState(const core::State& state, const ros::Time& stamp);
+  /// Builds and publishes every topic for `state` (loop thread only); ~markers only when due (~marker_rate),
+  /// else the state is kept in last_published_ for publishMissedMarkers.
+  void publishState(core::State& state, const ros::Time& stamp);
+  /// The markers of the last published state, when its publication went without them (loop thread only:
+  /// when the simulation stops, so that rviz shows where it stopped).
+  void publishMissedMarkers();
   /// Fills and publishes ~status (mutex held).
   void publishStatus();
   ros::Time stamp(double t) const;
@@ -83,6 +87,11 @@ private:
   std::unique_ptr<core::AdaptiveStepper> stepper_;  // with ~adaptive (a new one at every reset)
   core::ActuationController controller_;
   MessageBuilder builder_;
+  // (loop thread only) when ~markers may go next; the last publication's state when it went without them
+  WallClock::time_point next_markers_ = WallClock::time_point::min();
+  bool markers_missed_ = false;
+  core::State last_published_;
+  ros::Time last_stamp_;
 
   std::mutex mutex_;  // guards everything below that callbacks touch
   core::State state_;

@@ -26,6 +26,7 @@ struct SimParams
   std::vector<core::Override> overrides;  // from ~overrides, applied to the scene
   double real_time_factor = 1.0;          // simulated s per wall s; 0 = as fast as possible
   double publish_rate = 50.0;             // Hz of simulated time
+  double marker_rate = 30.0;              // ~markers at most this often, Hz of wall time (0: every publication)
   bool publish_clock = false;             // /clock from the simulation (stamps in simulated time)
   std::string frame_id = "world";
   double default_speed = 0.0;         // m/s for commands without max_speeds (0: the scene's actuation.speed)
