@@ -144,7 +144,7 @@ SimParams loadSimParams(const ros::NodeHandle& nh)
   if (p.publish_rate <= 0.0)
     throw ParamError("~publish_rate must be > 0 Hz, got " + core::shortestNumber(p.publish_rate));
   p.marker_rate = number(nh, "marker_rate", p.marker_rate);
-  if (!(p.marker_rate >= 0.0) || std::isinf(p.marker_rate))
+  if (!(p.marker_rate >= 0.0))
     throw ParamError("~marker_rate must be >= 0 Hz of wall time (0 = with every publication), got " +
                      core::shortestNumber(p.marker_rate));
   p.publish_clock = boolean(nh, "publish_clock", p.publish_clock);
