@@ -29,7 +29,7 @@ STRUTS = ["S1", "S2", "S3"]
 CABLES = ["R1", "R2", "R3", "R4", "R5", "R6", "V1", "V2", "V3"]
 RATE = 50.0  # the launch file's publish_rate (real time factor 1)
 PERIOD = 1.0 / RATE  # s of simulated time between publications
-MARKER_RATE = 30.0  # ~marker_rate's default: ~markers at most this often per wall second
+MARKER_RATE = 2.0  # the launch file's marker_rate: ~markers at most this often per wall second
 WAIT = 60.0  # s: bound on waiting for something that takes well under a second of wall time
 
 
@@ -218,7 +218,7 @@ class TestSimNode(unittest.TestCase):
         # ~markers: with published states (on the same grid), at most MARKER_RATE per wall second. The node
         # sends them at least 1 / MARKER_RATE apart, so n of them arrive over at least (n - 1) / MARKER_RATE s
         # less the first one's transport delay (allowed 1 s here). Sent with every publication they would be
-        # 50 per wall second: 150 over these 3 s against at most 120
+        # 50 per wall second: 150 over these 3 s against at most 8
         marks = after(self.rec.marker_times)
         self.assertGreater(len(marks), 1)
         for t, _ in marks:
@@ -342,6 +342,15 @@ class TestSimNode(unittest.TestCase):
         self.assertTrue(res.success)
         self.assertTrue(wait_for(lambda: self.status().paused, WAIT))
         t0 = self.status().sim_time
+
+        # rviz shows where the simulation stopped: the last ~markers are of the last published state, also
+        # when its publication went without them (~marker_rate)
+        def stamps():
+            with self.rec.lock:
+                return (self.rec.latest["markers"].markers[0].header.stamp,
+                        self.rec.latest["cables"].header.stamp)
+
+        self.assertTrue(wait_for(lambda: stamps()[0] == stamps()[1], WAIT), stamps())
         time.sleep(0.5)  # no stepping while paused
         self.assertEqual(self.status().sim_time, t0)
         self.assertEqual(self.status().solver_status, "paused")
