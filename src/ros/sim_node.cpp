@@ -501,8 +501,8 @@ void SimNode::publishState(core::State& state, const ros::Time& stamp)
     c.clock = stamp;
     clock_pub_.publish(c);
   }
-  // markers are for rviz, which draws at screen rates: at most marker_rate per wall second (at a real-time
-  // factor of 50 and 100 publications per simulated second they were most of the node's wall time)
+  // markers are for rviz, which draws at screen rates: at most marker_rate per wall second (with every
+  // publication they were about 40 % of the node's publishing time on the tower)
   const WallClock::time_point now = WallClock::now();
   const bool markers = params_.marker_rate <= 0.0 || now >= next_markers_;
   const Snapshot snap = builder_.build(state, stamp, solver_.contactsAt(state), markers);
@@ -521,7 +521,7 @@ void SimNode::publishState(core::State& state, const ros::Time& stamp)
   }
   else
   {
-    std::swap(last_published_, state);  // (the caller's copy: no allocation once both are sized)
+    std::swap(last_published_, state);  // (the caller's copy, not used after this)
     last_stamp_ = stamp;
   }
 }
