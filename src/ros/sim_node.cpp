@@ -20,6 +20,11 @@ double seconds(std::chrono::steady_clock::duration d)
   return std::chrono::duration<double>(d).count();
 }
 
+std::chrono::steady_clock::duration wallSpan(double seconds)
+{
+  return std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(seconds));
+}
+
 /// A JointTrajectory's points as the controller takes them (velocities only when some point has them).
 void trajectoryArrays(const trajectory_msgs::JointTrajectory& msg, std::vector<double>& times,
                       std::vector<std::vector<double>>& positions, std::vector<std::vector<double>>& velocities)
@@ -516,8 +521,7 @@ void SimNode::publishState(core::State& state, const ros::Time& stamp)
   {
     markers_pub_.publish(snap.markers);
     if (params_.marker_rate > 0.0)
-      next_markers_ = now + std::chrono::duration_cast<WallClock::duration>(
-                                std::chrono::duration<double>(1.0 / params_.marker_rate));
+      next_markers_ = now + wallSpan(1.0 / params_.marker_rate);
   }
   else
   {
@@ -656,9 +660,7 @@ void SimNode::run()
         const std::lock_guard<std::mutex> lock(mutex_);
         t_now = state_.t;
       }
-      const WallClock::time_point due =
-          pace_wall + std::chrono::duration_cast<WallClock::duration>(
-                          std::chrono::duration<double>((t_now - pace_sim) / params_.real_time_factor));
+      const WallClock::time_point due = pace_wall + wallSpan((t_now - pace_sim) / params_.real_time_factor);
       if (due > WallClock::now())
         std::this_thread::sleep_until(due);
     }
