@@ -566,7 +566,6 @@ void SimNode::run()
         builder_.clearMarkers();
         clear_markers_ = false;
         markers_missed_ = false;  // (the missed ones are of the state before the reset)
-        next_markers_ = WallClock::time_point::min();
         next_publish = state_.t;
         was_running = false;
       }
