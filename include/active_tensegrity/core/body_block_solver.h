@@ -122,15 +122,19 @@ private:
   std::vector<int> slot_;
   struct BodyBlock
   {
-    int size = 0;     // n_b + the rows it owns
-    int n = 0;        // n_b
-    int k_start = 0;  // K_b in kx_ (column-major size x size), its inverse in kinv_ at the same place (row-major)
-    int rows = 0;     // its rows in rows_ (global indices: the body's columns, then its own constraint rows)
-    int joins = 0;    // number of joining rows it takes part in
-    int j_start = 0;  // their positions (in joining_) in jidx_
-    int g_start = 0;  // G on them (joins x n, row-major) in gx_, Gt (n x joins, column-major) in gtx_
-    int w_start = 0;  // W_b = K_b^-1 [Gt_b; 0] (size x joins, row-major) in wx_
-    int y_start = 0;  // the body's part of the work vector y_
+    // (the matrices a solve multiplies by are stored by columns of whole packs of rows, the padding zero: ld, g_ld)
+    int size = 0;        // n_b + the rows it owns
+    int ld = 0;          // size rounded up to whole packs
+    int n = 0;           // n_b
+    int k_start = 0;     // K_b in kx_ (column-major size x size)
+    int kinv_start = 0;  // its inverse in kinv_ (column-major, ld x size)
+    int rows = 0;        // its rows in rows_ (global indices: the body's columns, then its own constraint rows)
+    int joins = 0;       // number of joining rows it takes part in
+    int g_ld = 0;        // joins rounded up to whole packs
+    int j_start = 0;     // their positions (in joining_) in jidx_
+    int g_start = 0;     // G on them (column-major, g_ld x n) in gx_, Gt (n x joins, column-major) in gtx_
+    int w_start = 0;     // W_b = K_b^-1 [Gt_b; 0] (column-major, ld x joins) in wx_
+    int y_start = 0;     // the body's part of the work vector y_ (ld entries)
   };
   std::vector<BodyBlock> blocks_;
   std::vector<int> rows_;     // global index of each body system's rows
@@ -148,7 +152,6 @@ private:
   std::vector<int> s_slot_;               // (per body, joins x joins column-major, from s_start)
   std::vector<int> s_start_;
   StaticPivotLU s_static_;
-  using RowMajor = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
   mutable Eigen::VectorXd y_, rhs_, xj_, v_, t_;  // work of solve()
 };
 
