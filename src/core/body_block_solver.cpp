@@ -13,14 +13,6 @@ namespace
 {
 /// A body system or Schur complement with a reciprocal condition estimate below this is refused.
 constexpr double kMinRcond = 1e-13;
-enum EntryKind : unsigned char
-{
-  kDropped = 0,
-  kBody = 1,
-  kJoinG = 2,
-  kJoinGt = 3,
-  kConstraintBlock = 4
-};
 /// The products of a solve work on packs of four rows: a matrix is stored by columns of `ld` rows, ld a
 /// multiple of kPack, the rows past its own zero.
 constexpr int kPack = 4;
@@ -86,7 +78,7 @@ BodyBlockSolver::BodyBlockSolver(std::vector<int> body_sizes) : body_sizes_(std:
   std::iota(group_of_body_wanted_.begin(), group_of_body_wanted_.end(), 0);
 }
 
-void BodyBlockSolver::chooseGroups(const Eigen::SparseMatrix<double>& a)
+void BodyBlockSolver::chooseGroups(const Eigen::SparseMatrix<double>& a, bool analyzed_pattern)
 {
   const int nb = static_cast<int>(body_sizes_.size());
   const int nq = static_cast<int>(body_of_column_.size());
@@ -96,26 +88,38 @@ void BodyBlockSolver::chooseGroups(const Eigen::SparseMatrix<double>& a)
     return;
   body_diagonal_.assign(nb, 0.0);
   couplings_.clear();
-  const int* outer = a.outerIndexPtr();
-  const int* inner = a.innerIndexPtr();
   const double* v = a.valuePtr();
-  for (int j = 0; j < nq; ++j)
-    for (int p = outer[j]; p < outer[j + 1]; ++p)
-      if (inner[p] == j)
-        body_diagonal_[body_of_column_[j]] = std::max(body_diagonal_[body_of_column_[j]], std::abs(v[p]));
-  for (int j = 0; j < nq; ++j)
-    for (int p = outer[j]; p < outer[j + 1]; ++p)
-    {
-      const int i = inner[p];
-      if (i >= nq || i >= j)  // (above the diagonal: H's pattern is symmetric, and a coupling's two sides alike)
-        continue;
-      const int bi = body_of_column_[i], bj = body_of_column_[j];
-      if (bi == bj)
-        continue;
-      const double scale = std::min(body_diagonal_[bi], body_diagonal_[bj]);
-      if (scale > 0.0 && std::abs(v[p]) >= kGroupCoupling * scale)
-        couplings_.push_back({ std::abs(v[p]) / scale, { bi, bj } });
-    }
+  const auto couple = [&](int p, int bi, int bj)
+  {
+    const double scale = std::min(body_diagonal_[bi], body_diagonal_[bj]);
+    if (scale > 0.0 && std::abs(v[p]) >= kGroupCoupling * scale)
+      couplings_.push_back({ std::abs(v[p]) / scale, { bi, bj } });
+  };
+  if (analyzed_pattern)  // the entries that matter, read off the pattern once
+  {
+    for (const auto& [p, b] : diagonal_entries_)
+      body_diagonal_[b] = std::max(body_diagonal_[b], std::abs(v[p]));
+    for (const Coupling& c : coupling_entries_)
+      couple(c.p, c.a, c.b);
+  }
+  else
+  {
+    const int* outer = a.outerIndexPtr();
+    const int* inner = a.innerIndexPtr();
+    for (int j = 0; j < nq; ++j)
+      for (int p = outer[j]; p < outer[j + 1]; ++p)
+        if (inner[p] == j)
+          body_diagonal_[body_of_column_[j]] = std::max(body_diagonal_[body_of_column_[j]], std::abs(v[p]));
+    for (int j = 0; j < nq; ++j)
+      for (int p = outer[j]; p < outer[j + 1]; ++p)
+      {
+        const int i = inner[p];
+        if (i >= nq || i >= j)  // (above the diagonal: H's pattern is symmetric, and a coupling's two sides alike)
+          continue;
+        if (body_of_column_[i] != body_of_column_[j])
+          couple(p, body_of_column_[i], body_of_column_[j]);
+      }
+  }
   if (couplings_.empty())
     return;
   // strongest first; a pair already together, or whose groups together would be too large, is left
@@ -155,8 +159,24 @@ bool BodyBlockSolver::analyze(const Eigen::SparseMatrix<double>& a)
   a_outer_.assign(a.outerIndexPtr(), a.outerIndexPtr() + a.cols() + 1);
   a_inner_.assign(a.innerIndexPtr(), a.innerIndexPtr() + a.nonZeros());
   nq_ = std::accumulate(body_sizes_.begin(), body_sizes_.end(), 0);
+  diagonal_entries_.clear();
+  coupling_entries_.clear();
+  body_entries_.clear();
+  g_entries_.clear();
+  gt_entries_.clear();
+  constraint_block_entries_.clear();
   if (body_sizes_.empty() || nq_ > n_ || a.cols() != n_ || !a.isCompressed())  // (the pattern is read from its arrays)
     return false;
+  // what chooseGroups reads: H's diagonal, and its entries above it that couple two bodies (in column order)
+  for (int j = 0; j < nq_; ++j)
+    for (int p = a_outer_[j]; p < a_outer_[j + 1]; ++p)
+    {
+      const int i = a_inner_[p];
+      if (i == j)
+        diagonal_entries_.emplace_back(p, body_of_column_[j]);
+      else if (i < j && body_of_column_[i] != body_of_column_[j])
+        coupling_entries_.push_back({ p, body_of_column_[i], body_of_column_[j] });
+    }
   // the blocks: one per group of bodies (group_of_body_: each body's group named by its smallest body)
   group_of_body_ = group_of_body_wanted_;
   std::vector<int> block_of_group(body_sizes_.size(), -1);
@@ -261,8 +281,6 @@ bool BodyBlockSolver::analyze(const Eigen::SparseMatrix<double>& a)
     const auto first = jidx_.begin() + bb.j_start;
     return static_cast<int>(std::lower_bound(first, first + bb.joins, join_pos[row - nq_]) - first);
   };
-  kind_.assign(a_inner_.size(), kDropped);
-  slot_.assign(a_inner_.size(), -1);
   for (int j = 0; j < n_; ++j)
     for (int p = a_outer_[j]; p < a_outer_[j + 1]; ++p)
     {
@@ -272,31 +290,21 @@ bool BodyBlockSolver::analyze(const Eigen::SparseMatrix<double>& a)
         if (body[i] != body[j])
           continue;
         const BodyBlock& bb = blocks_[body[i]];
-        kind_[p] = kBody;
-        slot_[p] = bb.k_start + local[j] * bb.size + local[i];
+        body_entries_.push_back({ p, bb.k_start + local[j] * bb.size + local[i] });
       }
       else if (i >= nq_ && j >= nq_)
-        kind_[p] = kConstraintBlock;
+        constraint_block_entries_.push_back(p);
       else
       {
         const int b = j < nq_ ? body[j] : body[i];
         const int row = j < nq_ ? i : j;  // the constraint row
         const BodyBlock& bb = blocks_[b];
         if (join_pos[row - nq_] < 0)
-        {
-          kind_[p] = kBody;
-          slot_[p] = bb.k_start + local[j] * bb.size + local[i];
-        }
+          body_entries_.push_back({ p, bb.k_start + local[j] * bb.size + local[i] });
         else if (j < nq_)  // G: g_ld x n, column-major
-        {
-          kind_[p] = kJoinG;
-          slot_[p] = bb.g_start + local[j] * bb.g_ld + joinLocal(b, row);
-        }
+          g_entries_.push_back({ p, bb.g_start + local[j] * bb.g_ld + joinLocal(b, row) });
         else  // Gt: n x joins, column-major
-        {
-          kind_[p] = kJoinGt;
-          slot_[p] = bb.g_start + joinLocal(b, row) * bb.n + local[i];
-        }
+          gt_entries_.push_back({ p, bb.g_start + joinLocal(b, row) * bb.n + local[i] });
       }
     }
   kx_.setZero(k_size);
@@ -352,8 +360,9 @@ bool BodyBlockSolver::analyze(const Eigen::SparseMatrix<double>& a)
 
 bool BodyBlockSolver::factorize(const Eigen::SparseMatrix<double>& a)
 {
-  chooseGroups(a);
-  if ((!samePattern(a) || group_of_body_wanted_ != group_of_body_) && !analyze(a))
+  const bool same = samePattern(a);
+  chooseGroups(a, same);
+  if ((!same || group_of_body_wanted_ != group_of_body_) && !analyze(a))
     return false;
   if (!usable_)
     return false;
@@ -361,25 +370,15 @@ bool BodyBlockSolver::factorize(const Eigen::SparseMatrix<double>& a)
   gx_.setZero();
   gtx_.setZero();
   const double* v = a.valuePtr();
-  for (size_t p = 0; p < kind_.size(); ++p)
-    switch (kind_[p])
-    {
-      case kBody:
-        kx_[slot_[p]] += v[p];
-        break;
-      case kJoinG:
-        gx_[slot_[p]] += v[p];
-        break;
-      case kJoinGt:
-        gtx_[slot_[p]] += v[p];
-        break;
-      case kConstraintBlock:
-        if (v[p] != 0.0)
-          return false;
-        break;
-      default:
-        break;
-    }
+  for (int p : constraint_block_entries_)
+    if (v[p] != 0.0)
+      return false;
+  for (const Entry& e : body_entries_)
+    kx_[e.slot] += v[e.p];
+  for (const Entry& e : g_entries_)
+    gx_[e.slot] += v[e.p];
+  for (const Entry& e : gt_entries_)
+    gtx_[e.slot] += v[e.p];
   s_.setZero();
   double* s_values = s_sparse_.valuePtr();
   if (sparse_schur_)
@@ -433,6 +432,7 @@ bool BodyBlockSolver::factorize(const Eigen::SparseMatrix<double>& a)
     const auto pivots = s_lu_.matrixLU().diagonal().cwiseAbs();
     if (!(pivots.minCoeff() > 1e-8 * pivots.maxCoeff()) && !(s_lu_.rcond() > kMinRcond))
       return false;
+    s_pivot_inverse_ = s_lu_.matrixLU().diagonal().cwiseInverse();
   }
   return true;
 }
@@ -465,8 +465,8 @@ void BodyBlockSolver::solve(const Eigen::VectorXd& b, Eigen::VectorXd& x) const
   else if (nj > 0)
   {
     // x_J = S^-1 rhs through S's LU factors (column-major): P, then each triangle column by column, a
-    // vectorized update of the rows below (above) per column (Eigen's solve for a vector went through its
-    // blocked kernels, about three times as long at the tower's 36 rows)
+    // vectorized update of the rows below (above) per column, U's pivots inverted once (Eigen's solve for a
+    // vector went through its blocked kernels, about three times as long at the tower's 36 rows)
     const Eigen::MatrixXd& lu = s_lu_.matrixLU();
     const auto& perm = s_lu_.permutationP().indices();
     for (int k = 0; k < nj; ++k)
@@ -475,7 +475,7 @@ void BodyBlockSolver::solve(const Eigen::VectorXd& b, Eigen::VectorXd& x) const
       xj_.segment(j + 1, nj - j - 1) -= xj_(j) * lu.col(j).segment(j + 1, nj - j - 1);
     for (int j = nj - 1; j >= 0; --j)
     {
-      xj_(j) /= lu(j, j);
+      xj_(j) *= s_pivot_inverse_(j);
       xj_.head(j) -= xj_(j) * lu.col(j).head(j);
     }
   }

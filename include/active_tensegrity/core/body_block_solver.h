@@ -101,7 +101,8 @@ private:
   bool analyze(const Eigen::SparseMatrix<double>& a);
   bool samePattern(const Eigen::SparseMatrix<double>& a) const;
   /// The groups `a`'s values ask for (group_of_body_wanted_): strongly coupled bodies joined, strongest first.
-  void chooseGroups(const Eigen::SparseMatrix<double>& a);
+  /// analyzed_pattern: `a` has the analyzed pattern, whose entries that matter here are listed.
+  void chooseGroups(const Eigen::SparseMatrix<double>& a, bool analyzed_pattern);
 
   std::vector<int> body_sizes_;
   std::vector<int> body_of_column_;
@@ -115,11 +116,26 @@ private:
   int analyses_ = 0;
   bool usable_ = false;                 // the analyzed pattern can be solved this way
   std::vector<int> a_outer_, a_inner_;  // the analyzed pattern
-  // where each stored entry of A goes: (kind, slot) with kind 0 dropped, 1 a body system's entry (slot into
-  // kx_), 2 an entry of G on a joining row (slot into gx_), 3 an entry of Gt on one (slot into gtx_),
-  // 4 an entry between constraint rows (must be zero)
-  std::vector<unsigned char> kind_;
-  std::vector<int> slot_;
+  // where the stored entries of A go (position in A's values, slot): a body system's entries (into kx_), G's on
+  // the joining rows (into gx_), Gt's on them (into gtx_); the entries between constraint rows (must be zero);
+  // every other entry (a coupling between bodies) is dropped
+  struct Entry
+  {
+    int p = 0;
+    int slot = 0;
+  };
+  std::vector<Entry> body_entries_, g_entries_, gt_entries_;
+  std::vector<int> constraint_block_entries_;
+  // what chooseGroups reads in the analyzed pattern: H's diagonal entries (position, body) and those above
+  // it that couple two bodies
+  struct Coupling
+  {
+    int p = 0;
+    int a = 0;
+    int b = 0;
+  };
+  std::vector<std::pair<int, int>> diagonal_entries_;
+  std::vector<Coupling> coupling_entries_;
   struct BodyBlock
   {
     // (the matrices a solve multiplies by are stored by columns of whole packs of rows, the padding zero: ld, g_ld)
@@ -147,6 +163,7 @@ private:
                                                                // once each size was factorized)
   Eigen::MatrixXd s_;                                          // dense S
   Eigen::PartialPivLU<Eigen::MatrixXd> s_lu_;
+  Eigen::VectorXd s_pivot_inverse_;  // 1 / U's diagonal of s_lu_
   bool sparse_schur_ = false;
   Eigen::SparseMatrix<double> s_sparse_;  // sparse S, and where each body's G_b W_b goes in its values
   std::vector<int> s_slot_;               // (per body, joins x joins column-major, from s_start)
