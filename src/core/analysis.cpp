@@ -54,6 +54,7 @@ double maxStrutBendingStress(const Model& model, const Eigen::VectorXd& q, const
   struct Load
   {
     int body;
+    int order;  // its place in the contact list (the sort keeps it within a strut)
     double s;
     Vec3 f;
   };
@@ -71,10 +72,12 @@ double maxStrutBendingStress(const Model& model, const Eigen::VectorXd& q, const
       const Vec3 axis = bodyZAxis(q.segment<4>(b.offset + 3));
       const double s = std::clamp(axis.dot(points[k] - q.segment<3>(b.offset)) + 0.5 * b.length, 0.0, b.length);
       const Vec3 f = k == 0 ? c.force_on_a : Vec3(-c.force_on_a);
-      loads.push_back({ bodies[k], s, f - axis * axis.dot(f) });
+      loads.push_back({ bodies[k], static_cast<int>(loads.size()), s, f - axis * axis.dot(f) });
     }
   }
-  std::stable_sort(loads.begin(), loads.end(), [](const Load& x, const Load& y) { return x.body < y.body; });
+  // (std::stable_sort took a heap buffer at every call)
+  std::sort(loads.begin(), loads.end(),
+            [](const Load& x, const Load& y) { return x.body < y.body || (x.body == y.body && x.order < y.order); });
   double sigma = 0.0;
   for (size_t first = 0, last = 0; first < loads.size(); first = last)
   {

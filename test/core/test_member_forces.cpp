@@ -1,6 +1,6 @@
 // Member forces (analysis.h: strutAxialForces, memberColumns, memberRow): the quadruplex's strut force of
 // Table 1, the tower's struts through their ball joints in static equilibrium (both ends agree), a
-// form-found prism at rest in a dynamic run.
+// form-found prism at rest in a dynamic run; the struts' bending stress under contact loads (maxStrutBendingStress).
 #include <cmath>
 #include <string>
 #include <vector>
@@ -119,4 +119,47 @@ TEST(MemberForces, FormFoundPrismAtRest)
     EXPECT_NEAR(forces[k], form.members[k].tension, 1e-6 * std::abs(form.members[k].tension)) << k;
     EXPECT_LT(std::abs(imbalance[k]), 1e-6 * std::abs(forces[k])) << k;
   }
+}
+
+// maxStrutBendingStress: each strut a simply supported beam under the contact forces across its axis, the
+// stress M / (pi r^3 / 4) at the largest moment. One load P at a from the lower end: M = P a (L - a) / L (the
+// axial part of the force bends nothing); two equal loads at a and L - a (four-point bending): M = P a between
+// them, in either order of the contact list; a load on the ground's side is not a strut's.
+TEST(MemberForces, StrutBendingIsThatOfASimplySupportedBeam)
+{
+  const at::Model model = at::loadScene(scene("quadruplex.yaml"));
+  const at::State s = at::initialState(model);
+  ASSERT_EQ(model.bodies[0].kind, at::BodyKind::kStrut);
+  const at::Body& b = model.bodies[0];
+  const double length = b.length, r = b.layers.front().outer_radius;
+  const at::Vec3 centre = s.q.segment<3>(b.offset);
+  const at::Vec3 axis = at::bodyZAxis(s.q.segment<4>(b.offset + 3));
+  const at::Vec3 across = axis.unitOrthogonal();
+  const auto load = [&](double x, double p, double axial)
+  {
+    at::ContactPairState c;
+    c.body_a = 0;
+    c.body_b = -1;  // the ground: only strut 0 is loaded
+    c.active = true;
+    c.point_a = centre + (x - 0.5 * length) * axis;
+    c.force_on_a = p * across + axial * axis;
+    return c;
+  };
+  const double section = M_PI * r * r * r / 4.0;
+  const double one = at::maxStrutBendingStress(model, s.q, { load(0.3 * length, 100.0, 50.0) });
+  const double expected_one = 100.0 * 0.3 * length * 0.7 * length / length / section;
+  EXPECT_NEAR(one, expected_one, 1e-9 * expected_one);
+  const double expected_four = 100.0 * 0.2 * length / section;
+  const double forward =
+      at::maxStrutBendingStress(model, s.q, { load(0.2 * length, 100.0, 0.0), load(0.8 * length, 100.0, 0.0) });
+  const double backward =
+      at::maxStrutBendingStress(model, s.q, { load(0.8 * length, 100.0, 0.0), load(0.2 * length, 100.0, 0.0) });
+  EXPECT_NEAR(forward, expected_four, 1e-9 * expected_four);
+  EXPECT_NEAR(backward, expected_four, 1e-9 * expected_four);
+  // opposite loads at a and L - a: the moment changes sign at mid-span, M = P a (L - 2a) / L at the loads
+  const double opposite =
+      at::maxStrutBendingStress(model, s.q, { load(0.2 * length, 100.0, 0.0), load(0.8 * length, -100.0, 0.0) });
+  const double expected_opposite = 100.0 * 0.2 * length * 0.6 * length / length / section;
+  EXPECT_NEAR(opposite, expected_opposite, 1e-9 * expected_opposite);
+  EXPECT_EQ(at::maxStrutBendingStress(model, s.q, {}), 0.0);
 }
