@@ -226,6 +226,21 @@ using Mat4x7 = Eigen::Matrix<double, 4, 7>;
 using Mat7 = Eigen::Matrix<double, 7, 7>;
 using Vec7 = Eigen::Matrix<double, 7, 1>;
 
+/// A ground contact's point and state without forces, with the penetration rate.
+ContactPairState groundMotion(const Model& model, int slot, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                              bool tangents, PointKinematics& k)
+{
+  const GroundContact& g = groundContact(model, slot);
+  // the point's Jacobians only for the tangents; a force or a state needs its position and velocity alone
+  if (tangents)
+    pointKinematics(model, PointRef{ g.body, g.local }, q, qd, true, k);
+  else
+    pointMotion(model, PointRef{ g.body, g.local }, q, qd, k.p, k.v);
+  ContactPairState st = groundGeometry(model, slot, k.p);
+  st.penetration_rate = -k.v.z();
+  return st;
+}
+
 // A sphere (centre c = R + A(Theta) u, radius r) on the plane z = h: zeta = h + r - c_z, n = z. The normal
 // force acts along z through c; friction acts at the lowest point PA as a material point,
 // u_A = u - r A^T z (moving over the body as it turns), against the slip v_T = P (R_dot + B(Theta, u_A)
@@ -241,13 +256,8 @@ ContactPairState evaluateGroundContact(const Model& model, int slot, const Eigen
   const bool strut = body.kind == BodyKind::kStrut;
   const bool dynamic = mode == ContactMode::kDynamic;
   const bool tangents = out && out->tangents;
-  // the point's Jacobians only for the tangents; a force or a state needs its position and velocity alone
   PointKinematics k;
-  if (tangents)
-    pointKinematics(model, PointRef{ g.body, g.local }, q, qd, true, k);
-  else
-    pointMotion(model, PointRef{ g.body, g.local }, q, qd, k.p, k.v);
-  ContactPairState st = groundGeometry(model, slot, k.p);
+  ContactPairState st = groundMotion(model, slot, q, qd, tangents, k);
   if (out)
   {
     out->force.setZero();
@@ -257,7 +267,6 @@ ContactPairState evaluateGroundContact(const Model& model, int slot, const Eigen
       out->damping.setZero();
     }
   }
-  st.penetration_rate = -k.v.z();
   if (!st.active)
     return st;
   const double zeta = st.penetration;
@@ -490,6 +499,42 @@ ContactPairState contactGeometry(const Model& model, int pair, const Eigen::Vect
   return st;
 }
 
+namespace
+{
+/// A strut pair's axes, closest points and state without forces, with the penetration rate (the velocities of the
+/// axis points at fixed s; also outside contact: the dynamics solver takes the impact speed from it).
+struct PairMotion
+{
+  StrutAxis a, b;
+  Closest c;
+  ContactPairState st;
+};
+
+PairMotion pairMotion(const Model& model, int pair, const Eigen::VectorXd& q, const Eigen::VectorXd& qd, bool tangents)
+{
+  const StrutPair& p = model.checked_pairs[pair];
+  PairMotion m;
+  m.a = strutAxis(model.bodies[p.body_a], q, &qd, tangents);
+  m.b = strutAxis(model.bodies[p.body_b], q, &qd, tangents);
+  m.c = closest(m.a, m.b);
+  m.st = baseState(pair, m.c, m.a, m.b);
+  m.st.body_a = p.body_a;
+  m.st.body_b = p.body_b;
+  const Vec3 v1 = m.a.centre_rate + m.c.s1 * m.a.axis_rate;
+  const Vec3 v2 = m.b.centre_rate + m.c.s2 * m.b.axis_rate;
+  m.st.penetration_rate = -m.c.n.dot(v1 - v2);
+  return m;
+}
+
+}  // namespace
+
+ContactPairState contactMotion(const Model& model, int pair, const Eigen::VectorXd& q, const Eigen::VectorXd& qd)
+{
+  PointKinematics k;
+  return model.isGroundSlot(pair) ? groundMotion(model, pair, q, qd, false, k) :
+                                    pairMotion(model, pair, q, qd, false).st;
+}
+
 ContactPairState evaluateContact(const Model& model, int pair, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
                                  double impact_speed, ContactMode mode, ContactContribution* out)
 {
@@ -499,12 +544,11 @@ ContactPairState evaluateContact(const Model& model, int pair, const Eigen::Vect
   const ContactSettings& set = model.contact;
   const bool dynamic = mode == ContactMode::kDynamic;
   const bool tangents = out && out->tangents;
-  const StrutAxis a = strutAxis(model.bodies[p.body_a], q, &qd, tangents);
-  const StrutAxis b = strutAxis(model.bodies[p.body_b], q, &qd, tangents);
-  const Closest c = closest(a, b);
-  ContactPairState st = baseState(pair, c, a, b);
-  st.body_a = p.body_a;
-  st.body_b = p.body_b;
+  PairMotion motion = pairMotion(model, pair, q, qd, tangents);
+  const StrutAxis& a = motion.a;
+  const StrutAxis& b = motion.b;
+  const Closest& c = motion.c;
+  ContactPairState& st = motion.st;
   if (out)
   {
     out->force.setZero();
@@ -514,17 +558,11 @@ ContactPairState evaluateContact(const Model& model, int pair, const Eigen::Vect
       out->damping.setZero();
     }
   }
-
-  // velocities of the axis points at fixed s, and the penetration rate (also outside contact: the
-  // dynamics solver takes the impact speed from it)
-  const Vec3& axis_rate1 = a.axis_rate;
-  const Vec3& axis_rate2 = b.axis_rate;
-  const Vec3 v1 = a.centre_rate + c.s1 * axis_rate1;
-  const Vec3 v2 = b.centre_rate + c.s2 * axis_rate2;
-  const Vec3 dv = v1 - v2;
-  st.penetration_rate = -c.n.dot(dv);
   if (!st.active)
     return st;
+  const Vec3& axis_rate1 = a.axis_rate;
+  const Vec3& axis_rate2 = b.axis_rate;
+  const Vec3 dv = (a.centre_rate + c.s1 * axis_rate1) - (b.centre_rate + c.s2 * axis_rate2);
 
   // the forces: stiffness from the crossing angle, then Lankarani-Nikravesh (dynamics) or Hertz
   // (statics), or the linear spring-dashpot; never pulling

@@ -169,7 +169,28 @@ bool DynamicsSolver::atEnd(const State& s) const
 
 const std::vector<ContactPairState>* DynamicsSolver::contactsAt(const State& state) const
 {
-  return atEnd(state) ? &end_contacts_ : nullptr;
+  if (!atEnd(state))
+    return nullptr;
+  if (!end_contacts_ready_)
+  {
+    // the touching end slots with their forces, at the impact speeds the memory keeps (asked for by a consumer:
+    // the step's own end evaluation needs their motion only)
+    end_contacts_.clear();
+    for (size_t k = 0; k < end_slots_.size(); ++k)
+    {
+      const int i = end_slots_[k];
+      if (!(end_gap_[i] < 0.0))
+        continue;
+      const ContactPairState st =
+          evaluateContact(system_.model(), i, end_q_, end_qd_, end_speed_[k], ContactMode::kDynamic, nullptr);
+      if (st.active)
+        end_contacts_.push_back(st);
+    }
+    std::sort(end_contacts_.begin(), end_contacts_.end(),
+              [](const ContactPairState& a, const ContactPairState& b) { return a.pair < b.pair; });
+    end_contacts_ready_ = true;
+  }
+  return &end_contacts_;
 }
 
 void DynamicsSolver::updateContactMemory(State& s, const Eigen::VectorXd& q_start)
@@ -205,23 +226,24 @@ void DynamicsSolver::updateContactMemory(State& s, const Eigen::VectorXd& q_star
   }
   end_slots_.clear();
   end_memory_.clear();
+  end_speed_.clear();
   end_contacts_.clear();
+  end_contacts_ready_ = false;
   end_q_ = s.q;
   end_qd_ = s.qd;
   end_valid_ = true;
   if (!model.anyContact())
     return;
-  // every slot touching at the step's end is near (attempt() checks the motion); each is evaluated with the
-  // step's impact speed, which is the one its memory keeps
+  // every slot touching at the step's end is near (attempt() checks the motion): its gap and approach rate there;
+  // its forces, with the step's impact speed (the one its memory keeps), only when contactsAt asks
   for (size_t k = 0; k < near_.size(); ++k)
   {
     const int i = near_[k];
-    const ContactPairState st = evaluateContact(model, i, s.q, s.qd, step_speeds_[i], ContactMode::kDynamic, nullptr);
+    const ContactPairState st = contactMotion(model, i, s.q, s.qd);
     end_rate_[i] = st.penetration_rate;
     end_gap_[i] = st.gap;
     end_slots_.push_back(i);
-    if (st.active)
-      end_contacts_.push_back(st);
+    end_speed_.push_back(step_speeds_[i]);
     const double gap = st.gap;
     end_memory_.push_back(gap < 0.0 ? step_speeds_[i] : 0.0);
     if (gap >= 0.0)
@@ -238,8 +260,6 @@ void DynamicsSolver::updateContactMemory(State& s, const Eigen::VectorXd& q_star
       estimate_.onset_pair = i;
     }
   }
-  std::sort(end_contacts_.begin(), end_contacts_.end(),
-            [](const ContactPairState& a, const ContactPairState& b) { return a.pair < b.pair; });
 }
 
 double DynamicsSolver::errorEstimate(const Eigen::VectorXd& a0, const Eigen::VectorXd& a1, double h) const

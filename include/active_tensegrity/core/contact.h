@@ -108,6 +108,10 @@ struct ContactContribution
 /// Geometry of a contact slot at q alone (narrow phase, no forces): gap, closest points, normal.
 ContactPairState contactGeometry(const Model& model, int pair, const Eigen::VectorXd& q);
 
+/// Geometry of a contact slot at q and its penetration rate at qd, no forces: evaluateContact's state before its
+/// force law (gap, penetration, closest points, normal, bodies, penetration_rate).
+ContactPairState contactMotion(const Model& model, int pair, const Eigen::VectorXd& q, const Eigen::VectorXd& qd);
+
 /// Evaluates contact slot `pair` (a strut pair or a ground contact) at (q, qd) with impact speed v_0 (m/s,
 /// used in dynamics only). Fills `out` (when not null) with its force and exact tangents; returns its state.
 ContactPairState evaluateContact(const Model& model, int pair, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,

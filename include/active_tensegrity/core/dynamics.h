@@ -66,8 +66,10 @@ public:
 
   /// The active contacts of `state` (as activeContacts(model, state) gives them, ordered by contact slot)
   /// when it is the state the last accepted step ended in, evaluated with that step's contact memory; else
-  /// null. Every step evaluates them at its end (the step after it starts from their approach rates), so
-  /// per-step consumers (peaks, messages) need no contact pass of their own.
+  /// null. Every step evaluates its end's near slots (gaps and approach rates: the step after it starts from
+  /// them); the first call at that end adds the touching ones' forces, so per-step consumers (peaks, messages)
+  /// need no contact pass of their own and a step no one asks about pays for no forces. (Not thread-safe: call
+  /// it from the thread that steps.)
   const std::vector<ContactPairState>* contactsAt(const State& state) const;
 
   const StepTimings& timings() const
@@ -156,16 +158,19 @@ private:
   bool start_at_end_ = false;          // the step being solved starts where the last accepted one ended (atEnd)
   std::vector<double> near_previous_;  // contact memory at the start of the step being accepted, per near_ slot
   // the near slots evaluated where the last accepted step ended (end_q_, end_qd_; end_slots_ with their
-  // contact memory end_memory_, every other slot apart there): their approach rates and gaps (per slot, NaN:
-  // not evaluated) for the next step's impact speeds and near slots, and the active contacts (no copy of the
-  // whole memory: a lattice of 2000 struts has 2 million slots)
+  // contact memory end_memory_, every other slot apart there, and the step's impact speeds end_speed_): their
+  // approach rates and gaps (per slot, NaN: not evaluated) for the next step's impact speeds and near slots, and
+  // the active contacts with their forces, formed when contactsAt first asks (no copy of the whole memory: a
+  // lattice of 2000 struts has 2 million slots)
   bool end_valid_ = false;
   Eigen::VectorXd end_q_, end_qd_;
   std::vector<int> end_slots_;
   std::vector<double> end_memory_;
+  std::vector<double> end_speed_;
   std::vector<double> end_rate_;
   std::vector<double> end_gap_;
-  std::vector<ContactPairState> end_contacts_;
+  mutable std::vector<ContactPairState> end_contacts_;
+  mutable bool end_contacts_ready_ = false;
   /// Whether `s` is the state the last accepted step ended in (end_*).
   bool atEnd(const State& s) const;
   StepTimings timings_;
