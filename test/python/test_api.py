@@ -309,10 +309,11 @@ def test_find_form_equals_tensegrity_formfind_and_the_closed_form():
             theirs = f.read()
         ours = at.find_form(start, tension={"rings": 80.0})
     assert ours["scene"] == theirs
-    # the class-1 prism's twist, 90 + 180 / n degrees (here turned the other way), between B1 and T1
+    # the class-1 prism's twist, 90 + 180 / n degrees (here turned the other way), between B1 and T1, to the
+    # 1e-6 rad that test_form_finding asks of the core (an AVX2 build ends 2.8e-8 rad off, an AVX-512 one closer)
     p = dict(zip(ours["node_names"], ours["positions"]))
     twist = math.degrees(math.atan2(p["T1"][1], p["T1"][0]) - math.atan2(p["B1"][1], p["B1"][0]))
-    assert (twist + 360.0) % 360.0 == pytest.approx(360.0 - (90.0 + 180.0 / 7), abs=1e-6)
+    assert (twist + 360.0) % 360.0 == pytest.approx(360.0 - (90.0 + 180.0 / 7), abs=math.degrees(1e-6))
     rings = [m for m in ours["members"] if m["family"] == "rings"]
     assert len(rings) == 14 and all(m["tension"] == pytest.approx(80.0) for m in rings)
     assert all(m["tension"] < 0 for m in ours["members"] if m["strut"])
