@@ -507,6 +507,7 @@ struct PairMotion
 {
   StrutAxis a, b;
   Closest c;
+  Vec3 dv;  // velocity of a's closest axis point relative to b's
   ContactPairState st;
 };
 
@@ -520,9 +521,8 @@ PairMotion pairMotion(const Model& model, int pair, const Eigen::VectorXd& q, co
   m.st = baseState(pair, m.c, m.a, m.b);
   m.st.body_a = p.body_a;
   m.st.body_b = p.body_b;
-  const Vec3 v1 = m.a.centre_rate + m.c.s1 * m.a.axis_rate;
-  const Vec3 v2 = m.b.centre_rate + m.c.s2 * m.b.axis_rate;
-  m.st.penetration_rate = -m.c.n.dot(v1 - v2);
+  m.dv = (m.a.centre_rate + m.c.s1 * m.a.axis_rate) - (m.b.centre_rate + m.c.s2 * m.b.axis_rate);
+  m.st.penetration_rate = -m.c.n.dot(m.dv);
   return m;
 }
 
@@ -562,7 +562,7 @@ ContactPairState evaluateContact(const Model& model, int pair, const Eigen::Vect
     return st;
   const Vec3& axis_rate1 = a.axis_rate;
   const Vec3& axis_rate2 = b.axis_rate;
-  const Vec3 dv = (a.centre_rate + c.s1 * axis_rate1) - (b.centre_rate + c.s2 * axis_rate2);
+  const Vec3& dv = motion.dv;
 
   // the forces: stiffness from the crossing angle, then Lankarani-Nikravesh (dynamics) or Hertz
   // (statics), or the linear spring-dashpot; never pulling

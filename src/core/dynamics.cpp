@@ -173,8 +173,8 @@ const std::vector<ContactPairState>* DynamicsSolver::contactsAt(const State& sta
     return nullptr;
   if (!end_contacts_ready_)
   {
-    // the touching end slots with their forces, at the impact speeds the memory keeps (asked for by a consumer:
-    // the step's own end evaluation needs their motion only)
+    // the touching end slots with their forces, at the impact speeds their memory keeps (the step's own, which
+    // end_memory_ holds for the touching slots; asked for by a consumer: the step's end needs their motion only)
     end_contacts_.clear();
     for (size_t k = 0; k < end_slots_.size(); ++k)
     {
@@ -182,7 +182,7 @@ const std::vector<ContactPairState>* DynamicsSolver::contactsAt(const State& sta
       if (!(end_gap_[i] < 0.0))
         continue;
       const ContactPairState st =
-          evaluateContact(system_.model(), i, end_q_, end_qd_, end_speed_[k], ContactMode::kDynamic, nullptr);
+          evaluateContact(system_.model(), i, end_q_, end_qd_, end_memory_[k], ContactMode::kDynamic, nullptr);
       if (st.active)
         end_contacts_.push_back(st);
     }
@@ -226,7 +226,6 @@ void DynamicsSolver::updateContactMemory(State& s, const Eigen::VectorXd& q_star
   }
   end_slots_.clear();
   end_memory_.clear();
-  end_speed_.clear();
   end_contacts_.clear();
   end_contacts_ready_ = false;
   end_q_ = s.q;
@@ -243,7 +242,6 @@ void DynamicsSolver::updateContactMemory(State& s, const Eigen::VectorXd& q_star
     end_rate_[i] = st.penetration_rate;
     end_gap_[i] = st.gap;
     end_slots_.push_back(i);
-    end_speed_.push_back(step_speeds_[i]);
     const double gap = st.gap;
     end_memory_.push_back(gap < 0.0 ? step_speeds_[i] : 0.0);
     if (gap >= 0.0)

@@ -158,7 +158,7 @@ private:
   bool start_at_end_ = false;          // the step being solved starts where the last accepted one ended (atEnd)
   std::vector<double> near_previous_;  // contact memory at the start of the step being accepted, per near_ slot
   // the near slots evaluated where the last accepted step ended (end_q_, end_qd_; end_slots_ with their
-  // contact memory end_memory_, every other slot apart there, and the step's impact speeds end_speed_): their
+  // contact memory end_memory_ (the step's impact speed where touching, else 0), every other slot apart there): their
   // approach rates and gaps (per slot, NaN: not evaluated) for the next step's impact speeds and near slots, and
   // the active contacts with their forces, formed when contactsAt first asks (no copy of the whole memory: a
   // lattice of 2000 struts has 2 million slots)
@@ -166,7 +166,6 @@ private:
   Eigen::VectorXd end_q_, end_qd_;
   std::vector<int> end_slots_;
   std::vector<double> end_memory_;
-  std::vector<double> end_speed_;
   std::vector<double> end_rate_;
   std::vector<double> end_gap_;
   mutable std::vector<ContactPairState> end_contacts_;
