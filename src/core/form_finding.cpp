@@ -6,7 +6,6 @@
 #include <set>
 
 #include <Eigen/Dense>
-#include <Eigen/SVD>
 #include <yaml-cpp/yaml.h>
 
 #include "active_tensegrity/core/analysis.h"
@@ -15,6 +14,7 @@
 #include "active_tensegrity/core/state.h"
 #include "active_tensegrity/core/statics.h"
 #include "active_tensegrity/core/structure_check.h"
+#include "active_tensegrity/core/svd.h"
 #include "active_tensegrity/core/text.h"
 
 namespace active_tensegrity::core
@@ -477,8 +477,8 @@ Eigen::VectorXd fitSelfStress(const FormTopology& t, const Held& held, bool supp
   const std::vector<int> rows = equilibriumRows(t, supports_react, n_rows);
   const Eigen::MatrixXd a = equilibriumMatrix(t, t.positions, rows, n_rows);
   const Eigen::Index m = a.cols();
-  Eigen::BDCSVD<Eigen::MatrixXd> svd(a, Eigen::ComputeFullV);
-  const Eigen::VectorXd& sv = svd.singularValues();
+  const Svd d = svd(a, Eigen::ComputeFullV);
+  const Eigen::VectorXd& sv = d.singular;
   const double largest = sv.size() ? sv[0] : 0.0;
   Eigen::Index rank = 0;
   while (rank < sv.size() && sv[rank] > kRankTolerance * largest)
@@ -488,7 +488,7 @@ Eigen::VectorXd fitSelfStress(const FormTopology& t, const Held& held, bool supp
     throw FormFindingError("the geometry has no state of self-stress (" + std::to_string(m) + " members, rank " +
                            std::to_string(rank) +
                            " of the equilibrium matrix): it is no tensegrity form; find one with --mode free");
-  const Eigen::MatrixXd s = svd.matrixV().rightCols(states);
+  const Eigen::MatrixXd s = d.v.rightCols(states);
   std::vector<Eigen::Index> target_rows;
   std::vector<double> targets;
   for (const auto& [f, kv] : held)

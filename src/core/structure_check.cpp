@@ -6,7 +6,6 @@
 #include <stdexcept>
 
 #include <Eigen/Dense>
-#include <Eigen/SVD>
 #include <Eigen/SparseCholesky>
 
 #include "active_tensegrity/core/analysis.h"
@@ -15,6 +14,7 @@
 #include "active_tensegrity/core/kinematics.h"
 #include "active_tensegrity/core/mechanics.h"
 #include "active_tensegrity/core/statics.h"
+#include "active_tensegrity/core/svd.h"
 #include "active_tensegrity/core/text.h"
 
 namespace active_tensegrity::core
@@ -289,11 +289,11 @@ ReducedStructure reduce(const Model& model, const State& state, const System& sy
   double sigma_max = 0.0;
   if (members > 0 && f > 0)
   {
-    Eigen::BDCSVD<Eigen::MatrixXd> svd(out.compatibility, Eigen::ComputeFullV);
-    const Eigen::VectorXd& sv = svd.singularValues();
+    const Svd d = svd(out.compatibility, Eigen::ComputeFullV);
+    const Eigen::VectorXd& sv = d.singular;
     sigma_max = sv(0);
     out.rank = static_cast<int>((sv.array() > kRankTolerance * sigma_max).count());
-    motions = svd.matrixV().rightCols(f - out.rank);
+    motions = d.v.rightCols(f - out.rank);
   }
 
   // rigid motions of the whole structure (about the centroid of its moving points), then those the
@@ -317,20 +317,19 @@ ReducedStructure reduce(const Model& model, const State& state, const System& sy
         w.block<3, 3>(3 * i, 0).setIdentity();
         w.block<3, 3>(3 * i, 3) = -skew(pointPosition(model, points[i], q) - centre);
       }
-    Eigen::JacobiSVD<Eigen::MatrixXd> fields(w, Eigen::ComputeThinU);
-    const int k =
-        static_cast<int>((fields.singularValues().array() > kRankTolerance * fields.singularValues()(0)).count());
-    Eigen::JacobiSVD<Eigen::MatrixXd> angles(pn.transpose() * fields.matrixU().leftCols(k), Eigen::ComputeThinU);
-    const int allowed = static_cast<int>((angles.singularValues().array() > 1.0 - 1e-8).count());
-    const Eigen::MatrixXd z0 = angles.matrixU().leftCols(allowed);
+    const Svd fields = jacobiSvd(w, Eigen::ComputeThinU);
+    const int k = static_cast<int>((fields.singular.array() > kRankTolerance * fields.singular(0)).count());
+    const Svd angles = jacobiSvd(pn.transpose() * fields.u.leftCols(k), Eigen::ComputeThinU);
+    const int allowed = static_cast<int>((angles.singular.array() > 1.0 - 1e-8).count());
+    const Eigen::MatrixXd z0 = angles.u.leftCols(allowed);
     // ... and of those, the ones that stretch no member (a cable to a ground point may hold them)
     int held = 0;
     Eigen::MatrixXd v = Eigen::MatrixXd::Identity(allowed, allowed);
     if (allowed > 0 && members > 0)
     {
-      Eigen::JacobiSVD<Eigen::MatrixXd> stretch(out.compatibility * z0, Eigen::ComputeFullV);
-      held = static_cast<int>((stretch.singularValues().array() > kRankTolerance * sigma_max).count());
-      v = stretch.matrixV();
+      const Svd stretch = jacobiSvd(out.compatibility * z0, Eigen::ComputeFullV);
+      held = static_cast<int>((stretch.singular.array() > kRankTolerance * sigma_max).count());
+      v = stretch.v;
     }
     z = z0 * v.rightCols(allowed - held);
   }
@@ -341,9 +340,9 @@ ReducedStructure reduce(const Model& model, const State& state, const System& sy
   if (z.cols() > 0 && motions.cols() > 0)
   {
     const Eigen::MatrixXd b = motions.transpose() * z;
-    Eigen::JacobiSVD<Eigen::MatrixXd> svd(b, Eigen::ComputeFullU);
-    const int inside = static_cast<int>((svd.singularValues().array() > 0.5).count());
-    out.mechanisms = motions * svd.matrixU().rightCols(motions.cols() - inside);
+    const Svd d = jacobiSvd(b, Eigen::ComputeFullU);
+    const int inside = static_cast<int>((d.singular.array() > 0.5).count());
+    out.mechanisms = motions * d.u.rightCols(motions.cols() - inside);
   }
 
   // the force residual with least-squares multipliers: -F + Phi_q^T lambda is minus the part of F in

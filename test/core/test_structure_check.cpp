@@ -1,12 +1,14 @@
 // Structural diagnostics (core/structure_check): the counts of the equilibrium matrix on prisms whose counts
 // follow from Maxwell's rule and their self-stress, stability, slack elements, the force residual off an
 // equilibrium against its first-order prediction, and the reduced stiffness against finite differences of the
-// potential energy along the constraint manifold.
+// potential energy along the constraint manifold; and the SVDs (core/svd) the diagnostics share with form finding.
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <random>
 #include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -17,6 +19,7 @@
 #include "active_tensegrity/core/scene.h"
 #include "active_tensegrity/core/statics.h"
 #include "active_tensegrity/core/structure_check.h"
+#include "active_tensegrity/core/svd.h"
 #include "test_models.h"
 
 using namespace active_tensegrity::test;
@@ -132,6 +135,49 @@ std::vector<std::string> names(std::initializer_list<const char*> list)
 // Maxwell's rule for a prism of rigid struts: f free coordinates (5 per free strut: 7 less the norm and the
 // spin; 2 per strut pinned at one end), members b, b - r self-stress states, f - r motions, of which the rigid
 // ones are no mechanism.
+
+// The SVDs the diagnostics and form finding share: U diag(s) V^T rebuilds the matrix, the singular values
+// descend, U and V are orthonormal, thin or full as asked and empty when not asked; BDCSVD past its switch to
+// Jacobi (16 columns) agrees with the Jacobi SVD on the singular values.
+TEST(Svd, RebuildsTheMatrixWithWhatWasAskedFor)
+{
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> uni(-1.0, 1.0);
+  for (const auto& [rows, cols] : { std::pair{ 9, 4 }, std::pair{ 4, 9 }, std::pair{ 30, 20 }, std::pair{ 20, 30 } })
+  {
+    Eigen::MatrixXd a(rows, cols);
+    for (Eigen::Index i = 0; i < a.size(); ++i)
+      a.data()[i] = uni(rng);
+    const int k = std::min(rows, cols);
+    const Svd thin = svd(a, Eigen::ComputeThinU | Eigen::ComputeThinV);
+    const Svd jacobi = jacobiSvd(a, Eigen::ComputeThinU | Eigen::ComputeThinV);
+    for (const Svd* d : { &thin, &jacobi })
+    {
+      ASSERT_EQ(d->singular.size(), k);
+      ASSERT_EQ(d->u.cols(), k);
+      ASSERT_EQ(d->v.cols(), k);
+      for (int i = 1; i < k; ++i)
+        EXPECT_GE(d->singular(i - 1), d->singular(i));
+      EXPECT_LT((d->u * d->singular.asDiagonal() * d->v.transpose() - a).norm(), 1e-12 * a.norm());
+      EXPECT_LT((d->u.transpose() * d->u - Eigen::MatrixXd::Identity(k, k)).norm(), 1e-12);
+    }
+    EXPECT_LT((thin.singular - jacobi.singular).norm(), 1e-12 * a.norm());
+    const Svd full_v = svd(a, Eigen::ComputeFullV);
+    EXPECT_EQ(full_v.u.size(), 0);
+    ASSERT_EQ(full_v.v.rows(), cols);
+    ASSERT_EQ(full_v.v.cols(), cols);
+    EXPECT_LT((full_v.v.transpose() * full_v.v - Eigen::MatrixXd::Identity(cols, cols)).norm(), 1e-12);
+    // the columns past the rank span the null space
+    if (cols > rows)
+    {
+      EXPECT_LT((a * full_v.v.rightCols(cols - rows)).norm(), 1e-12 * a.norm());
+    }
+    const Svd full_u = jacobiSvd(a, Eigen::ComputeFullU);
+    EXPECT_EQ(full_u.v.size(), 0);
+    EXPECT_EQ(full_u.u.rows(), rows);
+    EXPECT_EQ(full_u.u.cols(), rows);
+  }
+}
 
 TEST(StructureCheck, FreePrismHasOneSelfStressOneMechanismAndSixRigidModes)
 {
