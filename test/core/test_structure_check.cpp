@@ -160,6 +160,7 @@ TEST(Svd, RebuildsTheMatrixWithWhatWasAskedFor)
         EXPECT_GE(d->singular(i - 1), d->singular(i));
       EXPECT_LT((d->u * d->singular.asDiagonal() * d->v.transpose() - a).norm(), 1e-12 * a.norm());
       EXPECT_LT((d->u.transpose() * d->u - Eigen::MatrixXd::Identity(k, k)).norm(), 1e-12);
+      EXPECT_LT((d->v.transpose() * d->v - Eigen::MatrixXd::Identity(k, k)).norm(), 1e-12);
     }
     EXPECT_LT((thin.singular - jacobi.singular).norm(), 1e-12 * a.norm());
     const Svd full_v = svd(a, Eigen::ComputeFullV);
@@ -174,8 +175,9 @@ TEST(Svd, RebuildsTheMatrixWithWhatWasAskedFor)
     }
     const Svd full_u = jacobiSvd(a, Eigen::ComputeFullU);
     EXPECT_EQ(full_u.v.size(), 0);
-    EXPECT_EQ(full_u.u.rows(), rows);
-    EXPECT_EQ(full_u.u.cols(), rows);
+    ASSERT_EQ(full_u.u.rows(), rows);
+    ASSERT_EQ(full_u.u.cols(), rows);
+    EXPECT_LT((full_u.u.transpose() * full_u.u - Eigen::MatrixXd::Identity(rows, rows)).norm(), 1e-12);
   }
 }
 
