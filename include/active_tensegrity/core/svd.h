@@ -18,7 +18,7 @@ struct Svd
 /// Jacobi SVD). `options` are Eigen's Compute{Thin,Full}{U,V} flags.
 ///
 /// Eigen's SVD templates take about a minute to compile in a release build and nearly two under the
-/// sanitizers, more than any other file of the core; this function and jacobiSvd instantiate them once,
+/// sanitizers, as long as the longest files of the core; this function and jacobiSvd instantiate them once,
 /// for every caller.
 Svd svd(const Eigen::MatrixXd& a, unsigned int options);
 
