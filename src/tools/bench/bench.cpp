@@ -7,12 +7,20 @@
 
 // Heap allocations are counted by interposing glibc's malloc family in this executable (the core and
 // Eigen allocate through them; operator new does too): `steps` reports them per step. Not with
-// AddressSanitizer, which replaces malloc itself (this one would run before its initialization).
+// AddressSanitizer, which replaces malloc itself (this one would run before its initialization). GCC says
+// so with __SANITIZE_ADDRESS__, clang 14 only with __has_feature.
+#if defined(__SANITIZE_ADDRESS__)
+#define AT_BENCH_ASAN 1
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+#define AT_BENCH_ASAN 1
+#endif
+#endif
+#ifndef AT_BENCH_ASAN
 namespace
 {
 std::atomic<long> g_allocations{ 0 };
 }
-#ifndef __SANITIZE_ADDRESS__
 extern "C"
 {
   void* __libc_malloc(size_t size);
@@ -43,7 +51,7 @@ namespace active_tensegrity::tools::bench
 {
 long heapAllocations()
 {
-#ifdef __SANITIZE_ADDRESS__
+#ifdef AT_BENCH_ASAN
   return -1;
 #else
   return g_allocations.load();
