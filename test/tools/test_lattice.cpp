@@ -257,6 +257,25 @@ TEST(LatticeCommand, RefusesBadArgumentsByNameAndValue)
   }
 }
 
+// the other subcommands' arguments: refused before anything runs (a mistyped --quick used to start the full
+// stress run, minutes long; --repeat 0 and "5x" were taken as 1 and 5)
+TEST(BenchCommand, RefusesBadArgumentsByNameAndValue)
+{
+  for (const auto& [args, text] :
+       { std::pair<std::string, std::string>{ "stress --quik", "'--quik'" },
+         { "stress --quick --quick", "'--quick'" },
+         { "stress --quick 1", "'1'" },
+         { "steps config/scenes/prism.yaml --repeat 0", "--repeat: expected a positive integer, got '0'" },
+         { "contact-pair --repeat 5x", "'5x'" },
+         { "broad-phase --repeat abc", "'abc'" },
+         { "broad-phase --bogus", "'--bogus'" } })
+  {
+    const auto [status, out] = bench(args);
+    EXPECT_EQ(status, 2) << args << ": " << out;
+    EXPECT_NE(out.find(text), std::string::npos) << args << ": " << out;
+  }
+}
+
 TEST(LatticeCommand, PrintsARowPerSizeAndTheExponent)
 {
   const auto [status, out] = bench("lattice --struts 4,8 --duration 0.005 --repeat 1 --pairs near");

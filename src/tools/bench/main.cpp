@@ -1,5 +1,4 @@
 // tensegrity_bench: the usage and the dispatch to the subcommands, one file each in this folder (bench.h).
-#include <algorithm>
 #include <iostream>
 #include <string>
 #include <vector>
@@ -84,7 +83,16 @@ int main(int argc, char** argv)
     if (command == "work-precision")
       return bench::workPrecision(scene, std::vector<std::string>(argv + 3, argv + argc));
     if (command == "stress")
-      return bench::stress(argc >= 3 && std::string(argv[2]) == "--quick");
+    {
+      // nothing or --quick, once
+      for (int i = 2; i < argc; ++i)
+        if (i > 2 || std::string(argv[i]) != "--quick")
+        {
+          std::cerr << "tensegrity_bench: unknown argument '" << argv[i] << "'\n" << kUsage;
+          return 2;
+        }
+      return bench::stress(argc == 3);
+    }
     for (int i = needs_scene ? 3 : 2; i < argc; ++i)
     {
       const std::string arg = argv[i];
@@ -93,7 +101,7 @@ int main(int argc, char** argv)
       else if (needs_scene && arg == "--peaks")
         peaks = true;
       else if (arg == "--repeat" && i + 1 < argc)
-        repeat = std::max(1, std::stoi(argv[++i]));
+        repeat = tools::parsePositive<int>("--repeat", argv[++i]);
       else
       {
         std::cerr << "tensegrity_bench: unknown argument '" << arg << "'\n" << kUsage;
