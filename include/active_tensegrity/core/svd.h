@@ -17,9 +17,9 @@ struct Svd
 /// The SVD of `a` by Eigen's divide and conquer (BDCSVD; for fewer than 16 columns it is the one-sided
 /// Jacobi SVD). `options` are Eigen's Compute{Thin,Full}{U,V} flags.
 ///
-/// Eigen's SVD templates take about a minute to compile in a release build and nearly two under the
-/// sanitizers, as long as the longest files of the core; this function and jacobiSvd instantiate them once,
-/// for every caller.
+/// Eigen's SVD templates take about a minute to compile (release build, or clang's sanitizer build; nearly two
+/// under GCC's sanitizers), as long as the longest files of the core; this function and jacobiSvd instantiate
+/// them once, for every caller.
 Svd svd(const Eigen::MatrixXd& a, unsigned int options);
 
 /// The SVD of `a` by Eigen's one-sided Jacobi SVD with column-pivoting QR preconditioning (JacobiSVD): high
