@@ -26,7 +26,16 @@ int contactPair(int repeat);
 /// `broad-phase`: broad- and narrow-phase time on random scenes of 10 to 1000 struts (broad_phase.cpp).
 int broadPhase(int repeat);
 /// `stress`: the stability stress cases, one table row each (stress.cpp).
-int stress(bool quick_only);
+/// Which stress cases run: the short ones only (`--quick`), those whose name contains one of `cases` (all if
+/// empty), less those whose name contains one of `skipped`.
+struct StressSelection
+{
+  bool quick_only = false;
+  std::vector<std::string> cases;
+  std::vector<std::string> skipped;
+};
+/// 0 when every selected case ended with finite numbers, 3 when one did not, 2 when a text names no case or nothing is selected.
+int stress(const StressSelection& select);
 /// `lattice`: time per step against the number of struts on quadruplex lattices (lattice_cmd.cpp); reports
 /// its own bad arguments (status 2; 3 when a size did not converge).
 int lattice(const std::vector<std::string>& args);

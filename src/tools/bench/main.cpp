@@ -48,8 +48,9 @@ const char* kUsage =
     "  stiffness from F, default the reference's peak force; only when built with MuJoCo).\n"
     "                        [--paths FILE]\n"
     "  --paths writes each run's path: the bodies' mass centre per output step (scheme,dt,t,x,y,z).\n"
-    "       tensegrity_bench stress [--quick]\n"
-    "  The stability stress cases (docs/benchmarks.md): one row per case; --quick runs the short ones.\n"
+    "       tensegrity_bench stress [--quick] [--case TEXT]... [--skip TEXT]...\n"
+    "  The stability stress cases (docs/benchmarks.md): one row per case; --quick runs the short ones;\n"
+    "  --case runs only the cases whose name contains one of the TEXTs, --skip leaves out those that do.\n"
     "       tensegrity_bench lattice [--struts a,b,..] [--width W] [--max-struts N] [--duration S] [--repeat N]\n"
     "                        [--pairs all|auto|near] [--csv FILE] [--set key=value]... [--print-scene]\n"
     "  Quadruplex-cell lattices (default about 10, 20, 50, 100, 200, 500 struts) run dynamically into contact:\n"
@@ -84,14 +85,24 @@ int main(int argc, char** argv)
       return bench::workPrecision(scene, std::vector<std::string>(argv + 3, argv + argc));
     if (command == "stress")
     {
-      // nothing or --quick, once
+      bench::StressSelection select;
       for (int i = 2; i < argc; ++i)
-        if (i > 2 || std::string(argv[i]) != "--quick")
+      {
+        const std::string a = argv[i];
+        if (a == "--quick" && !select.quick_only)
+          select.quick_only = true;
+        else if ((a == "--case" || a == "--skip") && i + 1 < argc && argv[i + 1][0] != '\0')
+          (a == "--case" ? select.cases : select.skipped).emplace_back(argv[++i]);
+        else
         {
-          std::cerr << "tensegrity_bench: unknown argument '" << argv[i] << "'\n" << kUsage;
+          std::cerr << "tensegrity_bench: "
+                    << (a == "--case" || a == "--skip" ? "missing or empty text after" : "unknown argument") << " '"
+                    << a << "'\n"
+                    << kUsage;
           return 2;
         }
-      return bench::stress(argc == 3);
+      }
+      return bench::stress(select);
     }
     for (int i = needs_scene ? 3 : 2; i < argc; ++i)
     {

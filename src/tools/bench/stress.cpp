@@ -1,4 +1,4 @@
-//   tensegrity_bench stress [--quick]
+//   tensegrity_bench stress [--quick] [--case TEXT]... [--skip TEXT]...
 // runs the stability stress cases (tower and quadruplex: fast folding, large steps, bare steel, thin
 // struts, slack cables, impulsive actuation; two nearly parallel struts pressed together) and prints one table row per
 #include <algorithm>
@@ -28,7 +28,7 @@ struct StressCase
 };
 }  // namespace
 
-int stress(bool quick_only)
+int stress(const StressSelection& select)
 {
   const std::string dir = tools::sceneDirectory(ACTIVE_TENSEGRITY_SCENE_DIR) + "/";
   std::fprintf(stderr, "stress: scenes from %s\n", dir.c_str());
@@ -71,12 +71,34 @@ int stress(bool quick_only)
                    "actuation.speed=1", "analysis.duration=1.5" }),
       true },
   };
+  // every text must name a case (a misspelt one would silently run, or skip, nothing)
+  const auto names = [&](const std::string& text, const StressCase& c)
+  { return std::string(c.name).find(text) != std::string::npos; };
+  for (const std::vector<std::string>* texts : { &select.cases, &select.skipped })
+    for (const std::string& text : *texts)
+      if (std::none_of(cases.begin(), cases.end(), [&](const StressCase& c) { return names(text, c); }))
+      {
+        std::fprintf(stderr, "tensegrity_bench stress: no case's name contains '%s' (--%s)\n", text.c_str(),
+                     texts == &select.cases ? "case" : "skip");
+        return 2;
+      }
+  const auto selected = [&](const StressCase& c)
+  {
+    const auto in = [&](const std::vector<std::string>& texts)
+    { return std::any_of(texts.begin(), texts.end(), [&](const std::string& t) { return names(t, c); }); };
+    return (!select.quick_only || c.quick) && (select.cases.empty() || in(select.cases)) && !in(select.skipped);
+  };
+  if (std::none_of(cases.begin(), cases.end(), selected))
+  {
+    std::fprintf(stderr, "tensegrity_bench stress: the selection leaves no case to run\n");
+    return 2;
+  }
   std::printf("| case | ended | simulated (s) | steps | step cuts | crossings refused | max F_N (N) | min gap (mm) | "
               "finite | wall (s) |\n|---|---|---|---|---|---|---|---|---|---|\n");
   int bad = 0;
   for (const StressCase& c : cases)
   {
-    if (quick_only && !c.quick)
+    if (!selected(c))
       continue;
     std::vector<at::Override> o;
     for (const std::string& kv : c.overrides)
