@@ -55,7 +55,7 @@ StressRun runStress(const std::string& args)
 const char* const kTowerLargeSteps = "tower V = 0.5 m/s, dt = 1e-2 s";
 }  // namespace
 
-// every short case but the tower at 10 ms steps (below: half of the time, and left out of the sanitizer build's run)
+// every short case but the tower at 10 ms steps (a case of its own below: about half of the time)
 TEST(Stress, QuickCasesEndConvergedOrWithAStatusNeverNonFinite)
 {
   const StressRun run = runStress(std::string("--quick --skip '") + kTowerLargeSteps + "'");
