@@ -34,7 +34,8 @@ struct StressSelection
   std::vector<std::string> cases;
   std::vector<std::string> skipped;
 };
-/// 0 when every selected case ended with finite numbers, 3 when one did not, 2 when a text names no case or nothing is selected.
+/// 0 when every selected case ended with finite numbers, 3 when one did not; 2 when a text names no case or
+/// nothing is selected.
 int stress(const StressSelection& select);
 /// `lattice`: time per step against the number of struts on quadruplex lattices (lattice_cmd.cpp); reports
 /// its own bad arguments (status 2; 3 when a size did not converge).

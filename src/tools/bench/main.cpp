@@ -95,10 +95,10 @@ int main(int argc, char** argv)
           (a == "--case" ? select.cases : select.skipped).emplace_back(argv[++i]);
         else
         {
-          std::cerr << "tensegrity_bench: "
-                    << (a == "--case" || a == "--skip" ? "missing or empty text after" : "unknown argument") << " '"
-                    << a << "'\n"
-                    << kUsage;
+          const char* what = a == "--case" || a == "--skip" ? "missing or empty text after" :
+                             a == "--quick"                 ? "repeated argument" :
+                                                              "unknown argument";
+          std::cerr << "tensegrity_bench: " << what << " '" << a << "'\n" << kUsage;
           return 2;
         }
       }
