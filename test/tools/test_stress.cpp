@@ -4,9 +4,12 @@
 #include <cstdio>
 #include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <gtest/gtest.h>
+
+#include "command.h"
 
 namespace
 {
@@ -26,29 +29,26 @@ std::vector<std::string> cells(const std::string& row)
   return out;
 }
 
-// The rows of `tensegrity_bench stress ARGS` (its table's cells), and its exit status.
+// The rows of `tensegrity_bench stress ARGS` (its table's cells), its exit status and its whole output.
 struct StressRun
 {
   std::vector<std::vector<std::string>> rows;
   int status = -1;
+  std::string output;
 };
 
 StressRun runStress(const std::string& args)
 {
+  const active_tensegrity::test::CommandResult r =
+      active_tensegrity::test::runCommand(std::string(TENSEGRITY_BENCH_PATH) + " stress " + args + " 2>&1");
   StressRun run;
-  const std::string cmd = std::string(TENSEGRITY_BENCH_PATH) + " stress " + args + " 2>&1";
-  FILE* pipe = popen(cmd.c_str(), "r");
-  if (pipe == nullptr)
-    return run;
-  char line[8192];
-  while (fgets(line, sizeof line, pipe))
-  {
-    std::string l(line);
+  run.status = r.code;
+  run.output = r.output;
+  std::stringstream lines(r.output);
+  std::string l;
+  while (std::getline(lines, l))
     if (l.rfind("| ", 0) == 0 && l.find("| case |") == std::string::npos)
       run.rows.push_back(cells(l));
-  }
-  const int status = pclose(pipe);
-  run.status = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
   return run;
 }
 
@@ -110,14 +110,26 @@ TEST(Stress, TheTowerAtStepsOf10msFoldsToTheEndThroughStepCuts)
               r[9].c_str());
 }
 
-// a misspelt case is refused, not run as an empty selection
+// a misspelt case is refused, not run as an empty selection; a good one runs the cases it names
 TEST(Stress, ASelectionThatNamesNoCaseIsRefused)
 {
-  for (const char* args : { "--case 'no such case'", "--skip 'no such case'", "--case", "--quick --quick",
-                            "--quick --case 'tower V = 5 m/s'" })
+  const std::vector<std::pair<std::string, std::string>> bad = {
+    { "--case 'no such case'", "no case's name contains 'no such case' (--case)" },
+    { "--skip 'no such case'", "no case's name contains 'no such case' (--skip)" },
+    { "--case", "missing or empty text after '--case'" },
+    { "--skip ''", "missing or empty text after '--skip'" },
+    { "--quick --quick", "repeated argument '--quick'" },
+    { "--quick --case 'tower V = 5 m/s'", "the selection leaves no case to run" },
+  };
+  for (const auto& [args, message] : bad)
   {
     const StressRun run = runStress(args);
     EXPECT_EQ(run.status, 2) << args;
+    EXPECT_NE(run.output.find(message), std::string::npos) << args << ": " << run.output;
     EXPECT_TRUE(run.rows.empty()) << args;
   }
+  const StressRun good = runStress("--case 'two struts' --skip '10 m/s'");
+  EXPECT_EQ(good.status, 0);
+  ASSERT_EQ(good.rows.size(), 1u);
+  EXPECT_EQ(good.rows[0][0], "two struts 1 degree apart pressed side by side, 1 m/s");
 }
