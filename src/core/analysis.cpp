@@ -620,7 +620,7 @@ namespace
 /// The dynamic loop with solver.adaptive: steps to every output time and every actuation breakpoint.
 void runAdaptive(const Model& model, DynamicsSolver& solver, const ActuationLaw& law, State& state, RunResult& result,
                  const std::function<void(const State&)>& on_output, const std::function<void(double)>& on_progress,
-                 const StepCallback& on_step)
+                 const std::function<void(const State&)>& after_step)
 {
   const AnalysisSettings& an = model.analysis;
   const double eps = 1e-12 * std::max(1.0, an.duration);
@@ -653,8 +653,7 @@ void runAdaptive(const Model& model, DynamicsSolver& solver, const ActuationLaw&
     timed(
         [&]()
         {
-          if (on_step)
-            on_step(s, solver.contactsAt(s));
+          after_step(s);
           if (every && s.t < an.duration - eps)
           {
             on_output(s);
@@ -849,8 +848,11 @@ RunResult runAnalysis(const Model& model, const std::function<void(const State&)
     watch(state);
     on_output(state);
     ++result.steps;
+    // after each step: the yield watch, and the caller's on_step with the step's contacts, whose forces are
+    // evaluated for it alone (without an on_step, nothing asks for them)
+    const auto after_step = [&](const State& s) { step_hook(s, on_step ? solver.contactsAt(s) : nullptr); };
     if (model.solver.adaptive)
-      runAdaptive(model, solver, law, state, result, on_output, on_progress, step_hook);
+      runAdaptive(model, solver, law, state, result, on_output, on_progress, after_step);
     else
     {
       const double dt = model.solver.dt;
@@ -877,7 +879,7 @@ RunResult runAnalysis(const Model& model, const std::function<void(const State&)
         }
         state.t = t_target;  // no drift from summing steps
         const auto callbacks = std::chrono::steady_clock::now();
-        step_hook(state, solver.contactsAt(state));
+        after_step(state);
         if (state.t >= next_output - 1e-9 * dt || k == n_steps)
         {
           on_output(state);

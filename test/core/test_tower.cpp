@@ -232,6 +232,32 @@ TEST(Tower, EveryStepsContactsAreThoseOfAFullSearch)
   EXPECT_GT(touching, 50) << "the fold must reach contact for the comparison to mean anything";
 }
 
+TEST(Tower, AStepCallbackAsksForTheContactsWithoutChangingTheRun)
+{
+  // runAnalysis evaluates the step's contact forces (DynamicsSolver::contactsAt) only for an on_step; the steps
+  // themselves must not depend on whether anyone asked: the same run, bit for bit, with fixed and adaptive steps
+  for (const char* adaptive : { "false", "true" })
+  {
+    const Model model = tower({ { "analysis.type", "dynamic" },
+                                { "actuation.speed", "5" },
+                                { "analysis.duration", "0.3" },
+                                { "solver.adaptive", adaptive } });
+    int given = 0;
+    const RunResult with = runAnalysis(
+        model, [](const State&) {}, {},
+        [&](const State&, const std::vector<ContactPairState>* contacts) { given += contacts != nullptr ? 1 : 0; });
+    const RunResult without = runAnalysis(model, [](const State&) {});
+    ASSERT_TRUE(with.summary.ok()) << with.summary.message;
+    ASSERT_TRUE(without.summary.ok()) << without.summary.message;
+    EXPECT_EQ(given, with.solver_steps) << "adaptive " << adaptive;
+    EXPECT_EQ(with.solver_steps, without.solver_steps) << "adaptive " << adaptive;
+    EXPECT_EQ(with.summary.iterations, without.summary.iterations) << "adaptive " << adaptive;
+    EXPECT_TRUE(with.final_state.q == without.final_state.q) << "adaptive " << adaptive;
+    EXPECT_TRUE(with.final_state.qd == without.final_state.qd) << "adaptive " << adaptive;
+    EXPECT_TRUE(with.final_state.contact_speed == without.final_state.contact_speed) << "adaptive " << adaptive;
+  }
+}
+
 TEST(Tower, TheSolverGivesContactsOnlyForTheStateItsLastStepEndedIn)
 {
   const Model model = tower({ { "analysis.type", "dynamic" }, { "actuation.speed", "5" } });
