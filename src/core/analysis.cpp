@@ -691,6 +691,10 @@ void runAdaptive(const Model& model, DynamicsSolver& solver, const ActuationLaw&
   result.adaptive = stepper.stats();
   result.solver_steps = static_cast<int>(stepper.stats().accepted);
 }
+/// Both runAnalysis: `contacts_wanted` says whether on_step reads the step's contacts (the dynamics solver forms
+/// their forces for it alone; the state-only callback never sees them).
+RunResult run(const Model& model, const std::function<void(const State&)>& user_output,
+              const std::function<void(double)>& on_progress, const StepCallback& on_step, bool contacts_wanted);
 }  // namespace
 
 RunResult runAnalysis(const Model& model, const std::function<void(const State&)>& on_output,
@@ -699,11 +703,19 @@ RunResult runAnalysis(const Model& model, const std::function<void(const State&)
   StepCallback each;
   if (on_step)
     each = [&on_step](const State& s, const std::vector<ContactPairState>*) { on_step(s); };
-  return runAnalysis(model, on_output, on_progress, each);
+  return run(model, on_output, on_progress, each, false);
 }
 
-RunResult runAnalysis(const Model& model, const std::function<void(const State&)>& user_output,
+RunResult runAnalysis(const Model& model, const std::function<void(const State&)>& on_output,
                       const std::function<void(double)>& on_progress, const StepCallback& on_step)
+{
+  return run(model, on_output, on_progress, on_step, static_cast<bool>(on_step));
+}
+
+namespace
+{
+RunResult run(const Model& model, const std::function<void(const State&)>& user_output,
+              const std::function<void(double)>& on_progress, const StepCallback& on_step, bool contacts_wanted)
 {
   // cables that run through a strut, at the output steps: once per cable and strut, at most kMaxCrossingWarnings
   constexpr size_t kMaxCrossingWarnings = 20;
@@ -849,8 +861,8 @@ RunResult runAnalysis(const Model& model, const std::function<void(const State&)
     on_output(state);
     ++result.steps;
     // after each step: the yield watch, and the caller's on_step with the step's contacts, whose forces are
-    // evaluated for it alone (without an on_step, nothing asks for them)
-    const auto after_step = [&](const State& s) { step_hook(s, on_step ? solver.contactsAt(s) : nullptr); };
+    // evaluated for it alone (without an on_step that reads them, nothing asks for them)
+    const auto after_step = [&](const State& s) { step_hook(s, contacts_wanted ? solver.contactsAt(s) : nullptr); };
     if (model.solver.adaptive)
       runAdaptive(model, solver, law, state, result, on_output, on_progress, after_step);
     else
@@ -899,5 +911,6 @@ RunResult runAnalysis(const Model& model, const std::function<void(const State&)
   result.wall_time = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return result;
 }
+}  // namespace
 
 }  // namespace active_tensegrity::core

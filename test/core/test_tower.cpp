@@ -234,8 +234,9 @@ TEST(Tower, EveryStepsContactsAreThoseOfAFullSearch)
 
 TEST(Tower, AStepCallbackAsksForTheContactsWithoutChangingTheRun)
 {
-  // runAnalysis evaluates the step's contact forces (DynamicsSolver::contactsAt) only for an on_step; the steps
-  // themselves must not depend on whether anyone asked: the same run, bit for bit, with fixed and adaptive steps
+  // runAnalysis evaluates the step's contact forces (DynamicsSolver::contactsAt) only for an on_step that takes
+  // them (not for one that takes the state alone); the steps themselves must not depend on whether anyone asked:
+  // the same run, bit for bit, with fixed and adaptive steps
   for (const char* adaptive : { "false", "true" })
   {
     const Model model = tower({ { "analysis.type", "dynamic" },
@@ -247,6 +248,13 @@ TEST(Tower, AStepCallbackAsksForTheContactsWithoutChangingTheRun)
         model, [](const State&) {}, {},
         [&](const State&, const std::vector<ContactPairState>* contacts) { given += contacts != nullptr ? 1 : 0; });
     const RunResult without = runAnalysis(model, [](const State&) {});
+    int states = 0;  // the callback that takes the state alone: no contacts asked for
+    const RunResult state_only = runAnalysis(
+        model, [](const State&) {}, {}, [&](const State&) { ++states; });
+    ASSERT_TRUE(state_only.summary.ok()) << state_only.summary.message;
+    EXPECT_EQ(states, with.solver_steps) << "adaptive " << adaptive;
+    EXPECT_TRUE(state_only.final_state.q == without.final_state.q) << "adaptive " << adaptive;
+    EXPECT_EQ(state_only.summary.iterations, without.summary.iterations) << "adaptive " << adaptive;
     ASSERT_TRUE(with.summary.ok()) << with.summary.message;
     ASSERT_TRUE(without.summary.ok()) << without.summary.message;
     EXPECT_EQ(given, with.solver_steps) << "adaptive " << adaptive;
