@@ -214,8 +214,10 @@ double minimumGap(const Model& model, const Eigen::VectorXd& q)
 
 namespace
 {
-/// Calls visit(gap) for every checked pair of a cable segment and a strut whose grown boxes overlap.
-void forEachCableStrutGap(const Model& model, const Eigen::VectorXd& q,
+/// Calls visit(gap) for every checked pair of a cable segment and a strut whose boxes overlap, the strut's grown
+/// by the mean strut length (`grown`; the minimum's search) or by nothing (the crossings': a segment that runs
+/// through a strut meets its box).
+void forEachCableStrutGap(const Model& model, const Eigen::VectorXd& q, bool grown,
                           const std::function<void(const CableStrutGap&)>& visit)
 {
   struct Box
@@ -235,7 +237,7 @@ void forEachCableStrutGap(const Model& model, const Eigen::VectorXd& q,
     }
   if (struts == 0 || model.cables.empty())
     return;
-  const double margin = length_sum / struts;
+  const double margin = grown ? length_sum / struts : 0.0;
   for (size_t i = 0; i < model.bodies.size(); ++i)
   {
     const Body& b = model.bodies[i];
@@ -288,7 +290,7 @@ void forEachCableStrutGap(const Model& model, const Eigen::VectorXd& q,
 CableStrutGap minimumCableStrutGap(const Model& model, const Eigen::VectorXd& q)
 {
   CableStrutGap best;
-  forEachCableStrutGap(model, q,
+  forEachCableStrutGap(model, q, true,
                        [&](const CableStrutGap& g)
                        {
                          if (g.gap < best.gap)
@@ -300,7 +302,7 @@ CableStrutGap minimumCableStrutGap(const Model& model, const Eigen::VectorXd& q)
 std::vector<CableStrutGap> cableStrutCrossings(const Model& model, const Eigen::VectorXd& q)
 {
   std::vector<CableStrutGap> out;
-  forEachCableStrutGap(model, q,
+  forEachCableStrutGap(model, q, false,
                        [&](const CableStrutGap& g)
                        {
                          if (!(g.gap < 0.0))
