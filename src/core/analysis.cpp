@@ -851,6 +851,7 @@ RunResult run(const Model& model, const std::function<void(const State&)>& user_
   else
   {
     DynamicsSolver solver(model, model.solver);
+    solver.setContactsEveryStep(contacts_wanted);
     const ActuationLaw law = [&model](double t) { return scheduledActuation(model, t); };
     result.summary = solver.initialize(state, law);
     with_start_warnings(result.summary);

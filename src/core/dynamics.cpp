@@ -39,6 +39,13 @@ bool sameBits(const Eigen::VectorXd& a, const Eigen::VectorXd& b)
          (a.size() == 0 || std::memcmp(a.data(), b.data(), static_cast<size_t>(a.size()) * sizeof(double)) == 0);
 }
 
+/// Orders contacts by their slot (as activeContacts gives them).
+void sortBySlot(std::vector<ContactPairState>& contacts)
+{
+  std::sort(contacts.begin(), contacts.end(),
+            [](const ContactPairState& a, const ContactPairState& b) { return a.pair < b.pair; });
+}
+
 /// Gives the linear solver back the approximate-factorization setting it had when made (an attempt that
 /// suspends the approximate methods has many returns).
 class ApproximateSetting
@@ -186,8 +193,7 @@ const std::vector<ContactPairState>* DynamicsSolver::contactsAt(const State& sta
       if (st.active)
         end_contacts_.push_back(st);
     }
-    std::sort(end_contacts_.begin(), end_contacts_.end(),
-              [](const ContactPairState& a, const ContactPairState& b) { return a.pair < b.pair; });
+    sortBySlot(end_contacts_);
     end_contacts_ready_ = true;
   }
   return &end_contacts_;
@@ -234,11 +240,18 @@ void DynamicsSolver::updateContactMemory(State& s, const Eigen::VectorXd& q_star
   if (!model.anyContact())
     return;
   // every slot touching at the step's end is near (attempt() checks the motion): its gap and approach rate there;
-  // its forces, with the step's impact speed (the one its memory keeps), only when contactsAt asks
+  // its forces, with the step's impact speed (the one its memory keeps), only when contactsAt asks, or here when
+  // it will ask at every step (evaluateContact gives a slot apart what contactMotion gives, and a touching slot's
+  // forces with them, as contactsAt forms them)
+  long touching = 0;
   for (size_t k = 0; k < near_.size(); ++k)
   {
     const int i = near_[k];
-    const ContactPairState st = contactMotion(model, i, s.q, s.qd);
+    const ContactPairState st =
+        contacts_every_step_ ? evaluateContact(model, i, s.q, s.qd, step_speeds_[i], ContactMode::kDynamic, nullptr) :
+                               contactMotion(model, i, s.q, s.qd);
+    if (contacts_every_step_ && st.active)
+      end_contacts_.push_back(st);
     end_rate_[i] = st.penetration_rate;
     end_gap_[i] = st.gap;
     end_slots_.push_back(i);
@@ -246,6 +259,7 @@ void DynamicsSolver::updateContactMemory(State& s, const Eigen::VectorXd& q_star
     end_memory_.push_back(gap < 0.0 ? step_speeds_[i] : 0.0);
     if (gap >= 0.0)
       continue;
+    ++touching;
     s.contact_speed[i] = step_speeds_[i];
     const bool was_touching = near_previous_[k] > 0.0;
     if (was_touching || -gap <= estimate_.onset_depth)
@@ -257,6 +271,12 @@ void DynamicsSolver::updateContactMemory(State& s, const Eigen::VectorXd& q_star
       estimate_.onset_gap = gap_start;
       estimate_.onset_pair = i;
     }
+  }
+  timings_.most_touching = std::max(timings_.most_touching, touching);
+  if (contacts_every_step_)
+  {
+    sortBySlot(end_contacts_);
+    end_contacts_ready_ = true;
   }
 }
 

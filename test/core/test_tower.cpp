@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include "active_tensegrity/core/adaptive.h"
 #include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/scene.h"
 
@@ -263,6 +264,59 @@ TEST(Tower, AStepCallbackAsksForTheContactsWithoutChangingTheRun)
     EXPECT_TRUE(with.final_state.q == without.final_state.q) << "adaptive " << adaptive;
     EXPECT_TRUE(with.final_state.qd == without.final_state.qd) << "adaptive " << adaptive;
     EXPECT_TRUE(with.final_state.contact_speed == without.final_state.contact_speed) << "adaptive " << adaptive;
+  }
+}
+
+TEST(Tower, ContactsFormedAtEveryStepsEndAreThoseFormedOnDemand)
+{
+  // DynamicsSolver::setContactsEveryStep (runAnalysis sets it for an on_step that takes the contacts) forms the
+  // touching slots' forces in the pass that evaluates the step's end; contactsAt forms them when first asked
+  // otherwise. Two solvers, one of each kind, through the fold into contact at the paper's step (compared after
+  // every step) and with adaptive steps (after every 5 ms): the same steps and contacts, bit for bit
+  const Model model = tower({ { "analysis.type", "dynamic" }, { "actuation.speed", "5" } });
+  const ActuationLaw law = [&model](double t) { return scheduledActuation(model, t); };
+  for (const bool adaptive : { false, true })
+  {
+    DynamicsSolver eager(model, model.solver), lazy(model, model.solver);
+    eager.setContactsEveryStep(true);
+    AdaptiveStepper eager_steps(eager, model.solver), lazy_steps(lazy, model.solver);
+    State a = initialState(model), b = a;
+    ASSERT_TRUE(eager.initialize(a, law).ok());
+    ASSERT_TRUE(lazy.initialize(b, law).ok());
+    const double h = adaptive ? 5e-3 : model.solver.dt;
+    int touching = 0;
+    for (int k = 1; k * h <= 0.4 + 1e-12; ++k)
+    {
+      const double t = k * h;
+      if (adaptive)
+      {
+        ASSERT_TRUE(eager_steps.advanceTo(a, t, law, {}).ok()) << "t = " << t;
+        ASSERT_TRUE(lazy_steps.advanceTo(b, t, law, {}).ok()) << "t = " << t;
+      }
+      else
+      {
+        ASSERT_TRUE(eager.step(a, t - a.t, law).ok()) << "t = " << t;
+        ASSERT_TRUE(lazy.step(b, t - b.t, law).ok()) << "t = " << t;
+      }
+      ASSERT_TRUE(a.q == b.q && a.qd == b.qd && a.contact_speed == b.contact_speed) << "t = " << t;
+      const std::vector<ContactPairState>* ca = eager.contactsAt(a);
+      const std::vector<ContactPairState>* cb = lazy.contactsAt(b);
+      ASSERT_NE(ca, nullptr) << "t = " << t;
+      ASSERT_NE(cb, nullptr) << "t = " << t;
+      ASSERT_EQ(ca->size(), cb->size()) << "t = " << t;
+      for (size_t i = 0; i < ca->size(); ++i)
+      {
+        EXPECT_EQ((*ca)[i].pair, (*cb)[i].pair) << "t = " << t;
+        EXPECT_EQ((*ca)[i].normal_force, (*cb)[i].normal_force) << "t = " << t;
+        EXPECT_EQ((*ca)[i].friction_force, (*cb)[i].friction_force) << "t = " << t;
+        EXPECT_EQ((*ca)[i].penetration, (*cb)[i].penetration) << "t = " << t;
+        EXPECT_EQ((*ca)[i].force_on_a, (*cb)[i].force_on_a) << "t = " << t;
+        EXPECT_EQ((*ca)[i].point_a, (*cb)[i].point_a) << "t = " << t;
+      }
+      touching += ca->empty() ? 0 : 1;
+    }
+    EXPECT_GT(touching, adaptive ? 10 : 100) << "the fold must reach contact (adaptive " << adaptive << ")";
+    EXPECT_EQ(eager.timings().newton_iterations, lazy.timings().newton_iterations) << "adaptive " << adaptive;
   }
 }
 

@@ -53,6 +53,13 @@ public:
     variable_steps_ = variable;
     linear_.allowBodyGroups(!variable);
   }
+  /// Says whether contactsAt will be asked at every step's end (runAnalysis with a per-step consumer of the
+  /// contacts): each accepted step then forms its touching slots' forces in the one pass that evaluates its end's
+  /// near slots (the same values contactsAt forms on demand, without evaluating those slots' motion twice).
+  void setContactsEveryStep(bool every)
+  {
+    contacts_every_step_ = every;
+  }
   /// The error estimate and contact onset of the last accepted step.
   const StepEstimate& estimate() const
   {
@@ -182,6 +189,7 @@ private:
   std::vector<int> touching_;         // slots touching at the start of the step being solved (ascending)
   double theta_ = 0.0;                // largest contraction rate seen with it
   bool variable_steps_ = false;       // setVariableSteps
+  bool contacts_every_step_ = false;  // setContactsEveryStep
   bool theta_known_ = false;          // whether theta_ was measured (two increments above round-off)
   // after a kept matrix diverged (theta > 0.5): steps still to start with a new matrix, and how many the next
   // divergence orders (doubling while kept matrices keep failing, back to the least once one serves a step)

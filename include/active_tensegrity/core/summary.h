@@ -1,6 +1,7 @@
 /// What every solver returns: how it ended (SolveStatus) and its counts (Summary).
 #pragma once
 
+#include <algorithm>
 #include <chrono>
 #include <string>
 #include <vector>
@@ -67,6 +68,8 @@ struct StepTimings
                                   // blocks
   long static_pivots_kept = 0;    // dynamics: steps that kept a static-pivot matrix though the touching pairs had
                                   // changed, the next factorization being static pivots too (the body blocks paused)
+  long most_touching = 0;  // dynamics: the most contact slots touching at the end of a step the solver accepted (with
+                           // adaptive steps, also of one the step control then refused); a maximum, not a sum
 
   StepTimings& operator+=(const StepTimings& o)
   {
@@ -89,6 +92,7 @@ struct StepTimings
     body_block_distrusts += o.body_block_distrusts;
     body_block_rebuilds += o.body_block_rebuilds;
     static_pivots_kept += o.static_pivots_kept;
+    most_touching = std::max(most_touching, o.most_touching);
     return *this;
   }
 };
