@@ -261,6 +261,7 @@ int runLattice(const std::vector<std::string>& args)
               repeat, overrides.empty() ? "" : " (with --set overrides)");
   std::printf("us/step: wall time of the solver's step() calls / steps, median over the runs; breakdown in us/step\n");
   std::printf("bblk: share of the factorizations on body blocks (the rest exact or static pivots)\n");
+  std::printf("peakC: the most strut pairs touching at the end of a step\n");
   std::printf("%6s %6s %6s %6s %6s %8s %9s %6s %6s %6s %5s %5s %10s %8s %9s %9s %9s %9s %9s %5s %9s %s\n", "struts",
               "cells", "bodies", "coords", "rows", "pairs", "nnz", "steps", "newton", "factor", "bblk", "anal",
               "us/step", "us/strut", "forces", "contact", "constr", "factorize", "solve", "peakC", "setup ms",
