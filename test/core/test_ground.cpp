@@ -3,6 +3,7 @@
 // regime; point masses), a strut dropped flat rebounding as the 1-D Lankarani-Nikravesh model and c_e say,
 // a strut sliding on its side slowing at mu g, the six-bar robot at rest carrying its weight, and the
 // loader's refusals.
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <random>
@@ -318,6 +319,43 @@ TEST(GroundSupport, TheSixBarRobotAtRestCarriesItsWeightOnThreeEnds)
               sum, weight);
   EXPECT_EQ(touching, (std::vector<std::string>{ "N4", "N8", "N12" }));
   EXPECT_NEAR(sum, weight, 1e-6 * weight);
+}
+
+TEST(GroundSupport, TheContactsARunHandsItsStepCallbackAreThoseOfAFullSearch)
+{
+  // runAnalysis with an on_step that takes the contacts has the solver form them in its pass over each step's end
+  // (DynamicsSolver::setContactsEveryStep); on the six-bar robot's roll (ground contact with friction, strut ends
+  // landing and lifting) they must be, at every step, what a full search and evaluation gives
+  const Model m = loadScene(std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) + "/config/scenes/six_bar.yaml",
+                            { { "analysis.duration", "4" } });
+  int steps = 0, given = 0, sliding = 0;
+  std::vector<bool> touched(m.ground_contacts.size(), false);
+  const RunResult result = runAnalysis(
+      m, [](const State&) {}, {},
+      [&](const State& s, const std::vector<ContactPairState>* contacts)
+      {
+        ++steps;
+        if (!contacts)
+          return;
+        ++given;
+        const std::vector<ContactPairState> full = activeContacts(m, s);
+        ASSERT_EQ(contacts->size(), full.size()) << "t = " << s.t;
+        for (size_t i = 0; i < full.size(); ++i)
+        {
+          const ContactPairState &a = (*contacts)[i], &b = full[i];
+          EXPECT_EQ(a.pair, b.pair) << "t = " << s.t;
+          EXPECT_EQ(a.normal_force, b.normal_force) << "t = " << s.t;
+          EXPECT_EQ(a.friction_force, b.friction_force) << "t = " << s.t;
+          EXPECT_EQ(a.force_on_a, b.force_on_a) << "t = " << s.t;
+          EXPECT_EQ(a.point_a, b.point_a) << "t = " << s.t;
+          touched[b.pair - m.checked_pairs.size()] = true;
+          sliding += b.friction_force > 0.0 ? 1 : 0;
+        }
+      });
+  ASSERT_TRUE(result.summary.ok()) << result.summary.message;
+  EXPECT_EQ(given, steps) << "every step's contacts come from the solver";
+  EXPECT_GT(std::count(touched.begin(), touched.end(), true), 3) << "the roll must change the ends on the ground";
+  EXPECT_GT(sliding, 0) << "friction must act for the comparison to cover it";
 }
 
 TEST(GroundScene, RefusesAStartInTheGroundAnUnknownMaterialAndARadiusWithoutAMass)
