@@ -52,7 +52,8 @@ struct CableStrutGap
   int strut = -1;
 };
 CableStrutGap minimumCableStrutGap(const Model& model, const Eigen::VectorXd& q);
-/// Every cable that runs through a strut (gap < 0), once per cable and strut, at its deepest segment.
+/// Every cable that runs through a strut (gap < 0), once per cable and strut, at its deepest segment. (Such a
+/// segment meets the strut's box grown by its radius alone: only pairs whose boxes overlap so are measured.)
 std::vector<CableStrutGap> cableStrutCrossings(const Model& model, const Eigen::VectorXd& q);
 
 /// The contacts in a state: touching strut pairs, then spheres touching the ground (body_b = -1), evaluated as the
