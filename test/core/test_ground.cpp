@@ -15,6 +15,7 @@
 #include "active_tensegrity/core/dynamics.h"
 #include "active_tensegrity/core/scene.h"
 #include "active_tensegrity/core/structure_check.h"
+#include "contact_checks.h"
 #include "fd_check.h"
 #include "test_models.h"
 
@@ -339,17 +340,11 @@ TEST(GroundSupport, TheContactsARunHandsItsStepCallbackAreThoseOfAFullSearch)
           return;
         ++given;
         const std::vector<ContactPairState> full = activeContacts(m, s);
-        ASSERT_EQ(contacts->size(), full.size()) << "t = " << s.t;
-        for (size_t i = 0; i < full.size(); ++i)
+        expectSameContacts(*contacts, full, s.t);
+        for (const ContactPairState& c : full)
         {
-          const ContactPairState &a = (*contacts)[i], &b = full[i];
-          EXPECT_EQ(a.pair, b.pair) << "t = " << s.t;
-          EXPECT_EQ(a.normal_force, b.normal_force) << "t = " << s.t;
-          EXPECT_EQ(a.friction_force, b.friction_force) << "t = " << s.t;
-          EXPECT_EQ(a.force_on_a, b.force_on_a) << "t = " << s.t;
-          EXPECT_EQ(a.point_a, b.point_a) << "t = " << s.t;
-          touched[b.pair - m.checked_pairs.size()] = true;
-          sliding += b.friction_force > 0.0 ? 1 : 0;
+          touched[c.pair - m.checked_pairs.size()] = true;
+          sliding += c.friction_force > 0.0 ? 1 : 0;
         }
       });
   ASSERT_TRUE(result.summary.ok()) << result.summary.message;

@@ -7,6 +7,7 @@
 #include "active_tensegrity/core/adaptive.h"
 #include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/scene.h"
+#include "contact_checks.h"
 
 using namespace active_tensegrity::core;
 
@@ -201,27 +202,15 @@ TEST(Tower, EveryStepsContactsAreThoseOfAFullSearch)
                               { "analysis.output_interval", "0.05" } });
   ContactScan scan(model);
   int steps = 0, touching = 0, given = 0;
-  const auto same = [](const std::vector<ContactPairState>& a, const std::vector<ContactPairState>& b, double t)
-  {
-    ASSERT_EQ(a.size(), b.size()) << "t = " << t;
-    for (size_t i = 0; i < a.size(); ++i)
-    {
-      EXPECT_EQ(a[i].pair, b[i].pair) << "t = " << t;
-      EXPECT_EQ(a[i].normal_force, b[i].normal_force) << "t = " << t;
-      EXPECT_EQ(a[i].friction_force, b[i].friction_force) << "t = " << t;
-      EXPECT_EQ(a[i].penetration_rate, b[i].penetration_rate) << "t = " << t;
-      EXPECT_EQ(a[i].force_on_a, b[i].force_on_a) << "t = " << t;
-    }
-  };
   const RunResult result = runAnalysis(
       model, [](const State&) {}, {},
       [&](const State& s, const std::vector<ContactPairState>* contacts)
       {
         const std::vector<ContactPairState> full = activeContacts(model, s);
-        same(scan.active(s), full, s.t);
+        active_tensegrity::test::expectSameContacts(scan.active(s), full, s.t);
         if (contacts)
         {
-          same(*contacts, full, s.t);
+          active_tensegrity::test::expectSameContacts(*contacts, full, s.t);
           ++given;
         }
         ++steps;
@@ -303,16 +292,7 @@ TEST(Tower, ContactsFormedAtEveryStepsEndAreThoseFormedOnDemand)
       const std::vector<ContactPairState>* cb = lazy.contactsAt(b);
       ASSERT_NE(ca, nullptr) << "t = " << t;
       ASSERT_NE(cb, nullptr) << "t = " << t;
-      ASSERT_EQ(ca->size(), cb->size()) << "t = " << t;
-      for (size_t i = 0; i < ca->size(); ++i)
-      {
-        EXPECT_EQ((*ca)[i].pair, (*cb)[i].pair) << "t = " << t;
-        EXPECT_EQ((*ca)[i].normal_force, (*cb)[i].normal_force) << "t = " << t;
-        EXPECT_EQ((*ca)[i].friction_force, (*cb)[i].friction_force) << "t = " << t;
-        EXPECT_EQ((*ca)[i].penetration, (*cb)[i].penetration) << "t = " << t;
-        EXPECT_EQ((*ca)[i].force_on_a, (*cb)[i].force_on_a) << "t = " << t;
-        EXPECT_EQ((*ca)[i].point_a, (*cb)[i].point_a) << "t = " << t;
-      }
+      active_tensegrity::test::expectSameContacts(*ca, *cb, t);
       touching += ca->empty() ? 0 : 1;
     }
     EXPECT_GT(touching, adaptive ? 10 : 100) << "the fold must reach contact (adaptive " << adaptive << ")";
