@@ -863,8 +863,9 @@ RunResult run(const Model& model, const std::function<void(const State&)>& user_
     watch(state);
     on_output(state);
     ++result.steps;
-    // after each step: the yield watch, and the caller's on_step with the step's contacts, whose forces are
-    // evaluated for it alone (without an on_step that reads them, nothing asks for them)
+    // after each step: the yield watch, and the caller's on_step with the step's contacts, whose forces the solver
+    // forms in its pass over the step's end for such an on_step alone (setContactsEveryStep above; without one
+    // nothing forms them)
     const auto after_step = [&](const State& s) { step_hook(s, contacts_wanted ? solver.contactsAt(s) : nullptr); };
     if (model.solver.adaptive)
       runAdaptive(model, solver, law, state, result, on_output, on_progress, after_step);
