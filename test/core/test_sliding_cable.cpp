@@ -189,7 +189,10 @@ struct Pulley
     m.actuators.push_back(Actuator{ "winch", -0.5, 0.5, {}, { 0 } });
     m.cables[0].actuator = 0;
     finalizeModel(m);
-    m.q0 = Vec3(0.4, 0.05, -0.9);  // off the equilibrium (also out of the plane)
+    // off the equilibrium (also out of the plane); set entry by entry: GCC 12 warned (-Warray-bounds) on the
+    // vectorized copy of a Vec3 temporary into the VectorXd
+    m.q0.resize(3);
+    m.q0 << 0.4, 0.05, -0.9;
     return m;
   }
 
