@@ -88,7 +88,9 @@ double maxStrutBendingStress(const Model& model, const Eigen::VectorXd& q, const
     Vec3 reaction = Vec3::Zero();  // at the lower end
     for (size_t i = first; i < last; ++i)
       reaction += loads[i].f * (len - loads[i].s) / len;
-    // the moment is piecewise linear: its largest magnitude is at a load point
+    // the moment is piecewise linear: its largest magnitude is at a load point (compared squared, one square root
+    // and division per strut: the same number, as the square root is monotonic)
+    double largest = 0.0;
     for (size_t j = first; j < last; ++j)
     {
       const double x = loads[j].s;
@@ -96,9 +98,10 @@ double maxStrutBendingStress(const Model& model, const Eigen::VectorXd& q, const
       for (size_t i = first; i < last; ++i)
         if (loads[i].s < x)
           moment -= loads[i].f * (x - loads[i].s);
-      const double r = b.layers.front().outer_radius;
-      sigma = std::max(sigma, 4.0 * moment.norm() / (M_PI * r * r * r));
+      largest = std::max(largest, moment.squaredNorm());
     }
+    const double r = b.layers.front().outer_radius;
+    sigma = std::max(sigma, 4.0 * std::sqrt(largest) / (M_PI * r * r * r));
   }
   return sigma;
 }
@@ -533,6 +536,16 @@ PeakTracker::PeakTracker(const Model& model) : model_(model), contacts_(model)
   for (const char* name :
        { "actuation_force", "max_normal_force", "max_friction_force", "max_strut_bending_stress", "max_cable_stress" })
     peaks_.push_back({ name, 0.0, 0.0 });
+  // (maxCableStress's loop with the points' slots found once: it runs at every step)
+  for (size_t c = 0; c < model.cables.size(); ++c)
+  {
+    if (!(model.cables[c].area > 0.0))
+      continue;
+    stress_cables_.push_back(static_cast<int>(c));
+    stress_first_.push_back(static_cast<int>(stress_slots_.size()));
+    for (const PointRef& p : model.cables[c].points)
+      stress_slots_.push_back(pointSlot(model, p));
+  }
 }
 
 void PeakTracker::add(const State& state, const std::vector<ContactPairState>* given)
@@ -546,8 +559,19 @@ void PeakTracker::add(const State& state, const std::vector<ContactPairState>* g
       max_normal = std::max(max_normal, c.normal_force);
       max_friction = std::max(max_friction, c.friction_force);
     }
+  // maxCableStress (the same numbers, in the same order)
+  frames_.update(model_, state.q, state.qd);
+  double max_cable = 0.0;
+  for (size_t k = 0; k < stress_cables_.size(); ++k)
+  {
+    const Cable& c = model_.cables[stress_cables_[k]];
+    max_cable = std::max(max_cable, evaluateCable(c, stress_slots_.data() + stress_first_[k], frames_, state.q,
+                                                  state.qd, state.u, model_.damping_enabled)
+                                            .tension /
+                                        c.area);
+  }
   const double values[] = { model_.actuators.empty() ? 0.0 : actuationForce(model_, state, 0), max_normal, max_friction,
-                            maxStrutBendingStress(model_, state.q, contacts), maxCableStress(model_, state, frames_) };
+                            maxStrutBendingStress(model_, state.q, contacts), max_cable };
   for (size_t k = 0; k < peaks_.size(); ++k)
     if (std::abs(values[k]) > std::abs(peaks_[k].value))
     {

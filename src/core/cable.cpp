@@ -204,6 +204,14 @@ CableState evaluateCable(const Model& model, const Cable& cable, const BodyFrame
       [&](int j, Vec3& p, Vec3& v) { frames.motion(model, cable.points[j], q, qd, p, v); }, [](int, const Vec3&) {});
 }
 
+CableState evaluateCable(const Cable& cable, const PointSlot* points, const BodyFrames& frames,
+                         const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const ActuationValues& u, bool damping)
+{
+  return cableForces(
+      cable, static_cast<int>(cable.points.size()), u, damping, false,
+      [&](int j, Vec3& p, Vec3& v) { frames.motion(points[j], q, qd, p, v); }, [](int, const Vec3&) {});
+}
+
 double cablePotentialEnergy(const Cable& cable, const CableState& s)
 {
   const double stretch = s.length - s.rest_length;

@@ -62,9 +62,10 @@ std::string csvNumber(double v)
 {
   if (std::isinf(v))
     return v > 0 ? "" : "-inf";
-  std::ostringstream s;
-  s << std::setprecision(10) << v;
-  return s.str();
+  // what an ostream with setprecision(10) writes (%.10g in the C locale), without forming one per number
+  char buf[32];
+  const int n = std::snprintf(buf, sizeof buf, "%.10g", v);
+  return std::string(buf, static_cast<size_t>(std::max(n, 0)));
 }
 
 // A YAML double-quoted scalar: backslashes, quotes and control characters escaped

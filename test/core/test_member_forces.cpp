@@ -1,6 +1,7 @@
 // Member forces (analysis.h: strutAxialForces, memberColumns, memberRow): the quadruplex's strut force of
 // Table 1, the tower's struts through their ball joints in static equilibrium (both ends agree), a
 // form-found prism at rest in a dynamic run; the struts' bending stress under contact loads (maxStrutBendingStress).
+#include <algorithm>
 #include <cmath>
 #include <string>
 #include <vector>
@@ -162,4 +163,67 @@ TEST(MemberForces, StrutBendingIsThatOfASimplySupportedBeam)
   const double expected_opposite = 100.0 * 0.2 * length * 0.6 * length / length / section;
   EXPECT_NEAR(opposite, expected_opposite, 1e-9 * expected_opposite);
   EXPECT_EQ(at::maxStrutBendingStress(model, s.q, {}), 0.0);
+}
+
+// PeakTracker (a run's `peaks`, fed every step) gives, for each of its five columns, the largest magnitude over the
+// steps of what the row functions give at each step (actuationForce, the contacts' largest forces,
+// maxStrutBendingStress, maxCableStress), the same bits and the same step: its own cable loop, with the points'
+// slots found once, must not change a number. (It calls maxStrutBendingStress itself: that function's values are
+// checked in closed form above.)
+namespace
+{
+void expectPeaksOfEveryStep(const at::Model& model)
+{
+  at::PeakTracker tracker(model);
+  std::vector<at::Peak> expected = { { "actuation_force", 0.0, 0.0 },
+                                     { "max_normal_force", 0.0, 0.0 },
+                                     { "max_friction_force", 0.0, 0.0 },
+                                     { "max_strut_bending_stress", 0.0, 0.0 },
+                                     { "max_cable_stress", 0.0, 0.0 } };
+  int steps = 0;
+  const auto on_step = [&](const at::State& s, const std::vector<at::ContactPairState>* given)
+  {
+    tracker.add(s, given);
+    const std::vector<at::ContactPairState> contacts = at::activeContacts(model, s);
+    double normal = 0.0, friction = 0.0;
+    for (const at::ContactPairState& c : contacts)
+      if (c.body_b >= 0)
+      {
+        normal = std::max(normal, c.normal_force);
+        friction = std::max(friction, c.friction_force);
+      }
+    const double values[] = { model.actuators.empty() ? 0.0 : at::actuationForce(model, s, 0), normal, friction,
+                              at::maxStrutBendingStress(model, s.q, contacts), at::maxCableStress(model, s) };
+    for (size_t k = 0; k < expected.size(); ++k)
+      if (std::abs(values[k]) > std::abs(expected[k].value))
+        expected[k] = { expected[k].name, values[k], s.t };
+    ++steps;
+  };
+  const at::RunResult r = at::runAnalysis(
+      model, [](const at::State&) {}, {}, on_step);
+  ASSERT_TRUE(r.summary.ok()) << r.summary.message;
+  ASSERT_GT(steps, 100);
+  ASSERT_EQ(tracker.peaks().size(), expected.size());
+  for (size_t k = 0; k < expected.size(); ++k)
+  {
+    EXPECT_EQ(tracker.peaks()[k].name, expected[k].name);
+    EXPECT_EQ(tracker.peaks()[k].value, expected[k].value) << expected[k].name;
+    EXPECT_EQ(tracker.peaks()[k].t, expected[k].t) << expected[k].name;
+  }
+  // every column met something to track
+  EXPECT_GT(expected[1].value, 0.0);
+  EXPECT_GT(expected[3].value, 0.0);
+  EXPECT_GT(expected[4].value, 0.0);
+}
+}  // namespace
+
+TEST(MemberForces, PeaksAreTheLargestOfEveryStepsRowValues)
+{
+  // the quadruplex pressed into strut contact (two-point cables, several loads on a strut)
+  expectPeaksOfEveryStep(at::loadScene(scene("quadruplex_linear_contact.yaml"),
+                                       overrides({ "analysis.duration=0.7", "analysis.output_interval=0.1" })));
+  // the tower's fast fold into contact with friction (sliding cables over several points)
+  expectPeaksOfEveryStep(
+      at::loadScene(scene("tower.yaml"), overrides({ "analysis.type=dynamic", "actuation.speed=5",
+                                                     "analysis.duration=0.6", "analysis.output_interval=0.1" })));
 }

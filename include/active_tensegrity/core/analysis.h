@@ -164,6 +164,10 @@ private:
   std::vector<Peak> peaks_;
   ContactScan contacts_;
   BodyFrames frames_;  // of the cable stresses
+  // the cables with a cross-section (those with a stress), their points as slots: cable c's are
+  // stress_slots_[stress_first_[k]...] for k its place in stress_cables_
+  std::vector<int> stress_cables_, stress_first_;
+  std::vector<PointSlot> stress_slots_;
 };
 
 struct RunResult

@@ -53,6 +53,10 @@ CableState evaluateCable(const Model& model, const Cable& cable, const Eigen::Ve
 /// The cable's state alone, the points' motion from frames formed at (q, qd).
 CableState evaluateCable(const Model& model, const Cable& cable, const BodyFrames& frames, const Eigen::VectorXd& q,
                          const Eigen::VectorXd& qd, const ActuationValues& u, bool damping);
+/// The cable's state alone at its point slots (`points`, as many as the cable has), the points' motion from frames
+/// formed at (q, qd): the same numbers as the overload above, without finding the slots.
+CableState evaluateCable(const Cable& cable, const PointSlot* points, const BodyFrames& frames,
+                         const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const ActuationValues& u, bool damping);
 /// The same without tangents, the points' motion from frames formed at (q, qd) and the forces summed into
 /// `sum` and F (the caller flushes `sum` into F once all elements are added): a residual's force loop. The
 /// cable's points are given as slots (`points`, as many as the cable has; System keeps them in one table).
