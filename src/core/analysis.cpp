@@ -118,18 +118,33 @@ std::vector<CableState> cableStates(const Model& model, const State& state)
 
 double maxCableStress(const Model& model, const State& state)
 {
-  BodyFrames frames;
-  return maxCableStress(model, state, frames);
+  return CableStressScan(model).largest(state);
 }
 
-double maxCableStress(const Model& model, const State& state, BodyFrames& frames)
+CableStressScan::CableStressScan(const Model& model) : model_(model)
 {
-  frames.update(model, state.q, state.qd);
+  for (size_t c = 0; c < model.cables.size(); ++c)
+  {
+    if (!(model.cables[c].area > 0.0))
+      continue;
+    cables_.push_back(static_cast<int>(c));
+    first_.push_back(static_cast<int>(slots_.size()));
+    for (const PointRef& p : model.cables[c].points)
+      slots_.push_back(pointSlot(model, p));
+  }
+}
+
+double CableStressScan::largest(const State& state)
+{
+  frames_.update(model_, state.q, state.qd);
   double sigma = 0.0;
-  for (const Cable& c : model.cables)
-    if (c.area > 0.0)
-      sigma = std::max(
-          sigma, evaluateCable(model, c, frames, state.q, state.qd, state.u, model.damping_enabled).tension / c.area);
+  for (size_t k = 0; k < cables_.size(); ++k)
+  {
+    const Cable& c = model_.cables[cables_[k]];
+    const CableState s =
+        evaluateCable(c, slots_.data() + first_[k], frames_, state.q, state.qd, state.u, model_.damping_enabled);
+    sigma = std::max(sigma, s.tension / c.area);
+  }
   return sigma;
 }
 
@@ -531,21 +546,11 @@ const std::vector<ContactPairState>& ContactScan::active(const State& state)
   return contacts_;
 }
 
-PeakTracker::PeakTracker(const Model& model) : model_(model), contacts_(model)
+PeakTracker::PeakTracker(const Model& model) : model_(model), contacts_(model), cable_stress_(model)
 {
   for (const char* name :
        { "actuation_force", "max_normal_force", "max_friction_force", "max_strut_bending_stress", "max_cable_stress" })
     peaks_.push_back({ name, 0.0, 0.0 });
-  // (maxCableStress's loop with the points' slots found once: it runs at every step)
-  for (size_t c = 0; c < model.cables.size(); ++c)
-  {
-    if (!(model.cables[c].area > 0.0))
-      continue;
-    stress_cables_.push_back(static_cast<int>(c));
-    stress_first_.push_back(static_cast<int>(stress_slots_.size()));
-    for (const PointRef& p : model.cables[c].points)
-      stress_slots_.push_back(pointSlot(model, p));
-  }
 }
 
 void PeakTracker::add(const State& state, const std::vector<ContactPairState>* given)
@@ -559,19 +564,8 @@ void PeakTracker::add(const State& state, const std::vector<ContactPairState>* g
       max_normal = std::max(max_normal, c.normal_force);
       max_friction = std::max(max_friction, c.friction_force);
     }
-  // maxCableStress (the same numbers, in the same order)
-  frames_.update(model_, state.q, state.qd);
-  double max_cable = 0.0;
-  for (size_t k = 0; k < stress_cables_.size(); ++k)
-  {
-    const Cable& c = model_.cables[stress_cables_[k]];
-    max_cable = std::max(max_cable, evaluateCable(c, stress_slots_.data() + stress_first_[k], frames_, state.q,
-                                                  state.qd, state.u, model_.damping_enabled)
-                                            .tension /
-                                        c.area);
-  }
   const double values[] = { model_.actuators.empty() ? 0.0 : actuationForce(model_, state, 0), max_normal, max_friction,
-                            maxStrutBendingStress(model_, state.q, contacts), max_cable };
+                            maxStrutBendingStress(model_, state.q, contacts), cable_stress_.largest(state) };
   for (size_t k = 0; k < peaks_.size(); ++k)
     if (std::abs(values[k]) > std::abs(peaks_[k].value))
     {

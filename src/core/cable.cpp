@@ -196,14 +196,6 @@ CableState evaluateCable(const Cable& cable, const PointSlot* points, const Body
       [&](int j, const Vec3& f) { sum.add(points[j], f, F); });
 }
 
-CableState evaluateCable(const Model& model, const Cable& cable, const BodyFrames& frames, const Eigen::VectorXd& q,
-                         const Eigen::VectorXd& qd, const ActuationValues& u, bool damping)
-{
-  return cableForces(
-      cable, static_cast<int>(cable.points.size()), u, damping, false,
-      [&](int j, Vec3& p, Vec3& v) { frames.motion(model, cable.points[j], q, qd, p, v); }, [](int, const Vec3&) {});
-}
-
 CableState evaluateCable(const Cable& cable, const PointSlot* points, const BodyFrames& frames,
                          const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const ActuationValues& u, bool damping)
 {

@@ -118,12 +118,6 @@ void BodyFrames::update(const Model& model, const Eigen::VectorXd& q, const Eige
   }
 }
 
-void BodyFrames::motion(const Model& model, const PointRef& point, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
-                        Vec3& p, Vec3& v) const
-{
-  motion(pointSlot(model, point), q, qd, p, v);
-}
-
 void PointForceSum::reset(const Model& model)
 {
   moment_.resize(model.bodies.size());

@@ -277,7 +277,7 @@ TEST(CableFrames, ResidualLoopEqualsThePointwiseForms)
       for (const PointRef& p : c.points)
       {
         Vec3 pf, vf, pe, ve;
-        frames.motion(m, p, q, qd, pf, vf);
+        frames.motion(pointSlot(m, p), q, qd, pf, vf);
         pointMotion(m, p, q, qd, pe, ve);
         EXPECT_LT((pf - pe).norm(), 1e-14 * (1.0 + pe.norm())) << c.name;
         EXPECT_LT((vf - ve).norm(), 1e-13 * (1.0 + ve.norm())) << c.name;

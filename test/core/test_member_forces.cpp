@@ -9,6 +9,7 @@
 #include <gtest/gtest.h>
 
 #include "active_tensegrity/core/analysis.h"
+#include "active_tensegrity/core/cable.h"
 #include "active_tensegrity/core/form_finding.h"
 #include "active_tensegrity/core/generators.h"
 #include "active_tensegrity/core/scene.h"
@@ -167,9 +168,9 @@ TEST(MemberForces, StrutBendingIsThatOfASimplySupportedBeam)
 
 // PeakTracker (a run's `peaks`, fed every step) gives, for each of its five columns, the largest magnitude over the
 // steps of what the row functions give at each step (actuationForce, the contacts' largest forces,
-// maxStrutBendingStress, maxCableStress), the same bits and the same step: its own cable loop, with the points'
-// slots found once, must not change a number. (It calls maxStrutBendingStress itself: that function's values are
-// checked in closed form above.)
+// maxStrutBendingStress, maxCableStress), the same bits and the same step, though it keeps its cable scan
+// (CableStressScan) from step to step; and the cable stress of each step is the cables' own (evaluateCable from each
+// point's motion) to its round-off. (maxStrutBendingStress's values are checked in closed form above.)
 namespace
 {
 void expectPeaksOfEveryStep(const at::Model& model)
@@ -194,6 +195,15 @@ void expectPeaksOfEveryStep(const at::Model& model)
       }
     const double values[] = { model.actuators.empty() ? 0.0 : at::actuationForce(model, s, 0), normal, friction,
                               at::maxStrutBendingStress(model, s.q, contacts), at::maxCableStress(model, s) };
+    // the cable stress as evaluateCable gives it from each point's own motion (not from frames and slots)
+    double stress = 0.0;
+    for (const at::Cable& c : model.cables)
+      if (c.area > 0.0)
+        stress = std::max(
+            stress,
+            at::evaluateCable(model, c, s.q, s.qd, s.u, model.damping_enabled, nullptr, nullptr, 0.0, 0.0).tension /
+                c.area);
+    EXPECT_NEAR(values[4], stress, 1e-9 * stress) << "t = " << s.t;  // (T = k (l - l0): l's round-off, magnified)
     for (size_t k = 0; k < expected.size(); ++k)
       if (std::abs(values[k]) > std::abs(expected[k].value))
         expected[k] = { expected[k].name, values[k], s.t };

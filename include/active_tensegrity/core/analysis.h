@@ -93,9 +93,22 @@ std::vector<double> memberRow(const Model& model, const State& state);
 
 /// Largest stress T / A in a material cable (springs have no section and are left out), Pa.
 double maxCableStress(const Model& model, const State& state);
-/// The same with the points' motion from `frames`, formed here at the state (a caller that runs it every step
-/// keeps them: no allocation).
-double maxCableStress(const Model& model, const State& state, BodyFrames& frames);
+
+/// maxCableStress for a sequence of states (every step of a run): the material cables and their points' slots
+/// are found once, the points' motion comes from frames formed at each state (no allocation after the first).
+class CableStressScan
+{
+public:
+  explicit CableStressScan(const Model& model);
+  /// maxCableStress(model, state), the same number.
+  double largest(const State& state);
+
+private:
+  const Model& model_;
+  BodyFrames frames_;
+  std::vector<int> cables_, first_;  // the material cables; cables_[k]'s points are slots_[first_[k]] on
+  std::vector<PointSlot> slots_;
+};
 
 /// Number of slack cables (tension-only elements carrying no tension) in a state.
 int slackCables(const Model& model, const State& state);
@@ -163,11 +176,7 @@ private:
   const Model& model_;
   std::vector<Peak> peaks_;
   ContactScan contacts_;
-  BodyFrames frames_;  // of the cable stresses
-  // the cables with a cross-section (those with a stress), their points as slots: cable c's are
-  // stress_slots_[stress_first_[k]...] for k its place in stress_cables_
-  std::vector<int> stress_cables_, stress_first_;
-  std::vector<PointSlot> stress_slots_;
+  CableStressScan cable_stress_;
 };
 
 struct RunResult

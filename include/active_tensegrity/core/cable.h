@@ -50,11 +50,8 @@ CableState cableLaw(const Cable& cable, double length, double rate, const Actuat
 CableState evaluateCable(const Model& model, const Cable& cable, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
                          const ActuationValues& u, bool damping, Eigen::VectorXd* F, BlockSparseMatrix* jac,
                          double k_weight, double c_weight);
-/// The cable's state alone, the points' motion from frames formed at (q, qd).
-CableState evaluateCable(const Model& model, const Cable& cable, const BodyFrames& frames, const Eigen::VectorXd& q,
-                         const Eigen::VectorXd& qd, const ActuationValues& u, bool damping);
 /// The cable's state alone at its point slots (`points`, as many as the cable has), the points' motion from frames
-/// formed at (q, qd): the same numbers as the overload above, without finding the slots.
+/// formed at (q, qd).
 CableState evaluateCable(const Cable& cable, const PointSlot* points, const BodyFrames& frames,
                          const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const ActuationValues& u, bool damping);
 /// The same without tangents, the points' motion from frames formed at (q, qd) and the forces summed into

@@ -80,10 +80,7 @@ class BodyFrames
 public:
   /// Forms the frames at q, qd for every strut of the model (no allocation once sized).
   void update(const Model& model, const Eigen::VectorXd& q, const Eigen::VectorXd& qd);
-  /// As pointMotion, from the frames last formed (at the same q, qd).
-  void motion(const Model& model, const PointRef& point, const Eigen::VectorXd& q, const Eigen::VectorXd& qd, Vec3& p,
-              Vec3& v) const;
-  /// The same for a point slot.
+  /// As pointMotion for the point's slot, from the frames last formed (at the same q, qd).
   void motion(const PointSlot& point, const Eigen::VectorXd& q, const Eigen::VectorXd& qd, Vec3& p, Vec3& v) const
   {
     if (point.body < 0)
