@@ -68,6 +68,17 @@ at_workspace() {
   fi
 }
 
+# at_side_workspace DIR: a second catkin folder on the same package folder as build/ws (DIR/src a symlink to
+# build/ws/src), for builds with other flags (scripts/check_sanitizers, scripts/speed_report --generic).
+at_side_workspace() {
+  local dir=$1
+  mkdir -p "$dir"
+  if [[ "$(readlink "$dir/src" 2>/dev/null || true)" != "$AT_WS/src" ]]; then
+    rm -rf "$dir/src"
+    ln -s "$AT_WS/src" "$dir/src"
+  fi
+}
+
 # catkin_make in build/ws; extra arguments are make targets, e.g. run_tests. Incremental when re-run.
 # run_tests runs each test through build/catkin_generated/env_cached.sh, whose PYTHONPATH catkin computes
 # when cmake first configures: on a fresh clone devel/lib/python3/dist-packages does not exist yet and is
