@@ -64,7 +64,7 @@ double firstBelow(const std::vector<double>& x, const std::vector<double>& y, do
 }
 }  // namespace
 
-TEST(Tower, LayoutIsThatOfThePhysicsNotes)
+TEST(Tower, LayoutIsThatOfThePapersFourStageTower)
 {
   const Model m = tower();
   int struts = 0, sliding = 0, springs = 0, joints = 0, pins = 0;

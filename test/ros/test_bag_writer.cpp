@@ -162,8 +162,8 @@ TEST(MessageBuilder, ContactArrowsAreDrawnAndDeletedWhenTheContactEnds)
 
 TEST(TensegrityRunBag, WritesEveryTopicPerOutputStepInSimulatedTime)
 {
-  const std::string bag_path = ::testing::TempDir() + "tensegrity_run_tower.bag";
-  const std::string csv = ::testing::TempDir() + "tensegrity_run_tower_bag.csv";
+  const std::string bag_path = active_tensegrity::test::scratchPath("tensegrity_run_tower.bag");
+  const std::string csv = active_tensegrity::test::scratchPath("tensegrity_run_tower_bag.csv");
   std::string out;
   // the quasi-static fold past the contact onset (0.638 m): 70 load steps of 0.01 m
   const int code = run(scene("tower.yaml") + " --set analysis.max_actuation=0.7 --set analysis.steps=70 --out " + csv +

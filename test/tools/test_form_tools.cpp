@@ -34,7 +34,7 @@ Result formfind(const std::string& args)
 
 std::string tmp(const std::string& name)
 {
-  return ::testing::TempDir() + "form_tools_" + name;
+  return active_tensegrity::test::scratchPath(name);
 }
 
 std::string text(const std::string& path)

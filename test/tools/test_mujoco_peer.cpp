@@ -318,7 +318,7 @@ TEST(MujocoPeer, ExportedMjcfLoadsAndRunsAsTheTranslation)
     std::string sets;
     for (const std::string& o : overrides)
       sets += " --set " + o;
-    const std::string out = ::testing::TempDir() + "export_" + file + ".xml";
+    const std::string out = active_tensegrity::test::scratchPath("export_" + file + ".xml");
     const active_tensegrity::test::CommandResult r = active_tensegrity::test::runCommand(
         std::string(TENSEGRITY_EXPORT_PATH) + " " + kScenes + file + sets + " --mjcf " + out + " 2>&1");
     ASSERT_EQ(r.code, 0) << file << ": " << r.output;

@@ -55,7 +55,7 @@ std::vector<double> numbers(const std::string& row)
 
 std::string tmp(const std::string& name)
 {
-  return ::testing::TempDir() + "tensegrity_run_" + name;
+  return active_tensegrity::test::scratchPath(name);
 }
 }  // namespace
 
