@@ -235,10 +235,16 @@ int ActuationController::index(const std::string& name) const
 
 ActuationValues ActuationController::values(double t) const
 {
-  ActuationValues u(motions_.size());
+  ActuationValues u;
+  values(t, u);
+  return u;
+}
+
+void ActuationController::values(double t, ActuationValues& u) const
+{
+  u.resize(motions_.size());
   for (size_t i = 0; i < motions_.size(); ++i)
     u[i] = motions_[i].evaluate(t);
-  return u;
 }
 
 bool ActuationController::moving(double t) const

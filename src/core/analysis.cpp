@@ -167,10 +167,20 @@ void forEachRamp(const AnalysisSettings& an, int a, F&& f)
 
 ActuationValues scheduledActuation(const Model& model, double t)
 {
+  ActuationValues out;
+  scheduledActuation(model, t, out);
+  return out;
+}
+
+void scheduledActuation(const Model& model, double t, ActuationValues& out)
+{
   const AnalysisSettings& an = model.analysis;
   if (an.sequence.empty())
-    return ActuationValues(model.actuators.size(), an.schedule.evaluate(t));
-  ActuationValues out(model.actuators.size());
+  {
+    out.assign(model.actuators.size(), an.schedule.evaluate(t));
+    return;
+  }
+  out.assign(model.actuators.size(), ActuationValue{});
   for (size_t a = 0; a < model.actuators.size(); ++a)
     forEachRamp(an, static_cast<int>(a),
                 [&](const RampSchedule& r, double from, double to)
@@ -181,7 +191,6 @@ ActuationValues scheduledActuation(const Model& model, double t)
                   const double sign = to >= from ? 1.0 : -1.0;
                   out[a] = ActuationValue{ from + sign * v.value, sign * v.rate, sign * v.accel };
                 });
-  return out;
 }
 
 double actuationEndTime(const Model& model)
@@ -244,7 +253,10 @@ void forEachCableStrutGap(const Model& model, const Eigen::VectorXd& q, bool gro
     Vec3 a, b;    // axis ends
     Vec3 lo, hi;  // the capsule's box, grown by the margin
   };
-  std::vector<Box> boxes;
+  // (kept from call to call: the run checks the crossings at every output, with no allocation once it has its size;
+  // the visitors do not call back in here)
+  thread_local std::vector<Box> boxes;
+  boxes.clear();
   double length_sum = 0.0, widest = 0.0;
   int struts = 0;
   for (const Body& b : model.bodies)
@@ -668,7 +680,8 @@ void runAdaptive(const Model& model, DynamicsSolver& solver, const ActuationLaw&
     f();
     result.callback_time += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   };
-  const auto each_step = [&](const State& s)
+  // (a std::function made once: advanceTo takes one, and a lambda of this size converted at each call allocates)
+  const std::function<void(const State&)> each_step = [&](const State& s)
   {
     timed(
         [&]()
@@ -870,7 +883,8 @@ RunResult run(const Model& model, const std::function<void(const State&)>& user_
   {
     DynamicsSolver solver(model, model.solver);
     solver.setContactsEveryStep(contacts_wanted);
-    const ActuationLaw law = [&model](double t) { return scheduledActuation(model, t); };
+    const ActuationLaw law =
+        ActuationLaw::writing([&model](double t, ActuationValues& u) { scheduledActuation(model, t, u); });
     result.summary = solver.initialize(state, law);
     with_start_warnings(result.summary);
     if (!result.summary.ok())

@@ -410,7 +410,8 @@ Summary DynamicsSolver::attemptOrFullNewton(State& s, double h, const ActuationL
 Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law, bool full_newton)
 {
   Summary sum;
-  const ActuationValues u = law(s.t + h);
+  law(s.t + h, u_iter_);  // a member: no allocation in the step loop (with a writing law)
+  const ActuationValues& u = u_iter_;
   Eigen::VectorXd& qdd = qdd_iter_;  // members: no allocation in the step loop
   Eigen::VectorXd& lambda = lambda_iter_;
   firstGuess(s, h, qdd, lambda);
@@ -705,7 +706,7 @@ Summary DynamicsSolver::initialize(State& s, const ActuationLaw& law)
 {
   Summary sum;
   history_count_ = 0;
-  s.u = law(s.t);
+  law(s.t, s.u);
   const int nq = system_.nq();
   const int nl = system_.nLambda();
   Eigen::VectorXd rhs(system_.size()), x, tmp;

@@ -240,7 +240,7 @@ bool SparseLinearSolver::factorizeExact(const Eigen::SparseMatrix<double>& a)
   // a 104-unknown matrix, a tenth of a tower load step) is made only when the pivots spread over more than
   // 8 decades: with partial pivoting on an equilibrated matrix, a condition beyond 1e14 shows in its pivots
   // in practice (a mechanism's matrix has a pivot at round-off)
-  const Eigen::VectorXd pivots = dense_lu_.matrixLU().diagonal().cwiseAbs();
+  const auto pivots = dense_lu_.matrixLU().diagonal().cwiseAbs();  // (an expression: no allocation)
   if (pivots.size() > 0 && pivots.minCoeff() > 1e-8 * pivots.maxCoeff())
     return true;
   return dense_lu_.rcond() > 1e-14;

@@ -514,7 +514,8 @@ DynamicPeaks simulate(const core::Model& model, const core::State& start, const 
   double mass = 0.0;
   for (const core::Body& b : dyn.bodies)
     mass += b.mass;
-  const core::ActuationLaw law = [&control](double t) { return control.values(t); };
+  const core::ActuationLaw law =
+      core::ActuationLaw::writing([&control](double t, core::ActuationValues& u) { control.values(t, u); });
   core::Summary sum = solver.initialize(s, law);
   const double dt = dyn.solver.dt;
   const double t_end = times.back();

@@ -377,7 +377,7 @@ public:
 private:
   at::ActuationLaw law()
   {
-    return [this](double t) { return controller_.values(t); };
+    return at::ActuationLaw::writing([this](double t, at::ActuationValues& u) { controller_.values(t, u); });
   }
   std::string stepMany(long n)
   {

@@ -542,7 +542,8 @@ void SimNode::run()
 {
   const double dt = model_.solver.dt;
   const double period = 1.0 / params_.publish_rate;
-  const core::ActuationLaw law = [this](double t) { return controller_.values(t); };
+  const core::ActuationLaw law =
+      core::ActuationLaw::writing([this](double t, core::ActuationValues& u) { controller_.values(t, u); });
 
   // pacing: simulated time since (pace_wall, pace_sim) runs at real_time_factor
   WallClock::time_point pace_wall = WallClock::now();

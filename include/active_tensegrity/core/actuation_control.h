@@ -74,6 +74,8 @@ public:
 
   /// The law s(t) of every actuator.
   ActuationValues values(double t) const;
+  /// The same into `u` (resized to the actuators; no allocation once it has that size).
+  void values(double t, ActuationValues& u) const;
   /// Index of the named actuator, or -1.
   int index(const std::string& name) const;
   /// True while some actuator has not reached the end of its motion.

@@ -5,6 +5,8 @@
 #pragma once
 
 #include <functional>
+#include <type_traits>
+#include <utility>
 
 #include "active_tensegrity/core/contact.h"
 #include "active_tensegrity/core/reduced_linear_solver.h"
@@ -14,8 +16,56 @@
 
 namespace active_tensegrity::core
 {
-/// s(t) for every actuator.
-using ActuationLaw = std::function<ActuationValues(double t)>;
+/// s(t) for every actuator: a function that returns the values, or (ActuationLaw::writing) one that writes
+/// them into a vector the caller keeps. The solver keeps that vector, so a writing law costs no heap
+/// allocation per step once the vector has its size; a returning law costs one (its result).
+class ActuationLaw
+{
+public:
+  using Returning = std::function<ActuationValues(double t)>;
+  using Writing = std::function<void(double t, ActuationValues& u)>;
+
+  ActuationLaw() = default;
+  /// From any callable that returns the values at t (a lambda, a std::function).
+  template <class F, std::enable_if_t<std::is_invocable_r_v<ActuationValues, const F&, double> &&
+                                          !std::is_same_v<std::decay_t<F>, ActuationLaw>,
+                                      int> = 0>
+  ActuationLaw(F f)  // NOLINT(google-explicit-constructor): a law is written as a lambda at every call site
+    : returning_(std::move(f))
+  {
+  }
+  /// From a callable that writes the values at t into its second argument (resizing it as needed).
+  static ActuationLaw writing(Writing w)
+  {
+    ActuationLaw law;
+    law.writing_ = std::move(w);
+    return law;
+  }
+
+  /// The values at t into u.
+  void operator()(double t, ActuationValues& u) const
+  {
+    if (writing_)
+      writing_(t, u);
+    else
+      u = returning_(t);
+  }
+  /// The values at t.
+  ActuationValues operator()(double t) const
+  {
+    ActuationValues u;
+    (*this)(t, u);
+    return u;
+  }
+  explicit operator bool() const
+  {
+    return writing_ || returning_;
+  }
+
+private:
+  Returning returning_;
+  Writing writing_;
+};
 
 /// What an accepted step tells a step-size controller (AdaptiveStepper).
 struct StepEstimate
@@ -157,6 +207,7 @@ private:
     return reduced_current_ || linear_.exact();
   }
   Eigen::VectorXd q_, qd_, acc_, inertial_, applied_, cforce_, phi_, r_, dx_, qdd_iter_, lambda_iter_;
+  ActuationValues u_iter_;           // the law's values at the attempted step's end
   std::vector<double> step_speeds_;  // v_0 per checked pair for the step being solved
   std::vector<int> near_;            // the step's contact slots within reach (findNearContacts)
   double near_motion_ = 0.0;         // the motion near_ allows for (m)

@@ -1,61 +1,16 @@
 // What the subcommands share (bench.h): the strut built in code and the heap allocation counter.
 #include "bench.h"
 
-#include <atomic>
 #include <cmath>
 #include <cstddef>
 
-// Heap allocations are counted by interposing glibc's malloc family in this executable (the core and
-// Eigen allocate through them; operator new does too): `steps` reports them per step. Not with
-// AddressSanitizer, which replaces malloc itself (this one would run before its initialization). GCC says
-// so with __SANITIZE_ADDRESS__, clang 14 only with __has_feature.
-#if defined(__SANITIZE_ADDRESS__)
-#define AT_BENCH_ASAN 1
-#elif defined(__has_feature)
-#if __has_feature(address_sanitizer)
-#define AT_BENCH_ASAN 1
-#endif
-#endif
-#ifndef AT_BENCH_ASAN
-namespace
-{
-std::atomic<long> g_allocations{ 0 };
-}
-extern "C"
-{
-  void* __libc_malloc(size_t size);
-  void* __libc_calloc(size_t n, size_t size);
-  void* __libc_realloc(void* p, size_t size);
-}
-extern "C"
-{
-  void* malloc(size_t size)
-  {
-    g_allocations.fetch_add(1, std::memory_order_relaxed);
-    return __libc_malloc(size);
-  }
-  void* calloc(size_t n, size_t size)
-  {
-    g_allocations.fetch_add(1, std::memory_order_relaxed);
-    return __libc_calloc(n, size);
-  }
-  void* realloc(void* p, size_t size)
-  {
-    g_allocations.fetch_add(1, std::memory_order_relaxed);
-    return __libc_realloc(p, size);
-  }
-}
-#endif
+#include "heap_counter.h"  // (defines malloc, calloc and realloc for this executable)
 
 namespace active_tensegrity::tools::bench
 {
 long heapAllocations()
 {
-#ifdef AT_BENCH_ASAN
-  return -1;
-#else
-  return g_allocations.load();
-#endif
+  return heapAllocationCount();
 }
 
 core::Body strut(const std::string& name, double length, double radius, double youngs_modulus, double poisson_ratio)
