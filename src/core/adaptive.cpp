@@ -72,6 +72,7 @@ Summary AdaptiveStepper::advanceTo(State& s, double t_end, const ActuationLaw& l
     {
       // the gap closed from onset_gap to -onset_depth: aim at half the allowed depth
       ++stats_.rejected_onset;
+      solver_.stepRefused();
       const double fraction = (e.onset_gap + 0.5 * options_.onset_depth) / (e.onset_gap + e.onset_depth);
       h_ = std::max(options_.dt_min, h * std::clamp(fraction, 0.02, 0.9));
       continue;
@@ -79,6 +80,7 @@ Summary AdaptiveStepper::advanceTo(State& s, double t_end, const ActuationLaw& l
     if (!at_min && err > 1.0)
     {
       ++stats_.rejected_error;
+      solver_.stepRefused();
       h_ = std::max(options_.dt_min, h * std::clamp(kSafety * std::cbrt(1.0 / err), kMinShrink, kSafety));
       continue;
     }

@@ -272,6 +272,7 @@ void DynamicsSolver::updateContactMemory(State& s, const Eigen::VectorXd& q_star
       estimate_.onset_pair = i;
     }
   }
+  most_touching_before_ = timings_.most_touching;
   timings_.most_touching = std::max(timings_.most_touching, touching);
   if (contacts_every_step_)
   {

@@ -1,5 +1,6 @@
 // The four-stage clustered tower (paper Sec. 6.2; layout in docs/scenes.md): its layout, the quasi-static fold
 // with and without contact against the paper's contact onset, and short dynamic folds.
+#include <algorithm>
 #include <cmath>
 
 #include <gtest/gtest.h>
@@ -330,4 +331,36 @@ TEST(Tower, TheSolverGivesContactsOnlyForTheStateItsLastStepEndedIn)
   moved = s;
   moved.t += 1e-9;  // callers round the time to their step grid
   EXPECT_NE(solver.contactsAt(moved), nullptr);
+}
+
+TEST(Tower, AStepTheStepControlRefusesLeavesTheMostTouchingPairsAsTheyWere)
+{
+  // StepTimings::most_touching counts the slots touching at the ends of accepted steps; a step that the solver
+  // accepted and the step control then refused (a contact onset too deep, an error above the tolerance: the
+  // adaptive stepper calls stepRefused) is not part of the run. Each time the touching pairs reach a new most,
+  // that step is refused once and taken again.
+  const Model m = tower({ { "analysis.type", "dynamic" }, { "actuation.speed", "5" } });
+  DynamicsSolver solver(m, m.solver);
+  const ActuationLaw law = [&m](double t) { return scheduledActuation(m, t); };
+  State s = initialState(m);
+  ASSERT_TRUE(solver.initialize(s, law).ok());
+  const double h = m.solver.dt;
+  int refused = 0;
+  while (s.t < 0.6 && refused < 3)
+  {
+    const long most = solver.timings().most_touching;
+    State trial = s;
+    ASSERT_TRUE(solver.tryStep(trial, h, law).ok()) << s.t;
+    if (solver.timings().most_touching > most)
+    {
+      solver.stepRefused();
+      EXPECT_EQ(solver.timings().most_touching, most) << "t = " << trial.t;
+      ++refused;
+      trial = s;
+      ASSERT_TRUE(solver.tryStep(trial, h, law).ok()) << s.t;
+      EXPECT_GT(solver.timings().most_touching, most) << "taken again: t = " << trial.t;
+    }
+    s = trial;
+  }
+  EXPECT_EQ(refused, 3) << "the fold must reach three new counts of touching pairs by 0.6 s";
 }

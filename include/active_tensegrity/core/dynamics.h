@@ -136,6 +136,13 @@ public:
   void resetTimings()
   {
     timings_ = StepTimings();
+    most_touching_before_ = 0;
+  }
+  /// The step control refused the step that tryStep just accepted (on its error estimate or a contact onset):
+  /// the figures of that step's end (StepTimings::most_touching) are taken back. Its work stays counted.
+  void stepRefused()
+  {
+    timings_.most_touching = most_touching_before_;
   }
 
   /// Effective Newmark coefficients and the generalized-alpha weights.
@@ -231,6 +238,7 @@ private:
   /// Whether `s` is the state the last accepted step ended in (end_*).
   bool atEnd(const State& s) const;
   StepTimings timings_;
+  long most_touching_before_ = 0;  // timings_.most_touching before the last accepted step's end (stepRefused)
   StepEstimate estimate_;
   // modified Newton (options_.reuse_jacobian): the factorization in linear_ and what it was built for
   bool factor_valid_ = false;

@@ -68,8 +68,8 @@ struct StepTimings
                                   // blocks
   long static_pivots_kept = 0;    // dynamics: steps that kept a static-pivot matrix though the touching pairs had
                                   // changed, the next factorization being static pivots too (the body blocks paused)
-  long most_touching = 0;  // dynamics: the most contact slots touching at the end of a step the solver accepted (with
-                           // adaptive steps, also of one the step control then refused); a maximum, not a sum
+  long most_touching = 0;  // dynamics: the most contact slots touching at the end of an accepted step (not of one the
+                           // adaptive step control refused); a maximum, not a sum
 
   StepTimings& operator+=(const StepTimings& o)
   {
