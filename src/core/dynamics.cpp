@@ -42,8 +42,10 @@ bool sameBits(const Eigen::VectorXd& a, const Eigen::VectorXd& b)
 /// Orders contacts by their slot (as activeContacts gives them).
 void sortBySlot(std::vector<ContactPairState>& contacts)
 {
-  std::sort(contacts.begin(), contacts.end(),
-            [](const ContactPairState& a, const ContactPairState& b) { return a.pair < b.pair; });
+  const auto by_slot = [](const ContactPairState& a, const ContactPairState& b) { return a.pair < b.pair; };
+  // (the near slots come in slot order nearly always: std::sort would still move the large states around)
+  if (!std::is_sorted(contacts.begin(), contacts.end(), by_slot))
+    std::sort(contacts.begin(), contacts.end(), by_slot);
 }
 
 /// Gives the linear solver back the approximate-factorization setting it had when made (an attempt that
