@@ -27,6 +27,30 @@ ActuationLaw writingLaw(const Model& m)
 {
   return ActuationLaw::writing([&m](double t, ActuationValues& u) { scheduledActuation(m, t, u); });
 }
+
+/// The fold twice with one solver: the first pass grows its buffers (contact lists, factorizations, the stepper's
+/// trial state), the second must not allocate at all. `advance(state, pass)` takes the state through the fold;
+/// the allocations of each pass are counted from after initialize. Empty after a fatal failure.
+template <class Advance>
+std::vector<long> allocationsOfTwoPasses(const Model& m, DynamicsSolver& solver, const ActuationLaw& law,
+                                         const Advance& advance)
+{
+  std::vector<long> allocations;
+  for (int pass = 0; pass < 2; ++pass)
+  {
+    State s = initialState(m);
+    EXPECT_TRUE(solver.initialize(s, law).ok());
+    solver.resetTimings();
+    const long before = heapAllocationCount();
+    advance(s, pass);
+    if (::testing::Test::HasFatalFailure())
+      return {};
+    allocations.push_back(heapAllocationCount() - before);
+    EXPECT_GE(solver.timings().most_touching, 2) << "the fold must reach contact for this test to mean anything";
+    EXPECT_GT(solver.timings().factorizations, 1) << "and build more than one Newton matrix";
+  }
+  return allocations;
+}
 }  // namespace
 
 TEST(Allocations, FixedStepsThroughContactAllocateNothingOnceTheirBuffersHaveGrown)
@@ -36,26 +60,18 @@ TEST(Allocations, FixedStepsThroughContactAllocateNothingOnceTheirBuffersHaveGro
   const Model m = fastTowerFold();
   DynamicsSolver solver(m, m.solver);
   const ActuationLaw law = writingLaw(m);
-  const double h = m.solver.dt;
   constexpr int kSteps = 4000;  // 0.8 s: the struts come into contact, slide and part
-  // the same fold twice with one solver: the first pass grows its buffers (contact lists, factorizations), the
-  // second must not allocate at all
-  std::vector<long> allocations;
-  for (int pass = 0; pass < 2; ++pass)
-  {
-    State s = initialState(m);
-    ASSERT_TRUE(solver.initialize(s, law).ok());
-    solver.resetTimings();
-    const long before = heapAllocationCount();
-    for (int k = 0; k < kSteps; ++k)
-    {
-      const Summary sum = solver.step(s, h, law);
-      ASSERT_TRUE(sum.ok()) << "pass " << pass << ", t = " << s.t << ": " << sum.message;
-    }
-    allocations.push_back(heapAllocationCount() - before);
-    EXPECT_GE(solver.timings().most_touching, 2) << "the fold must reach contact for this test to mean anything";
-    EXPECT_GT(solver.timings().factorizations, 1) << "and build more than one Newton matrix";
-  }
+  const std::vector<long> allocations =
+      allocationsOfTwoPasses(m, solver, law,
+                             [&](State& s, int pass)
+                             {
+                               for (int k = 0; k < kSteps; ++k)
+                               {
+                                 const Summary sum = solver.step(s, m.solver.dt, law);
+                                 ASSERT_TRUE(sum.ok()) << "pass " << pass << ", t = " << s.t << ": " << sum.message;
+                               }
+                             });
+  ASSERT_EQ(allocations.size(), 2u);
   EXPECT_EQ(allocations[1], 0) << "first pass: " << allocations[0] << " allocations over " << kSteps << " steps";
 }
 
@@ -70,21 +86,17 @@ TEST(Allocations, AdaptiveStepsThroughContactAllocateNothingOnceTheirBuffersHave
   // as above, with the error control's steps: refused steps, step-size changes and the exact factorizations
   // that they ask for
   AdaptiveStepper stepper(solver, m.solver);  // (one for both passes: its trial state is a buffer too)
-  std::vector<long> allocations;
-  for (int pass = 0; pass < 2; ++pass)
-  {
-    State s = initialState(m);
-    ASSERT_TRUE(solver.initialize(s, law).ok());
-    solver.resetTimings();
-    const long before = heapAllocationCount();
-    for (int k = 1; k <= 80; ++k)  // to 0.8 s in outputs of 0.01 s
-    {
-      const Summary sum = stepper.advanceTo(s, 0.01 * k, law);
-      ASSERT_TRUE(sum.ok()) << "pass " << pass << ", t = " << s.t << ": " << sum.message;
-    }
-    allocations.push_back(heapAllocationCount() - before);
-    EXPECT_GE(solver.timings().most_touching, 2);
-  }
+  const std::vector<long> allocations =
+      allocationsOfTwoPasses(m, solver, law,
+                             [&](State& s, int pass)
+                             {
+                               for (int k = 1; k <= 80; ++k)  // to 0.8 s in outputs of 0.01 s
+                               {
+                                 const Summary sum = stepper.advanceTo(s, 0.01 * k, law);
+                                 ASSERT_TRUE(sum.ok()) << "pass " << pass << ", t = " << s.t << ": " << sum.message;
+                               }
+                             });
+  ASSERT_EQ(allocations.size(), 2u);
   EXPECT_GT(stepper.stats().rejected_error + stepper.stats().rejected_onset, 1) << "some steps refused";
   EXPECT_EQ(allocations[1], 0) << "first pass: " << allocations[0] << " allocations";
 }
