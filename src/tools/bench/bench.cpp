@@ -4,7 +4,7 @@
 #include <cmath>
 #include <cstddef>
 
-#include "heap_counter.h"  // (defines malloc, calloc and realloc for this executable)
+#include "../heap_counter.h"  // (defines malloc, calloc and realloc for this executable)
 
 namespace active_tensegrity::tools::bench
 {
