@@ -57,10 +57,6 @@ public:
     (*this)(t, u);
     return u;
   }
-  explicit operator bool() const
-  {
-    return writing_ || returning_;
-  }
 
 private:
   Returning returning_;
