@@ -16,13 +16,12 @@
 
 namespace active_tensegrity::core
 {
-/// s(t) for every actuator: a function that returns the values, or (ActuationLaw::writing) one that writes
-/// them into a vector the caller keeps. The solver keeps that vector, so a writing law costs no heap
-/// allocation per step once the vector has its size; a returning law costs one (its result).
+/// s(t) for every actuator, written into a vector the caller keeps: the solver keeps that vector, so a law made with
+/// ActuationLaw::writing costs no heap allocation per step once the vector has its size. A callable that returns
+/// the values converts too (a lambda at a call site) and costs one allocation per call (its result).
 class ActuationLaw
 {
 public:
-  using Returning = std::function<ActuationValues(double t)>;
   using Writing = std::function<void(double t, ActuationValues& u)>;
 
   ActuationLaw() = default;
@@ -31,36 +30,32 @@ public:
                                           !std::is_same_v<std::decay_t<F>, ActuationLaw>,
                                       int> = 0>
   ActuationLaw(F f)  // NOLINT(google-explicit-constructor): a law is written as a lambda at every call site
-    : returning_(std::move(f))
+    : write_([f = std::move(f)](double t, ActuationValues& u) { u = f(t); })
   {
   }
   /// From a callable that writes the values at t into its second argument (resizing it as needed).
   static ActuationLaw writing(Writing w)
   {
     ActuationLaw law;
-    law.writing_ = std::move(w);
+    law.write_ = std::move(w);
     return law;
   }
 
   /// The values at t into u.
   void operator()(double t, ActuationValues& u) const
   {
-    if (writing_)
-      writing_(t, u);
-    else
-      u = returning_(t);
+    write_(t, u);
   }
   /// The values at t.
   ActuationValues operator()(double t) const
   {
     ActuationValues u;
-    (*this)(t, u);
+    write_(t, u);
     return u;
   }
 
 private:
-  Returning returning_;
-  Writing writing_;
+  Writing write_;
 };
 
 /// What an accepted step tells a step-size controller (AdaptiveStepper).
