@@ -39,6 +39,7 @@ VALUES = [
     ".nan", ".inf", "-.inf", "nan", "inf", "true", "false", "null", "~", "''", "abc", "[]", "{}", "[1, 2, 3]",
     "[0, 0, 0]", "[1e300, 1e300, 1e300]", "{a: 1}", "[[1, 2], [3]]", "'x' ", "\"\\u0000\"", "0x10", "1_000",
     "[.nan, 0, 0]", "*alias", "&a [1]", "!!binary aGVsbG8=", "? a", "- - 1", "x" * 5000,
+    "{radius: 1, radius: 2}", "1\n---\n2", "--- 1", "1e-3", "1e-2", "1e14", "1e5", "10",
 ]
 KEYS_EXTRA = [
     "solver.max_step_cuts", "solver.max_iterations", "solver.dt", "solver.dt_min", "solver.dt_max", "solver.adaptive",
@@ -49,7 +50,8 @@ KEYS_EXTRA = [
     "contact.pairs", "contact.min_crossing_angle", "gravity.enabled", "gravity.vector", "damping.enabled",
     "actuation.speed", "actuation.blend_time", "actuation.start_time", "outputs.height_nodes", "struts.radius",
     "struts.core.radius", "struts.material", "analysis.duration.", ".analysis", "a..b", "analysis", "nodes",
-    "struts.members", "x" * 3000,
+    "struts.members", "x" * 3000, "solver.onset_depth", "struts.radious", "solver.newton_tolerence",
+    "materials", "struts",
 ]
 
 NUMBER = re.compile(r"(?<![\w.])-?\d+(\.\d+)?([eE][-+]?\d+)?(?![\w.])")

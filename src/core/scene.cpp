@@ -1,7 +1,10 @@
 #include "active_tensegrity/core/scene.h"
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <fstream>
 #include <limits>
 #include <map>
@@ -9,6 +12,8 @@
 #include <sstream>
 #include <unordered_map>
 #include <unordered_set>
+
+#include <sys/stat.h>
 
 #include <yaml-cpp/eventhandler.h>
 #include <yaml-cpp/yaml.h>
@@ -31,6 +36,14 @@ constexpr int kMaxJacobianAge = 1000000;
 constexpr int kMaxLoadSteps = 10000000;
 constexpr double kMaxTimeSteps = 1e8;    // duration / dt (fixed steps), duration / output_interval
 constexpr double kMaxOutputSteps = 1e8;  // output rows of a dynamic run
+// bounds of the tolerances (m): beyond them a run converges to whatever it starts from
+constexpr double kMaxNewtonTolerance = 1e-3;
+constexpr double kMaxErrorTolerance = 1e-2;
+constexpr double kMaxOnsetDepth = 1e-2;
+// bounds of the materials: far beyond any solid, and they keep every derived stiffness and mass finite
+constexpr double kMaxYoungsModulus = 1e14;  // Pa (diamond: 1.2e12)
+constexpr double kMaxDensity = 1e5;         // kg/m^3 (osmium: 22590)
+constexpr double kMaxFriction = 10.0;
 
 std::string show(const YAML::Node& n)
 {
@@ -116,7 +129,19 @@ public:
   {
     used_.insert(k);
     if (!has(k))
+    {
+      // a key of this map that nothing has read yet and that is one typo away from k: named as the cause
+      std::vector<std::string> unread;
+      for (const std::string& other : order_)
+        if (!used_.count(other))
+          unread.push_back(other);
+      std::vector<std::string> wanted{ k };
+      for (const std::string& other : unread)
+        if (nearestMatch(other, wanted) == k)
+          fail(key(other), "unknown key (misspelt, or not valid here): did you mean " + quoted(k) +
+                               "? (the required key " + key(k) + " is missing)");
       fail(key(k), "missing required key");
+    }
     return index_.at(k);
   }
   YAML::Node get(const std::string& k) const
@@ -144,6 +169,18 @@ public:
   double positive(const std::string& k, double fallback)
   {
     return has(k) ? positive(k) : (used_.insert(k), fallback);
+  }
+  /// A positive number of at most `max_value` (a tolerance: a larger one accepts nonsense), in `unit`.
+  double bounded(const std::string& k, double fallback, double max_value, const std::string& unit)
+  {
+    used_.insert(k);
+    if (!has(k))
+      return fallback;
+    const double v = number(k);
+    if (!(v > 0.0 && v <= max_value))
+      fail(key(k), "must be positive and at most " + shortestNumber(max_value) + " " + unit + " (the range (0, " +
+                       shortestNumber(max_value) + "] " + unit + "), got " + show(get(k)));
+    return v;
   }
   double nonNegative(const std::string& k, double fallback)
   {
@@ -245,7 +282,11 @@ public:
   {
     for (const std::string& k : order_)
       if (!used_.count(k))
-        fail(key(k), "unknown key (misspelt, or not valid here)");
+      {
+        const std::string near = nearestMatch(k, std::vector<std::string>(used_.begin(), used_.end()));
+        fail(key(k), "unknown key (misspelt, or not valid here)" +
+                         (near.empty() ? std::string() : ": did you mean " + quoted(near) + "?"));
+      }
   }
 
   double toNumber(const YAML::Node& n, const std::string& full_key) const
@@ -286,34 +327,46 @@ private:
   std::set<std::string> used_;
 };
 
-/// Refuses a key that appears twice in one map, anywhere in the tree, with both lines (yaml-cpp keeps
-/// both and reads the first). Nodes reached twice through YAML aliases are checked once.
+/// Where a YAML mark is, for a message: "line N" in a scene file; "column N" (of line L when the text has
+/// several) in an override's value.
+std::string markText(const YAML::Mark& mark, bool in_value)
+{
+  if (!in_value)
+    return "line " + std::to_string(mark.line + 1);
+  return "column " + std::to_string(mark.column + 1) +
+         (mark.line > 0 ? " of line " + std::to_string(mark.line + 1) : std::string());
+}
+
+/// Refuses a key that appears twice in one map, anywhere in the tree, with both places (yaml-cpp keeps
+/// both and reads the first). Nodes reached twice through YAML aliases are checked once. `path` is the
+/// dotted key of `n`; `in_value`: the tree is an override's value (its places are columns of the value).
 void refuseRepeatedKeys(const YAML::Node& n, const std::string& path, const std::string& file,
-                        std::unordered_set<int>& seen)
+                        std::unordered_set<int>& seen, bool in_value = false)
 {
   const int pos = n.Mark().pos;
   if (pos >= 0 && !seen.insert(pos).second)
     return;
   if (n.IsMap())
   {
-    std::unordered_map<std::string, int> lines;
+    std::unordered_map<std::string, YAML::Mark> marks;
     for (const auto& kv : n)
     {
       if (!kv.first.IsScalar())
         continue;  // refused by name where the map is read
       const std::string& k = kv.first.Scalar();
       const std::string full = path.empty() ? k : path + "." + k;
-      const auto [it, fresh] = lines.emplace(k, kv.first.Mark().line + 1);
+      const auto [it, fresh] = marks.emplace(k, kv.first.Mark());
       if (!fresh)
         throw SceneError(file, clipped(full),
-                         "repeated key: given on line " + std::to_string(it->second) + " and again on line " +
-                             std::to_string(kv.first.Mark().line + 1));
-      refuseRepeatedKeys(kv.second, full, file, seen);
+                         "repeated key: given " + std::string(in_value ? "at " : "on ") +
+                             markText(it->second, in_value) + " and again " + (in_value ? "at " : "on ") +
+                             markText(kv.first.Mark(), in_value) + (in_value ? " of the --set value" : ""));
+      refuseRepeatedKeys(kv.second, full, file, seen, in_value);
     }
   }
   else if (n.IsSequence())
     for (size_t i = 0; i < n.size(); ++i)
-      refuseRepeatedKeys(n[i], path + "[" + std::to_string(i) + "]", file, seen);
+      refuseRepeatedKeys(n[i], path + "[" + std::to_string(i) + "]", file, seen, in_value);
 }
 
 struct Material
@@ -401,10 +454,16 @@ private:
       Reader m = mats.map(name);
       Material mat;
       mat.youngs_modulus = m.positive("youngs_modulus");
+      if (mat.youngs_modulus > kMaxYoungsModulus)
+        m.fail(m.key("youngs_modulus"), "must lie in (0, " + shortestNumber(kMaxYoungsModulus) +
+                                            "] Pa (beyond any solid), got " + show(m.get("youngs_modulus")));
       mat.poisson_ratio = m.number("poisson_ratio", 0.3);
       if (mat.poisson_ratio < 0.0 || mat.poisson_ratio >= 0.5)
         m.fail(m.key("poisson_ratio"), "must lie in [0, 0.5), got " + shortestNumber(mat.poisson_ratio));
       mat.density = m.nonNegative("density", 0.0);
+      if (mat.density > kMaxDensity)
+        m.fail(m.key("density"), "must lie in [0, " + shortestNumber(kMaxDensity) +
+                                     "] kg/m^3 (beyond any solid), got " + show(m.get("density")));
       mat.yield_strength = m.has("yield_strength") ? m.positive("yield_strength") : 0.0;
       m.finish();
       materials_[name] = mat;
@@ -946,6 +1005,8 @@ private:
     if (restitution > 1.0)
       r.fail(r.key("restitution"), "must be in [0, 1], got " + show(r.get("restitution")));
     friction = r.nonNegative("friction", friction);
+    if (friction > kMaxFriction)
+      r.fail(r.key("friction"), "must lie in [0, " + shortestNumber(kMaxFriction) + "], got " + show(r.get("friction")));
     stick = stick_may_be_zero ? r.nonNegative("stick_velocity", stick) : r.positive("stick_velocity", stick);
     slip = r.positive("slip_velocity", slip);
     if (slip <= stick)
@@ -1116,26 +1177,32 @@ private:
       if (o.newmark_gamma < 0.5)
         s.fail(s.key("newmark.gamma"),
                "must be at least 0.5 (Newmark is unstable below), got " + shortestNumber(o.newmark_gamma));
+      if (o.newmark_gamma > 1.0)
+        s.fail(s.key("newmark.gamma"),
+               "must be at most 1 (beyond, the damping swamps the motion), got " + shortestNumber(o.newmark_gamma));
       const double beta_min = 0.25 * (o.newmark_gamma + 0.5) * (o.newmark_gamma + 0.5);
       if (o.newmark_beta < beta_min - 1e-12)
         s.fail(s.key("newmark.beta"), "must be at least (gamma + 1/2)^2 / 4 = " + shortestNumber(beta_min) +
                                           " for unconditional stability, got " + shortestNumber(o.newmark_beta));
+      if (o.newmark_beta > 1.0)
+        s.fail(s.key("newmark.beta"), "must lie in [(gamma + 1/2)^2 / 4, 1] = [" + roundedNumber(beta_min) +
+                                          ", 1], got " + shortestNumber(o.newmark_beta));
     }
     else
       s.optional("newmark");
     o.rho_infinity = s.number("rho_infinity", o.rho_infinity);
     if (o.rho_infinity < 0.0 || o.rho_infinity > 1.0)
       s.fail(s.key("rho_infinity"), "must lie in [0, 1], got " + shortestNumber(o.rho_infinity));
-    o.newton_tolerance = s.positive("newton_tolerance", o.newton_tolerance);
+    o.newton_tolerance = s.bounded("newton_tolerance", o.newton_tolerance, kMaxNewtonTolerance, "m");
     o.max_iterations = s.integer("max_iterations", o.max_iterations, 1, kMaxNewtonIterations);
     o.max_step_cuts = s.integer("max_step_cuts", o.max_step_cuts, 0, kMaxStepCuts);
     o.reuse_jacobian = s.boolean("reuse_jacobian", o.reuse_jacobian);
     o.max_jacobian_age = s.integer("max_jacobian_age", o.max_jacobian_age, 1, kMaxJacobianAge);
     o.adaptive = s.boolean("adaptive", o.adaptive);
-    o.error_tolerance = s.positive("error_tolerance", o.error_tolerance);
+    o.error_tolerance = s.bounded("error_tolerance", o.error_tolerance, kMaxErrorTolerance, "m");
     o.dt_min = s.positive("dt_min", o.dt_min);
     o.dt_max = s.positive("dt_max", o.dt_max);
-    o.onset_depth = s.positive("onset_depth", o.onset_depth);
+    o.onset_depth = s.bounded("onset_depth", o.onset_depth, kMaxOnsetDepth, "m");
     if (o.dt_min > o.dt_max)
       s.fail(s.key("dt_min"),
              "must not exceed dt_max = " + shortestNumber(o.dt_max) + ", got " + shortestNumber(o.dt_min));
@@ -1324,6 +1391,12 @@ private:
     if (an.duration < o.dt_min)
       a.fail(a.key("duration"),
              "must be at least solver.dt_min = " + shortestNumber(o.dt_min) + " s, got " + shortestNumber(an.duration));
+    // a step longer than the whole run (it ran no step at all and said converged)
+    if (o.dt > an.duration)
+      root_.fail("solver.dt", std::string(o.adaptive ? "the first step " : "the time step ") + shortestNumber(o.dt) +
+                                  " s is longer than the run: analysis.duration " +
+                                  (an.duration_note.empty() ? "" : "(derived) ") + roundedNumber(an.duration) +
+                                  " s; give a solver.dt of at most the duration");
     if (o.adaptive && an.duration / o.dt_max > kMaxTimeSteps)
       root_.fail("solver.dt_max",
                  "analysis.duration " + shortestNumber(an.duration) + " s / solver.dt_max " + shortestNumber(o.dt_max) +
@@ -1427,6 +1500,8 @@ std::vector<std::string> keyParts(const Override& o)
   }
 }
 
+int secondDocumentLine(const std::string& yaml, const std::string& name);
+
 void applyOverride(const YAML::Node& root, const Override& o, const Source& source)
 {
   const std::vector<std::string> parts = keyParts(o);
@@ -1439,6 +1514,13 @@ void applyOverride(const YAML::Node& root, const Override& o, const Source& sour
   {
     source.fail(o.key, "override: cannot parse value " + quoted(o.value));
   }
+  // the value is held to the file's rules: one document, no key twice in a map
+  const int second = secondDocumentLine(o.value, source.blame(o.key));
+  if (second > 0)
+    source.fail(o.key, "override: the value " + quoted(o.value) + " holds a second YAML document (from line " +
+                           std::to_string(second) + "); a value is one YAML node");
+  std::unordered_set<int> seen;
+  refuseRepeatedKeys(value, o.key, source.blame(o.key), seen, true);
   // the maps on the way, each a new handle (assigning one YAML::Node to another would rebind the first's
   // content); a missing intermediate map is created: the schema check refuses it later if it is not a key
   std::vector<YAML::Node> chain{ root };
@@ -1517,20 +1599,60 @@ Override parseOverride(const std::string& text)
   return Override{ text.substr(0, eq), text.substr(eq + 1) };
 }
 
-Model loadScene(const std::string& path, const std::vector<Override>& overrides)
+std::string readSceneFile(const std::string& path)
 {
-  std::ifstream in(path);
+  struct stat st;
+  if (::stat(path.c_str(), &st) != 0)
+    throw SceneError(path, "", std::string("cannot open the scene file (") + std::strerror(errno) + ")");
+  if (S_ISDIR(st.st_mode))
+    throw SceneError(path, "", "is a directory, not a scene file");
+  if (!S_ISREG(st.st_mode))
+    throw SceneError(path, "",
+                     std::string("is not a regular file (") +
+                         (S_ISCHR(st.st_mode) || S_ISBLK(st.st_mode) ? "a device" :
+                          S_ISFIFO(st.st_mode)                       ? "a pipe" :
+                          S_ISSOCK(st.st_mode)                       ? "a socket" :
+                                                                       "not a file") +
+                         "): a scene is read from a file of at most " + std::to_string(kMaxSceneBytes) +
+                         " bytes (64 MiB)");
+  const auto tooLarge = [&](const std::string& size)
+  {
+    return SceneError(path, "",
+                      "the file has " + size + " bytes, more than the " + std::to_string(kMaxSceneBytes) +
+                          " bytes (64 MiB) a scene may have");
+  };
+  const auto size = static_cast<std::uintmax_t>(st.st_size);
+  if (size > kMaxSceneBytes)
+    throw tooLarge(std::to_string(size));
+  std::ifstream in(path, std::ios::binary);
   if (!in)
     throw SceneError(path, "", "cannot open the scene file");
-  std::stringstream buffer;
-  buffer << in.rdbuf();
+  // read with a bound all the same: the file may grow while it is read
+  std::string text;
+  text.reserve(static_cast<size_t>(size));
+  char chunk[1 << 16];
+  while (in.read(chunk, sizeof chunk) || in.gcount() > 0)
+  {
+    text.append(chunk, static_cast<size_t>(in.gcount()));
+    if (text.size() > kMaxSceneBytes)
+      throw tooLarge("more than " + std::to_string(kMaxSceneBytes));
+  }
   if (in.bad())
     throw SceneError(path, "", "cannot read the scene file");
-  return loadSceneFromString(buffer.str(), path, overrides);
+  return text;
+}
+
+Model loadScene(const std::string& path, const std::vector<Override>& overrides)
+{
+  return loadSceneFromString(readSceneFile(path), path, overrides);
 }
 
 Model loadSceneFromString(const std::string& yaml, const std::string& name, const std::vector<Override>& overrides)
 {
+  if (yaml.size() > kMaxSceneBytes)
+    throw SceneError(name, "",
+                     "the scene text has " + std::to_string(yaml.size()) + " bytes, more than the " +
+                         std::to_string(kMaxSceneBytes) + " bytes (64 MiB) a scene may have");
   YAML::Node root;
   try
   {

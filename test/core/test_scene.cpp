@@ -4,6 +4,7 @@
 #include <cmath>
 #include <exception>
 #include <filesystem>
+#include <fstream>
 #include <functional>
 #include <map>
 #include <ostream>
@@ -1094,4 +1095,155 @@ TEST(MessageNumbers, ComputedValuesAreRoundedUserValuesExact)
   EXPECT_EQ(roundedNumber(-2.5e-300), "-2.5e-300");
   EXPECT_EQ(roundedNumber(std::nan("")), "nan");
   EXPECT_EQ(roundedNumber(-HUGE_VAL), "-inf");
+}
+
+TEST(SceneBounds, ATimeStepLongerThanTheRunIsRefusedWithBoth)
+{
+  // it ran no step at all and said converged
+  EXPECT_TRUE(refused(
+      []
+      {
+        loadSceneFromString(dynamicMini(), "mini.yaml",
+                            { parseOverride("analysis.duration=0.003"), parseOverride("solver.dt=1e7") });
+      },
+      "solver.dt", { "--set solver.dt=1e7", "time step 1e+07 s", "analysis.duration 0.003 s" }));
+  EXPECT_TRUE(refused(
+      []
+      {
+        loadSceneFromString(dynamicMini(), "mini.yaml",
+                            { parseOverride("analysis.duration=0.003"), parseOverride("solver.dt=0.004"),
+                              parseOverride("solver.adaptive=true") });
+      },
+      "solver.dt", { "first step 0.004 s", "analysis.duration 0.003 s" }));
+  // a derived duration is named as such
+  EXPECT_TRUE(refused(
+      []
+      {
+        loadSceneFromString(edited({ { kAnalysis, "actuation: {speed: 0.1}\nanalysis:\n  type: dynamic\n  "
+                                                  "max_actuation: 0.3\n  settle_time: 0.5\n" } }),
+                            "mini.yaml", { parseOverride("solver.dt=10") });
+      },
+      "solver.dt", { "(derived) 3.5 s" }));
+  // a step as long as the run, and any step of a static path, load
+  EXPECT_NO_THROW(loadSceneFromString(dynamicMini(), "mini.yaml", { parseOverride("solver.dt=0.1") }));
+  EXPECT_NO_THROW(loadSceneFromString(kMini, "mini.yaml", { parseOverride("solver.dt=10") }));
+}
+
+TEST(SceneBounds, TolerancesLieInTheirRanges)
+{
+  const std::vector<std::tuple<std::string, std::string, std::string, std::string>> cases = {
+    { "solver.newton_tolerance", "1e300", "(0, 0.001] m", "got '1e300'" },
+    { "solver.newton_tolerance", "0.002", "(0, 0.001] m", "got '0.002'" },
+    { "solver.newton_tolerance", "0", "(0, 0.001] m", "got '0'" },
+    { "solver.error_tolerance", "1", "(0, 0.01] m", "got '1'" },
+    { "solver.onset_depth", "1e9", "(0, 0.01] m", "got '1e9'" },
+    { "solver.newmark.gamma", "2", "at most 1", "got 2" },
+    { "solver.newmark.beta", "1e300", "[0.3025, 1]", "got 1e+300" },
+    { "materials.steel.youngs_modulus", "1e300", "(0, 1e+14] Pa", "got '1e300'" },
+    { "materials.steel.density", "1e6", "[0, 1e+05] kg/m^3", "got '1e6'" },
+    { "contact.friction", "1e300", "[0, 10]", "got '1e300'" },
+  };
+  for (const auto& [key, value, range, got] : cases)
+  {
+    const std::string set = key + "=" + value;
+    EXPECT_TRUE(
+        refused([&set] { loadSceneFromString(kMini, "mini.yaml", { parseOverride(set) }); }, key, { range, got }))
+        << set;
+  }
+  // the bounds themselves load
+  const Model m = loadSceneFromString(
+      kMini, "mini.yaml",
+      { parseOverride("solver.newton_tolerance=1e-3"), parseOverride("solver.error_tolerance=1e-2"),
+        parseOverride("solver.onset_depth=1e-2"), parseOverride("solver.newmark={gamma: 1, beta: 1}"),
+        parseOverride("materials.steel.youngs_modulus=1e14"), parseOverride("materials.steel.density=1e5"),
+        parseOverride("contact.friction=10") });
+  EXPECT_EQ(m.solver.newton_tolerance, 1e-3);
+  EXPECT_EQ(m.solver.error_tolerance, 1e-2);
+  EXPECT_EQ(m.contact.friction, 10.0);
+}
+
+TEST(SceneOverride, AValueIsHeldToTheRulesOfTheFile)
+{
+  // a repeated key inside a --set value (the first one was kept silently)
+  EXPECT_TRUE(refused([]
+                      { loadSceneFromString(kMini, "mini.yaml", { parseOverride("struts={radius: 1, radius: 2}") }); },
+                      "struts.radius",
+                      { "--set struts={radius: 1, radius: 2} (on mini.yaml)", "repeated key", "column 2",
+                        "column 13 of the --set value" }));
+  EXPECT_TRUE(
+      refused([] { loadSceneFromString(kMini, "mini.yaml", { parseOverride("materials.steel={a: {b: 1, b: 2}}") }); },
+              "materials.steel.a.b", { "repeated key" }));
+  // a second document in a value (only the first was read)
+  EXPECT_TRUE(refused([] { loadSceneFromString(kMini, "mini.yaml", { parseOverride("struts.radius=0.05\n---\n1") }); },
+                      "struts.radius", { "second YAML document", "line 2" }));
+  EXPECT_TRUE(refused([] { loadSceneFromString(kMini, "mini.yaml", { parseOverride("name=a\n--- b") }); }, "name",
+                      { "second YAML document" }));
+  // what looks like them but is not: '---' inside a text, the same key in two maps
+  EXPECT_EQ(loadSceneFromString(kMini, "mini.yaml", { parseOverride("name=a --- b") }).name, "a --- b");
+  EXPECT_NO_THROW(
+      loadSceneFromString(kMini, "mini.yaml", { parseOverride("gravity={enabled: true, vector: [0, 0, 1]}") }));
+}
+
+TEST(SceneKeys, AMisspeltKeyIsNamedWithItsNearMatch)
+{
+  // a required key misspelt: the typo is named, not only the missing key
+  EXPECT_TRUE(refused(
+      [] {
+        loadSceneFromString(edited({ { "radius: 0.02", "radious: 0.02" } }), "mini.yaml");
+      },
+      "struts.radious", { "unknown key", "did you mean 'radius'?", "the required key struts.radius is missing" }));
+  // an optional one, from the command line and in the file
+  EXPECT_TRUE(refused([] { loadSceneFromString(kMini, "mini.yaml", { parseOverride("solver.newton_tolerence=1e-6") }); },
+                      "solver.newton_tolerence", { "unknown key", "did you mean 'newton_tolerance'?" }));
+  EXPECT_TRUE(refused(
+      [] {
+        loadSceneFromString(edited({ { "  steps: 10", "  stpes: 10" } }), "mini.yaml");
+      },
+      "analysis.stpes", { "did you mean 'steps'?" }));
+  // nothing near: no guess
+  EXPECT_TRUE(refused(
+      [] {
+        loadSceneFromString(edited({ { "radius: 0.02", "thickness: 0.02" } }), "mini.yaml");
+      },
+      "struts.radius", { "missing required key" }));
+  try
+  {
+    loadSceneFromString(kMini, "mini.yaml", { parseOverride("solver.frobnicate=1") });
+    FAIL() << "loaded";
+  }
+  catch (const SceneError& e)
+  {
+    EXPECT_EQ(std::string(e.what()).find("did you mean"), std::string::npos) << e.what();
+  }
+}
+
+TEST(MessageText, EditDistanceAndNearestMatch)
+{
+  EXPECT_EQ(editDistance("radious", "radius"), 1u);
+  EXPECT_EQ(editDistance("stpes", "steps"), 1u);  // a swap of neighbours
+  EXPECT_EQ(editDistance("", "abc"), 3u);
+  EXPECT_EQ(editDistance("kitten", "sitting"), 3u);
+  EXPECT_EQ(nearestMatch("radious", { "material", "radius", "members" }), "radius");
+  EXPECT_EQ(nearestMatch("dt", { "dt_min", "dt_max" }), "");
+  EXPECT_EQ(nearestMatch("mas", { "mass", "radius" }), "mass");
+  EXPECT_EQ(nearestMatch("radius", { "radius" }), "");
+}
+
+TEST(SceneFiles, OnlyRegularFilesOfBoundedSizeAreRead)
+{
+  // /dev/zero was read without end (std::bad_alloc)
+  EXPECT_TRUE(refused([] { loadScene("/dev/zero"); }, "", { "/dev/zero", "not a regular file (a device)", "64 MiB" }));
+  const std::string dir = std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) + "/config/scenes";
+  EXPECT_TRUE(refused([&] { loadScene(dir); }, "", { dir, "is a directory" }));
+  // a sparse file of 64 MiB and a byte
+  const std::filesystem::path big = std::filesystem::path(::testing::TempDir()) / "active_tensegrity_big_scene.yaml";
+  {
+    std::ofstream(big.string()) << "name: big\n";
+  }
+  std::filesystem::resize_file(big, kMaxSceneBytes + 1);
+  EXPECT_TRUE(refused([&] { loadScene(big.string()); }, "", { "67108865 bytes", "64 MiB" }));
+  std::filesystem::remove(big);
+  EXPECT_TRUE(refused([] { loadSceneFromString(std::string(kMaxSceneBytes + 1, ' '), "big.yaml"); }, "",
+                      { "big.yaml", "67108865 bytes" }));
+  EXPECT_EQ(readSceneFile(kQuadruplex).substr(0, 1), "#");
 }

@@ -3,6 +3,7 @@
 /// naming the file, the key and the value. The format is documented in docs/scenes.md.
 #pragma once
 
+#include <cstddef>
 #include <stdexcept>
 #include <string>
 #include <utility>
@@ -34,6 +35,13 @@ struct Override
   std::string key;
   std::string value;
 };
+
+/// The largest scene text the loader reads (a file, or a string), in bytes: 64 MiB.
+constexpr std::size_t kMaxSceneBytes = std::size_t(64) << 20;
+
+/// The text of the scene file `path`: a regular file (or a link to one) of at most kMaxSceneBytes. A
+/// directory, a device (/dev/zero), a pipe or a larger file is refused with a SceneError that says which.
+std::string readSceneFile(const std::string& path);
 
 /// Parses "key=value" (throws SceneError on a missing '=' or an empty key).
 Override parseOverride(const std::string& text);

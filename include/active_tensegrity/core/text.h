@@ -4,6 +4,7 @@
 
 #include <cstddef>
 #include <string>
+#include <vector>
 
 namespace active_tensegrity::core
 {
@@ -23,5 +24,13 @@ std::string clipped(const std::string& text, std::size_t max_length = kMaxEchoLe
 
 /// clipped(text) in single quotes: how messages quote a name or a value.
 std::string quoted(const std::string& text);
+
+/// The optimal string alignment distance of `a` and `b`: the fewest insertions, deletions, substitutions
+/// and swaps of two neighbouring characters that turn one into the other ("radious" to "radius": 1).
+std::size_t editDistance(const std::string& a, const std::string& b);
+
+/// The candidate a misspelling of `word` most likely meant: the nearest by editDistance, if it is at most 1
+/// for a word of up to 4 characters, at most 2 for a longer one (and not `word` itself); "" when none is.
+std::string nearestMatch(const std::string& word, const std::vector<std::string>& candidates);
 
 }  // namespace active_tensegrity::core
