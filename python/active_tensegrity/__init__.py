@@ -10,7 +10,9 @@
 docs/python.md describes the API.
 """
 
+import json
 import math
+import numbers
 import os
 import pkgutil
 
@@ -26,16 +28,79 @@ __all__ = ["FormFindingError", "Model", "SceneError", "Result", "Simulation", "c
            "plan_folding", "planners", "run"]
 
 
-def _value_text(value):
-    """A value as an override takes it: booleans as YAML writes them, floats in the shortest text that reads back
-    as the same double."""
+def _number(what, value, integer=False, minimum=None, maximum=None, finite=True, wrong_type=TypeError):
+    """value as a float (an int when integer), or an error naming `what` and the value: wrong_type for what is
+    not a number (a bool is not), ValueError for a number out of range"""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or (integer and not isinstance(value,
+                                                                                                    numbers.Integral)):
+        raise wrong_type("%s: expected %s, got %r" % (what, "an integer" if integer else "a number", value))
+    value = int(value) if integer else float(value)
+    if finite and not math.isfinite(value):
+        raise ValueError("%s: expected a finite number, got %r" % (what, value))
+    if minimum is not None and value < minimum:
+        raise ValueError("%s: expected a number >= %s, got %r" % (what, minimum, value))
+    if maximum is not None and value > maximum:
+        raise ValueError("%s: expected a number <= %s, got %r" % (what, maximum, value))
+    return value
+
+
+def _value_text(value, what="value"):
+    """A value as an override takes it (YAML): booleans as YAML writes them, floats in the shortest text that
+    reads back as the same double (.nan, .inf, -.inf), None as null, lists and mappings in flow style."""
+    if value is None:
+        return "null"
     if isinstance(value, bool):
         return "true" if value else "false"
-    return repr(value) if isinstance(value, float) else str(value)
+    if isinstance(value, str):
+        return value
+    if isinstance(value, numbers.Integral):
+        return str(int(value))
+    if isinstance(value, numbers.Real):
+        value = float(value)
+        if math.isnan(value):
+            return ".nan"
+        if math.isinf(value):
+            return ".inf" if value > 0 else "-.inf"
+        return repr(value)
+    if isinstance(value, (list, tuple, dict)):
+        return _flow(value, what)
+    raise TypeError("%s: expected a number, text, boolean, list or mapping, got %r (%s)"
+                    % (what, value, type(value).__name__))
+
+
+def _flow(value, what):
+    """A list or mapping as YAML flow text (texts quoted), at most 64 levels deep."""
+    out, stack = [], [(value, 0)]
+    while stack:
+        item, depth = stack.pop()
+        if depth is None:  # text formed already
+            out.append(item)
+        elif depth > 64:
+            raise ValueError("%s: nested deeper than 64 levels" % what)
+        elif isinstance(item, (list, tuple)):
+            parts = [("[", None)]
+            for i, x in enumerate(item):
+                parts += ([(", ", None)] if i else []) + [(x, depth + 1)]
+            stack += reversed(parts + [("]", None)])
+        elif isinstance(item, dict):
+            parts = [("{", None)]
+            for i, (k, x) in enumerate(item.items()):
+                if not isinstance(k, str):
+                    raise TypeError("%s: a mapping's key must be a text, got %r" % (what, k))
+                key = json.dumps(k, ensure_ascii=False) + ": "
+                parts += ([(", ", None)] if i else []) + [(key, None), (x, depth + 1)]
+            stack += reversed(parts + [("}", None)])
+        elif isinstance(item, str):
+            out.append(json.dumps(item, ensure_ascii=False))
+        else:
+            out.append(_value_text(item, what))
+    return "".join(out)
 
 
 def _override_text(key, value):
-    return "%s=%s" % (key, _value_text(value))
+    if not isinstance(key, str) or not key:
+        raise TypeError("overrides: a key must be a non-empty text (as analysis.steps), got %r" % (key,))
+    return "%s=%s" % (key, _value_text(value, "overrides: " + key))
 
 
 def _overrides(overrides):
@@ -45,7 +110,15 @@ def _overrides(overrides):
         return [_override_text(k, v) for k, v in overrides.items()]
     if isinstance(overrides, str):
         raise TypeError("overrides: a dict {key: value} or a list of 'key=value' texts, not one string")
-    return [str(o) for o in overrides]
+    try:
+        texts = list(overrides)
+    except TypeError:
+        raise TypeError("overrides: a dict {key: value} or a list of 'key=value' texts, got %r" % (overrides,)) \
+            from None
+    for o in texts:
+        if not isinstance(o, str):
+            raise TypeError("overrides: a list of 'key=value' texts, got the item %r" % (o,))
+    return texts
 
 
 def _is_text(scene):
@@ -60,9 +133,20 @@ def load(scene, overrides=None, name="<string>"):
     A refused scene raises SceneError (a ValueError) with the loader's message; its `key` is the key named.
     """
     sets = _overrides(overrides)
+    if not isinstance(name, str):
+        raise TypeError("load: name: expected a text, got %r" % (name,))
     if _is_text(scene):
         return _core.load_scene_text(scene, name, sets)
-    return _core.load_scene(os.fspath(scene), sets)
+    return _core.load_scene(_path("load", scene), sets)
+
+
+def _path(what, scene):
+    """scene as a path's text, or TypeError naming what takes it"""
+    if isinstance(scene, (str, os.PathLike)):
+        path = os.fsdecode(os.fspath(scene))
+        if "\0" not in path:
+            return path
+    raise TypeError("%s: scene: expected a Model, a scene file's path or YAML text, got %r" % (what, scene))
 
 
 def _model(scene, overrides, extra=()):
@@ -96,19 +180,36 @@ def find_form(scene, mode="free", tension=None, force_density=None, supports="fi
     self_stress_states, notes, check (the written scene's own check). A refused scene raises SceneError; a form
     that cannot be found raises FormFindingError with the reason."""
     def choice(what, value, a, b):
-        if value not in (a, b):
+        if not isinstance(value, str) or value not in (a, b):
             raise ValueError("find_form: %s must be %r or %r, got %r" % (what, a, b, value))
         return value == a
+
+    def family_values(what, values):
+        if values is None:
+            return {}
+        if not isinstance(values, dict):
+            raise TypeError("find_form: %s: expected {family: value}, got %r" % (what, values))
+        out = {}
+        for family, value in values.items():
+            if not isinstance(family, str):
+                raise TypeError("find_form: %s: a family's name must be a text, got %r" % (what, family))
+            out[family] = _number("find_form: %s: %s" % (what, family), value)
+        return out
+    if not isinstance(mode, str):
+        raise ValueError("find_form: mode must be 'free' or 'prestress', got %r" % (mode,))
     if _is_text(scene):
         text, name = scene, "<string>"
     else:
-        with open(os.fspath(scene)) as f:
-            text, name = f.read(), os.fspath(scene)
-    return _core.find_form(text, name, mode, dict(tension or {}), dict(force_density or {}),
+        name = _path("find_form", scene)
+        with open(name) as f:
+            text = f.read()
+    return _core.find_form(text, name, mode, family_values("tension", tension),
+                           family_values("force_density", force_density),
                            not choice("supports", supports, "fixed", "react"),
                            choice("struts", struts, "uniform", "free"),
                            not choice("strut_lengths", strut_lengths, "free", "keep"),
-                           float(tolerance), int(max_iterations))
+                           _number("find_form: tolerance", tolerance),
+                           _number("find_form: max_iterations", max_iterations, integer=True, maximum=10000))
 
 
 def planners():
@@ -154,9 +255,14 @@ class Result:
     contacts: one row per active contact and step: step index, strut a, strut b (body indices; b is -1 for the
       ground), point on a (x, y, z), point on b, normal, penetration, penetration rate, normal force, friction
       force on a (x, y, z).
-    summary: status, message, warnings, newton_iterations, step_cuts, output_steps, solver_steps, wall_time, and
+    summary: tensegrity_run's summary as a dict (but its scene): name, analysis, status, message, output_steps,
+      solver_steps, newton_iterations, step_cuts, wall_time, (dynamic runs) duration, real_time_factor,
+      adaptive_steps, warnings, time_breakdown, final ({column: value} of the run's last state), and
       peaks: {column: {"value", "t"}}, the largest magnitude over every step (not only the output steps) of
       actuation_force, max_normal_force, max_friction_force, max_strut_bending_stress, max_cable_stress.
+    extremes: {column: {"max": {"value", "t"}, "min": {"value", "t"}, "states": n}} of the columns run() was
+      asked to track: the largest and smallest value over the start and every time or load step, and the time
+      (or path parameter) of the first state that reached it; NaN when the column is NaN at any state.
     """
 
     CONTACT_COLUMNS = ("step", "strut_a", "strut_b", "point_a_x", "point_a_y", "point_a_z", "point_b_x",
@@ -172,6 +278,7 @@ class Result:
         self.members = raw["members"]
         self.contacts = raw["contacts"]
         self.summary = dict(raw["summary"])
+        self.extremes = dict(raw["extremes"])
 
     def __getitem__(self, column):
         if column in self.columns:
@@ -186,14 +293,21 @@ class Result:
         return self.summary["status"] == "converged"
 
 
-def run(scene, overrides=None):
+def run(scene, overrides=None, extremes=None):
     """Runs a scene's analysis (static path or dynamic run); returns a Result.
 
-    scene: a Model from load(), or what load() takes (then overrides apply). The interpreter's lock is
-    released while the analysis runs: other Python threads go on.
+    scene: a Model from load(), or what load() takes (then overrides apply). extremes: columns (of the CSV or
+    the members' table; one name or a list) whose largest and smallest values over every step the run tracks
+    (Result.extremes). The interpreter's lock is released while the analysis runs: other Python threads go on.
     """
     model = _model(scene, overrides)
-    return Result(model, _core.run(model))
+    if extremes is None:
+        extremes = []
+    elif isinstance(extremes, str):
+        extremes = [extremes]
+    elif not isinstance(extremes, (list, tuple)) or not all(isinstance(c, str) for c in extremes):
+        raise TypeError("run: extremes: expected a column's name or a list of them, got %r" % (extremes,))
+    return Result(model, _core.run(model, list(extremes)))
 
 
 class Simulation:
@@ -224,14 +338,17 @@ class Simulation:
         `accel` (m/s^2); 0 takes the node's defaults (the scene's actuation.speed, else 0.1 m/s). An unknown
         name, a target out of the actuator's range, a NaN or a speed <= 0 raises ValueError and changes
         nothing."""
+        if not isinstance(targets, dict):
+            raise TypeError("set_targets: expected {actuator: target (m)}, got %r" % (targets,))
         names = list(targets)
         values = []
         for n in names:
-            try:
-                values.append(float(targets[n]))
-            except (TypeError, ValueError):
-                raise ValueError("set_targets: %s: expected a number (m), got %r" % (n, targets[n])) from None
-        self._sim.set_targets(names, values, [], [], float(speed), float(accel))
+            if not isinstance(n, str):
+                raise TypeError("set_targets: an actuator's name must be a text, got %r" % (n,))
+            values.append(_number("set_targets: " + n, targets[n], finite=False, wrong_type=ValueError))
+        self._sim.set_targets(names, values, [], [],
+                              _number("set_targets: speed", speed, minimum=0.0, wrong_type=ValueError),
+                              _number("set_targets: accel", accel, minimum=0.0, wrong_type=ValueError))
 
     def advance(self, seconds=None, steps=None, callback=None, every=None):
         """Advances by `seconds` (rounded to whole steps) or `steps`. callback(sim), when given, is called every
@@ -239,12 +356,19 @@ class Simulation:
         ends the advance early by returning False. Returns the number of steps taken."""
         if (seconds is None) == (steps is None):
             raise ValueError("advance: give seconds or steps")
-        for what, value in (("seconds", seconds), ("every", every)):
-            if value is not None and not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
-                raise ValueError("advance: %s must be a finite number >= 0, got %r" % (what, value))
+        if seconds is not None:
+            seconds = _number("advance: seconds", seconds, minimum=0.0, wrong_type=ValueError)
+        if steps is not None:
+            steps = _number("advance: steps", steps, integer=True, minimum=0, maximum=2 ** 62, wrong_type=ValueError)
+        if every is not None:
+            every = _number("advance: every", every, minimum=0.0, wrong_type=ValueError)
+        if callback is not None and not callable(callback):
+            raise TypeError("advance: callback: expected a function of the simulation, got %r" % (callback,))
         dt = self._sim.dt
         n = steps if steps is not None else int(round(seconds / dt))
-        k = 1 if every is None else max(1, int(round(every / dt)))
+        k = 1 if every is None else max(1, min(2 ** 62, int(round(every / dt))))
+        if n > 2 ** 62:
+            raise ValueError("advance: seconds: %r s are more than 2^62 steps of %r s" % (seconds, dt))
         if callback is None:
             return self._sim.advance(n)
         return self._sim.advance(n, lambda _: callback(self), k)

@@ -4,8 +4,10 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <map>
 #include <string>
@@ -86,7 +88,232 @@ struct Collected
   size_t steps = 0;
 };
 
-py::dict run(const at::Model& model)
+/// The largest and smallest value of chosen columns of the CSV (csvColumns) and of the members' table
+/// (memberColumns) over every state of a run: its start and the state after every time step or load step,
+/// not only the output steps. Each extreme comes with the time (or path parameter) of the first state that
+/// reached it; a NaN at any state makes both extremes NaN (from the first such state on).
+class ExtremeTracker
+{
+public:
+  ExtremeTracker(const at::Model& model, const std::vector<std::string>& names)
+    : model_(model), contacts_(model), cable_stress_(model), alone_(columnFunctions())
+  {
+    const std::vector<std::string> csv = at::csvColumns(model), members = at::memberColumns(model);
+    const auto index = [](const std::vector<std::string>& in, const std::string& name)
+    { return static_cast<size_t>(std::find(in.begin(), in.end(), name) - in.begin()); };
+    for (const std::string& name : names)
+    {
+      if (std::any_of(columns_.begin(), columns_.end(), [&](const Column& c) { return c.name == name; }))
+        continue;
+      Column c;
+      c.name = name;
+      c.index = index(csv, name);
+      if (c.index == csv.size())
+      {
+        c.member = true;
+        c.index = index(members, name);
+        if (c.index == members.size())
+          throw py::value_error("run: extremes: no column '" + name.substr(0, 200) + "' (columns: " + joined(csv) +
+                                "; members: " + joined(members) + ")");
+      }
+      c.alone = !c.member && alone_[c.index].value;
+      any_row_ |= !c.member && !c.alone;
+      any_member_ |= c.member;
+      any_contacts_ |= c.alone && alone_[c.index].contacts;
+      columns_.push_back(c);
+    }
+  }
+
+  bool empty() const
+  {
+    return columns_.empty();
+  }
+
+  /// `contacts`: the state's active contacts when the run has them (runAnalysis's StepCallback), else null
+  void add(const at::State& s, const std::vector<at::ContactPairState>* contacts)
+  {
+    if (any_contacts_ && !contacts)
+      contacts = &contacts_.active(s);
+    if (any_row_)
+      row_ = at::csvRow(model_, s);
+    if (any_member_)
+      member_row_ = at::memberRow(model_, s);
+    for (Column& c : columns_)
+    {
+      const double v = c.alone ? alone_[c.index].value(s, contacts) : c.member ? member_row_[c.index] : row_[c.index];
+      if (c.states++ == 0 || (std::isnan(v) && !std::isnan(c.max)))
+      {
+        c.max = c.min = v;
+        c.t_max = c.t_min = s.t;
+        continue;
+      }
+      if (v > c.max)
+      {
+        c.max = v;
+        c.t_max = s.t;
+      }
+      if (v < c.min)
+      {
+        c.min = v;
+        c.t_min = s.t;
+      }
+    }
+  }
+
+  /// {column: {"max": {"value", "t"}, "min": {"value", "t"}, "states": n}}
+  py::dict result() const
+  {
+    py::dict out;
+    for (const Column& c : columns_)
+    {
+      const auto peak = [](double value, double t)
+      {
+        py::dict d;
+        d["value"] = value;
+        d["t"] = t;
+        return d;
+      };
+      py::dict d;
+      d["max"] = peak(c.max, c.t_max);
+      d["min"] = peak(c.min, c.t_min);
+      d["states"] = c.states;
+      out[py::str(c.name)] = d;
+    }
+    return out;
+  }
+
+private:
+  using Contacts = std::vector<at::ContactPairState>;
+  /// A CSV column's value in a state, computed alone as csvRow computes it (`contacts`: the state's, when it
+  /// reads them)
+  struct Function
+  {
+    std::function<double(const at::State&, const Contacts*)> value;
+    bool contacts = false;
+  };
+
+  static std::string joined(const std::vector<std::string>& names)
+  {
+    std::string out;
+    for (const std::string& n : names)
+      out += (out.empty() ? "" : ", ") + n;
+    return out;
+  }
+
+  /// What the contacts give a column: (strut pairs or the ground's) count, largest normal force, largest
+  /// friction force, sum of the normal forces, as csvRow sums them.
+  enum class Over
+  {
+    kPairs,
+    kGround
+  };
+  enum class Figure
+  {
+    kCount,
+    kLargestNormal,
+    kLargestFriction,
+    kNormalSum
+  };
+  static double fromContacts(const Contacts& contacts, Over over, Figure figure)
+  {
+    double out = 0.0;
+    for (const at::ContactPairState& c : contacts)
+    {
+      if ((c.body_b < 0) != (over == Over::kGround))
+        continue;
+      switch (figure)
+      {
+        case Figure::kCount:
+          out += 1.0;
+          break;
+        case Figure::kLargestNormal:
+          out = std::max(out, c.normal_force);
+          break;
+        case Figure::kLargestFriction:
+          out = std::max(out, c.friction_force);
+          break;
+        case Figure::kNormalSum:
+          out += c.normal_force;
+          break;
+      }
+    }
+    return out;
+  }
+
+  /// Per CSV column, the function that computes its value alone (the whole row is not formed at every step,
+  /// nor the contacts when the run gives them). The columns are laid out here as csvColumns lays them out; when
+  /// the names differ from csvColumns', every column is left to csvRow.
+  std::vector<Function> columnFunctions()
+  {
+    const at::Model& m = model_;
+    const bool any = !m.actuators.empty();
+    std::vector<std::string> names;
+    std::vector<Function> f;
+    const auto state = [&](const std::string& name, std::function<double(const at::State&)> value)
+    {
+      names.push_back(name);
+      f.push_back({ [value](const at::State& s, const Contacts*) { return value(s); }, false });
+    };
+    const auto contact = [&](const std::string& name, Over over, Figure figure)
+    {
+      names.push_back(name);
+      f.push_back(
+          { [over, figure](const at::State&, const Contacts* c) { return fromContacts(*c, over, figure); }, true });
+    };
+    state("t", [](const at::State& s) { return s.t; });
+    state("actuation", [any](const at::State& s) { return any ? s.u[0].value : 0.0; });
+    state("actuation_force", [&m, any](const at::State& s) { return any ? at::actuationForce(m, s, 0) : 0.0; });
+    state("height", [&m](const at::State& s) { return at::structureHeight(m, s.q); });
+    contact("active_contacts", Over::kPairs, Figure::kCount);
+    state("min_gap", [&m](const at::State& s) { return at::minimumGap(m, s.q); });
+    contact("max_normal_force", Over::kPairs, Figure::kLargestNormal);
+    contact("max_friction_force", Over::kPairs, Figure::kLargestFriction);
+    state("slack_cables", [&m](const at::State& s) { return static_cast<double>(at::slackCables(m, s)); });
+    names.push_back("max_strut_bending_stress");
+    f.push_back({ [&m](const at::State& s, const Contacts* c) { return at::maxStrutBendingStress(m, s.q, *c); }, true });
+    state("max_cable_stress", [this](const at::State& s) { return cable_stress_.largest(s); });
+    state("min_cable_strut_gap", [&m](const at::State& s) { return at::minimumCableStrutGap(m, s.q).gap; });
+    if (m.ground.enabled)
+    {
+      contact("ground_contacts", Over::kGround, Figure::kCount);
+      state("min_ground_gap", [&m](const at::State& s) { return at::minimumGroundGap(m, s.q); });
+      contact("ground_normal_force", Over::kGround, Figure::kNormalSum);
+      contact("max_ground_friction_force", Over::kGround, Figure::kLargestFriction);
+    }
+    if (at::hasLoadPath(m))
+      state("load_factor", [&m](const at::State& s) { return at::loadFactor(m, s); });
+    for (const at::OutputLayer& layer : m.layers)
+      state("height_" + layer.name, [&m, &layer](const at::State& s) { return at::nodesHeight(m, layer.nodes, s.q); });
+    if (m.actuators.size() > 1)
+      for (size_t i = 0; i < m.actuators.size(); ++i)
+      {
+        state("actuation_" + m.actuators[i].name, [i](const at::State& s) { return s.u[i].value; });
+        state("actuation_force_" + m.actuators[i].name,
+              [&m, i](const at::State& s) { return at::actuationForce(m, s, static_cast<int>(i)); });
+      }
+    if (names != at::csvColumns(m))
+      return std::vector<Function>(at::csvColumns(m).size());
+    return f;
+  }
+
+  struct Column
+  {
+    std::string name;
+    bool member = false, alone = false;
+    size_t index = 0;
+    long states = 0;
+    double max = std::numeric_limits<double>::quiet_NaN(), min = max, t_max = max, t_min = max;
+  };
+  const at::Model& model_;
+  at::ContactScan contacts_;
+  at::CableStressScan cable_stress_;
+  std::vector<Function> alone_;
+  std::vector<Column> columns_;
+  bool any_row_ = false, any_member_ = false, any_contacts_ = false;
+  std::vector<double> row_, member_row_;
+};
+
+py::dict run(const at::Model& model, const std::vector<std::string>& extremes)
 {
   if (model.analysis.type == at::AnalysisType::kModal)
     throw py::value_error("run: the scene's analysis.type is modal (natural modes have no output steps; run it with "
@@ -94,8 +321,13 @@ py::dict run(const at::Model& model)
   Collected c;
   at::RunResult result;
   at::PeakTracker peaks(model);
+  ExtremeTracker tracked(model, extremes);
   {
     const py::gil_scoped_release release;
+    // the extremes see the start (the first output step) and every step's state once: an output step that is
+    // not the state of the step just taken (none so far) is given to them too
+    bool stepped = false;
+    double last_step_t = 0.0;
     result = at::runAnalysis(
         model,
         [&](const at::State& s)
@@ -114,9 +346,21 @@ py::dict run(const at::Model& model)
                                 k.penetration, k.penetration_rate, k.normal_force, k.friction_on_a.x(),
                                 k.friction_on_a.y(), k.friction_on_a.z() });
           }
+          if (!tracked.empty() && (!stepped || s.t != last_step_t))
+            tracked.add(s, nullptr);
           ++c.steps;
         },
-        {}, [&](const at::State& s, const std::vector<at::ContactPairState>* contacts) { peaks.add(s, contacts); });
+        {},
+        [&](const at::State& s, const std::vector<at::ContactPairState>* contacts)
+        {
+          peaks.add(s, contacts);
+          if (!tracked.empty())
+          {
+            tracked.add(s, contacts);
+            stepped = true;
+            last_step_t = s.t;
+          }
+        });
   }
   const std::vector<std::string> columns = at::csvColumns(model);
   const std::vector<std::string> member_columns = at::memberColumns(model);
@@ -129,15 +373,55 @@ py::dict run(const at::Model& model)
   out["member_columns"] = member_columns;
   out["members"] = table(c.members, c.steps, member_columns.size());
   out["contacts"] = table(c.contacts, c.contacts.size() / 18, 18);
+  out["extremes"] = tracked.result();
+  // the fields of tensegrity_run's summary but its scene (the file it ran), with the same names
+  const bool dynamic = model.analysis.type == at::AnalysisType::kDynamic;
   py::dict summary;
+  summary["name"] = model.name;
+  summary["analysis"] = analysisName(model.analysis.type);
   summary["status"] = at::toString(result.summary.status);
   summary["message"] = result.summary.message;
-  summary["warnings"] = result.summary.warnings;
-  summary["newton_iterations"] = result.summary.iterations;
-  summary["step_cuts"] = result.summary.step_cuts;
   summary["output_steps"] = result.steps;
   summary["solver_steps"] = result.solver_steps;
+  summary["newton_iterations"] = result.summary.iterations;
+  summary["step_cuts"] = result.summary.step_cuts;
   summary["wall_time"] = result.wall_time;
+  if (dynamic)
+  {
+    summary["duration"] = model.analysis.duration;
+    if (!model.analysis.duration_note.empty())
+      summary["duration_note"] = model.analysis.duration_note;
+    if (result.wall_time > 0.0)
+      summary["real_time_factor"] = result.final_state.t / result.wall_time;
+    if (model.solver.adaptive)
+    {
+      const at::AdaptiveStats& a = result.adaptive;
+      py::dict adaptive;
+      adaptive["accepted"] = a.accepted;
+      adaptive["rejected_error"] = a.rejected_error;
+      adaptive["rejected_onset"] = a.rejected_onset;
+      adaptive["rejected_solver"] = a.rejected_solver;
+      adaptive["at_min_step"] = a.at_min_step;
+      adaptive["smallest"] = a.h_min;
+      adaptive["largest"] = a.h_max;
+      summary["adaptive_steps"] = adaptive;
+    }
+  }
+  summary["warnings"] = result.summary.warnings;
+  py::dict breakdown;
+  for (const auto& [part, seconds] : at::timeBreakdown(result))
+  {
+    py::dict one;
+    one["seconds"] = seconds;
+    one["share"] = result.wall_time > 0.0 ? seconds / result.wall_time : 0.0;
+    breakdown[py::str(part)] = one;
+  }
+  summary["time_breakdown"] = breakdown;
+  py::dict final_row;
+  const std::vector<double> last = at::csvRow(model, result.final_state);
+  for (size_t i = 0; i < columns.size(); ++i)
+    final_row[py::str(columns[i])] = last[i];
+  summary["final"] = final_row;
   py::dict peak;
   for (const at::Peak& p : peaks.peaks())
   {
@@ -565,7 +849,9 @@ PYBIND11_MODULE(_core, m)
       .def_property_readonly("nodes", [](const at::Model& s) { return namesOf(s.nodes); })
       .def_property_readonly("bodies", [](const at::Model& s) { return namesOf(s.bodies); })
       .def_property_readonly("cables", [](const at::Model& s) { return namesOf(s.cables); })
-      .def_property_readonly("actuators", [](const at::Model& s) { return namesOf(s.actuators); });
+      .def_property_readonly("actuators", [](const at::Model& s) { return namesOf(s.actuators); })
+      .def_property_readonly("columns", [](const at::Model& s) { return at::csvColumns(s); })
+      .def_property_readonly("member_columns", [](const at::Model& s) { return at::memberColumns(s); });
 
   m.def(
       "load_scene",
@@ -661,6 +947,7 @@ PYBIND11_MODULE(_core, m)
       },
       py::arg("scene"), "The folding planner (docs/planning.md) from a Model's initial state or a Simulation's state");
   m.def("planners", &ap::plannerNames, "The OMPL planners plan_folding accepts");
-  m.def("run", &run, py::arg("model"),
-        "Runs the scene's analysis (static or dynamic); a dict of numpy arrays per output step and the summary");
+  m.def("run", &run, py::arg("model"), py::arg("extremes") = std::vector<std::string>{},
+        "Runs the scene's analysis (static or dynamic); a dict of numpy arrays per output step, the summary, and "
+        "the largest and smallest value over every step of the columns named in `extremes`");
 }
