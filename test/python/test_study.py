@@ -55,7 +55,9 @@ def check_against_single_runs(rows):
         assert int(row["newton_iterations"]) == alone.summary["newton_iterations"]
         assert float(row["final_height"]) == alone["height"][-1]
         assert float(row["min_height"]) == alone["height"].min()
+        assert float(row["min_height_t"]) == alone["t"][alone["height"].argmin()]  # a static path: a row per step
         assert float(row["max_cable_stress"]) == alone["max_cable_stress"].max()
+        assert float(row["max_cable_stress_t"]) == alone["t"][alone["max_cable_stress"].argmax()]
         assert float(row["final_actuation"]) == pytest.approx(sets["analysis.max_actuation"])
     failed = rows[6]
     assert failed["status"] == "refused"
@@ -139,6 +141,9 @@ def test_a_bad_study_file_is_refused_with_the_key_named():
                 "no value for {struts.radius}",
             "scene: %s\ngrid: {analysis.steps: [1]}\nsave: {name: r, files: [table, bag]}\n" % SCENE: "save.files",
             "scene: %s\ngrid: {analysis.steps: [1]}\nplots: [{x: t, y: height}]\n" % SCENE: "plots[0]",
+            "scene: %s\ngrid: {analysis.steps: [1]}\ncollect: {summary: [peaks]}\n" % SCENE: "'peaks' is a mapping",
+            "scene: %s\ngrid: {analysis.steps: [1]}\ncollect: {summary: [wall]}\n" % SCENE:
+                "unknown summary field 'wall'",
         }
         for text, words in cases.items():
             path = os.path.join(tmp, "bad.yaml")
