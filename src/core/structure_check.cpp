@@ -450,7 +450,10 @@ StructureReport checkStructure(const Model& model, const State& state)
 {
   StructureReport report;
   report.coordinates = model.nq;
-  report.members = static_cast<int>(model.cables.size());
+  report.tension_members = static_cast<int>(model.cables.size());
+  report.struts = static_cast<int>(std::count_if(model.bodies.begin(), model.bodies.end(),
+                                                 [](const Body& b) { return b.kind == BodyKind::kStrut; }));
+  report.members = report.struts + report.tension_members;
   if (model.nq > kMaxStructureCoordinates)
   {
     report.note = "skipped: " + std::to_string(model.nq) + " coordinates, more than the limit of " +
@@ -461,7 +464,7 @@ StructureReport checkStructure(const Model& model, const State& state)
   report.checked = true;
   report.free_coordinates = static_cast<int>(r.basis.cols());
   report.rank = r.rank;
-  report.self_stress_states = report.members - r.rank;
+  report.self_stress_states = report.tension_members - r.rank;
   report.rigid_body_modes = static_cast<int>(r.rigid.cols());
   report.mechanisms = static_cast<int>(r.mechanisms.cols());
 
@@ -494,6 +497,20 @@ StructureReport checkStructure(const Model& model, const State& state)
   }
   report.equilibrium_residual = r.residual;
   return report;
+}
+
+double structureSize(const Model& model, const Eigen::VectorXd& q)
+{
+  if (model.nodes.empty())
+    return 0.0;
+  Vec3 lo = Vec3::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+  for (const Node& n : model.nodes)
+  {
+    const Vec3 p = pointPosition(model, n.point, q);
+    lo = lo.cwiseMin(p);
+    hi = hi.cwiseMax(p);
+  }
+  return (hi - lo).norm();
 }
 
 int freeCoordinates(const Model& model, const Eigen::VectorXd& q)
@@ -558,7 +575,7 @@ std::vector<std::string> startWarnings(const Model& model_in, const State& state
       names += (i ? ", " : "") + quoted(report.slack_cables[i]);
     if (report.slack_cables.size() > 10)
       names += ", ...";
-    warnings.push_back(std::to_string(report.slack_cables.size()) + " of " + std::to_string(report.members) +
+    warnings.push_back(std::to_string(report.slack_cables.size()) + " of " + std::to_string(report.tension_members) +
                        " tension elements are slack at the start: " + names);
   }
   if (!report.prestress_stable)

@@ -190,7 +190,10 @@ TEST(StructureCheck, FreePrismHasOneSelfStressOneMechanismAndSixRigidModes)
   ASSERT_TRUE(r.checked) << r.note;
   EXPECT_EQ(r.coordinates, 21);
   EXPECT_EQ(r.free_coordinates, 15);
-  EXPECT_EQ(r.members, 9);
+  // every member counts: 3 struts and 9 cables (the self-stress states are those of the 9 tension elements)
+  EXPECT_EQ(r.members, 12);
+  EXPECT_EQ(r.struts, 3);
+  EXPECT_EQ(r.tension_members, 9);
   EXPECT_EQ(r.rank, 8);
   EXPECT_EQ(r.self_stress_states, 1);
   EXPECT_EQ(r.rigid_body_modes, 6);
@@ -218,7 +221,8 @@ TEST(StructureCheck, PinnedPrismHasNoRigidModeAndOneMechanism)
   const Model m = loadScene(scenePath("prism_pinned.yaml"));
   const StructureReport r = checkStructure(m, initialState(m));
   EXPECT_EQ(r.free_coordinates, 6);
-  EXPECT_EQ(r.members, 9);
+  EXPECT_EQ(r.members, 12);
+  EXPECT_EQ(r.tension_members, 9);
   EXPECT_EQ(r.rank, 5);
   EXPECT_EQ(r.self_stress_states, 4);
   EXPECT_EQ(r.rigid_body_modes, 0);
@@ -238,7 +242,9 @@ TEST(StructureCheck, SlidingVerticalsMakeThreeMechanisms)
   const Model m = loadScene(scenePath("prism_pinned_sliding.yaml"));
   ASSERT_EQ(m.cables.back().points.size(), 6u);
   const StructureReport r = checkStructure(m, initialState(m));
-  EXPECT_EQ(r.members, 7);
+  EXPECT_EQ(r.members, 10);
+  EXPECT_EQ(r.struts, 3);
+  EXPECT_EQ(r.tension_members, 7);
   EXPECT_EQ(r.rank, 3);
   EXPECT_EQ(r.self_stress_states, 4);
   EXPECT_EQ(r.rigid_body_modes, 0);
@@ -261,7 +267,8 @@ TEST(StructureCheck, TooFewMembersLeaveAFiniteMechanism)
       "rings_only.yaml");
   const StructureReport r = checkStructure(m, initialState(m));
   EXPECT_EQ(r.free_coordinates, 6);
-  EXPECT_EQ(r.members, 6);
+  EXPECT_EQ(r.members, 9);
+  EXPECT_EQ(r.tension_members, 6);
   EXPECT_EQ(r.rank, 3);
   EXPECT_EQ(r.self_stress_states, 3);  // the bottom rings, between pins
   EXPECT_EQ(r.rigid_body_modes, 0);
@@ -355,6 +362,8 @@ TEST(StructureCheck, AboveTheLimitTheCheckIsSkippedAtOnce)
   const StructureReport r = checkStructure(big, s);
   EXPECT_FALSE(r.checked);
   EXPECT_EQ(r.note, "skipped: " + std::to_string(big.nq) + " coordinates, more than the limit of 3000");
+  EXPECT_EQ(r.members, static_cast<int>(big.bodies.size()));  // counted all the same
+  EXPECT_EQ(r.struts, r.members);
   EXPECT_THROW(reduceStructure(big, s), std::invalid_argument);
 }
 
@@ -382,4 +391,17 @@ TEST(StartWarnings, SayWhatTheStartIsAndNothingForASoundOne)
   ASSERT_GE(run.summary.warnings.size(), 2u);
   EXPECT_EQ(run.summary.warnings[0], t[0]);
   EXPECT_EQ(run.summary.warnings[1], t[1]);
+}
+
+TEST(StructureCheck, MembersCountEveryStrutAndEveryTensionElement)
+{
+  // the tower: 16 struts, 8 cables (4 of them sliding, each one member), 8 springs; its 4 driven point masses are
+  // bodies, not members (--check's `members` counted the 20 tension elements alone)
+  const Model m = loadScene(scenePath("tower.yaml"));
+  const StructureReport r = checkStructure(m, initialState(m));
+  ASSERT_TRUE(r.checked) << r.note;
+  EXPECT_EQ(r.struts, 16);
+  EXPECT_EQ(r.tension_members, 20);
+  EXPECT_EQ(r.members, 36);
+  EXPECT_EQ(r.self_stress_states, r.tension_members - r.rank);
 }

@@ -10,8 +10,8 @@
 ///   C      the compatibility matrix, one row dl_i/dq per tension element (a sliding cable is one member
 ///          with its total length), taken in the reduced coordinates: C N; A = (C N)^T is the equilibrium matrix;
 ///   r      rank(C N) (singular values above kRankTolerance times the largest);
-///   s      = members - r self-stress states;  null(C N), dimension f - r (f = columns of N), the motions
-///          that stretch no member to first order;
+///   s      = b - r self-stress states, b the tension elements (StructureReport::tension_members);
+///          null(C N), dimension f - r (f = columns of N), the motions that stretch no member to first order;
 ///   rigid-body modes: the rigid motions of the whole structure (node fields u_i = t + w x x_i) that the
 ///          constraints allow and that stretch no member, counted by the rank of their node fields;
 ///   m      = dim null(C N) - rigid-body modes, the infinitesimal mechanisms;
@@ -47,7 +47,7 @@ struct ReducedStructure
   Eigen::SparseMatrix<double> node_map;  // P, 3 n_points x nq: the model's nodes first (Model::nodes order), then
                                          // strut ends no node stands at; ground points give zero rows
   int node_rows = 0;                     // rows of P that belong to Model::nodes (3 per node)
-  Eigen::MatrixXd compatibility;         // C N, members x f (members: Model::cables order)
+  Eigen::MatrixXd compatibility;         // C N, tension elements x f (Model::cables order)
   Eigen::MatrixXd stiffness;             // K_r, f x f, N/m
   Eigen::MatrixXd rigid;                 // f x (rigid-body modes): orthonormal basis of the rigid-body modes
   Eigen::MatrixXd mechanisms;            // f x m: orthonormal basis of the mechanisms (null(C N) minus the rigid modes)
@@ -63,7 +63,10 @@ struct StructureReport
   std::string note;
   int coordinates = 0;       // nq
   int free_coordinates = 0;  // f = dim null(Phi_q), spin locks included
-  int members = 0;           // tension elements (cables, springs; a sliding cable counts once)
+  int members = 0;           // every member: struts + tension_members
+  int struts = 0;            // rigid struts
+  int tension_members = 0;   // tension elements (cables, springs; a sliding cable counts once): the b of the
+                             // equilibrium matrix, whose self-stress states are b - rank
   int rank = 0;              // rank of the equilibrium matrix
   int self_stress_states = 0;
   int mechanisms = 0;
@@ -114,6 +117,10 @@ StructureReport checkStructure(const Model& model, const State& state);
 
 /// The coordinates' block (nq x nq) of a [q; lambda] matrix such as System::makeMatrix() gives.
 Eigen::SparseMatrix<double> coordinateBlock(const BlockSparseMatrix& m, int nq);
+
+/// The size of a structure at q (m): the diagonal of the box around its nodes (Model::nodes, fixed ones
+/// included); 0 for a single node. What an error or a drift is judged against ("far above its size").
+double structureSize(const Model& model, const Eigen::VectorXd& q);
 
 /// dim null(Phi_q) at q, spin locks included: the coordinates the constraints leave free.
 int freeCoordinates(const Model& model, const Eigen::VectorXd& q);
