@@ -3,6 +3,7 @@
 #include <mujoco/mujoco.h>
 
 #include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <map>
@@ -13,6 +14,8 @@
 #include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/contact.h"
 #include "active_tensegrity/core/mechanics.h"
+#include "active_tensegrity/core/structure_check.h"
+#include "active_tensegrity/core/text.h"
 
 namespace active_tensegrity::tools
 {
@@ -93,6 +96,45 @@ bool isGuideOf(const core::Constraint& g, const core::Constraint& c)
     return false;
   const Vec3 d = c.directions[0];
   return std::abs(g.directions[0].dot(d)) < 1e-9 && std::abs(g.directions[1].dot(d)) < 1e-9;
+}
+
+// Refuses MJCF text with a number that is not finite (std::invalid_argument naming the element and the attribute):
+// every value of the translation is derived from the scene, and MuJoCo reads "inf" or "nan" as it likes.
+void refuseNonFinite(const std::string& xml)
+{
+  for (size_t at = xml.find("=\""); at != std::string::npos; at = xml.find("=\"", at + 2))
+  {
+    const size_t end = xml.find('"', at + 2);
+    if (end == std::string::npos)
+      return;
+    const size_t attr = xml.find_last_of(" \n", at) + 1;
+    const std::string attribute = xml.substr(attr, at - attr);
+    // names (the scene's own, which may be "inf") and references to them hold no numbers
+    if (attribute == "name" || attribute == "model" || attribute == "tendon" || attribute.rfind("body", 0) == 0 ||
+        attribute.rfind("geom", 0) == 0 || attribute == "joint" || attribute == "site")
+      continue;
+    std::istringstream tokens(xml.substr(at + 2, end - at - 2));
+    for (std::string t; tokens >> t;)
+    {
+      std::string lower = t;
+      std::transform(lower.begin(), lower.end(), lower.begin(), [](unsigned char c) { return std::tolower(c); });
+      if (lower.find("nan") == std::string::npos && lower.find("inf") == std::string::npos)
+        continue;
+      // a number that did not come out finite ("inf", "-nan"), not a name that holds the letters
+      if (lower != "inf" && lower != "-inf" && lower != "nan" && lower != "-nan" && lower != "+inf")
+        continue;
+      const size_t open = xml.rfind('<', at);
+      const size_t name_end = xml.find_first_of(" \n/>", open);
+      const size_t named = xml.find(" name=\"", open);
+      const std::string element = xml.substr(open + 1, name_end - open - 1) +
+                                  (named != std::string::npos && named < at ?
+                                       " '" + xml.substr(named + 7, xml.find('"', named + 7) - named - 7) + "'" :
+                                       std::string());
+      throw std::invalid_argument("MuJoCo peer: the translation's <" + element + "> " + attribute + "=\"" +
+                                  xml.substr(at + 2, end - at - 2) +
+                                  "\" is not finite (a value derived from the scene overflowed)");
+    }
+  }
 }
 
 // MuJoCo's model from the MJCF text, loaded through a virtual file (std::runtime_error with MuJoCo's message)
@@ -712,15 +754,38 @@ void MujocoPeer::Impl::setContactParameters(mjModel* m)
   // one pair's solref for (K_lin, C_lin). Friction rows damp the slip with impratio * C_lin (elliptic cone, no
   // friction solref in 2.2.2): our regularized Coulomb reaches mu F_N at v1, so that slope is matched at the force
   // scale f (the largest impratio any pair needs)
-  const auto set = [&](int j, std::pair<double, double> linear, double f, double inv_mass, double mu, double v_ramp)
+  // (a value MuJoCo cannot take is refused, naming the contact and where it comes from: the text would hold
+  // "-inf nan", which MuJoCo reads as it likes)
+  const auto set = [&](int j, std::pair<double, double> linear, double f, double inv_mass, double mu, double v_ramp,
+                       const std::string& what, const std::string& source)
   {
     const auto [k_lin, c_lin] = linear;
-    m->pair_solref[2 * j] = -k_lin * inv_mass;
-    m->pair_solref[2 * j + 1] = -c_lin * inv_mass;
-    text_solref.emplace_back(-k_lin * inv_mass, -c_lin * inv_mass);
+    const double k_ref = -k_lin * inv_mass, c_ref = -c_lin * inv_mass;
+    if (!std::isfinite(k_ref) || !std::isfinite(c_ref))
+      throw std::invalid_argument("MuJoCo peer: " + what + ": its solref (-K/m, -C/m) = (" +
+                                  core::shortestNumber(k_ref) + ", " + core::shortestNumber(c_ref) +
+                                  ") is not finite: stiffness K = " + core::shortestNumber(k_lin) +
+                                  " N/m, damping C = " + core::shortestNumber(c_lin) + " N s/m from " + source +
+                                  ", over the mass " + core::roundedNumber(1.0 / inv_mass, 6) + " kg");
+    m->pair_solref[2 * j] = k_ref;
+    m->pair_solref[2 * j + 1] = c_ref;
+    text_solref.emplace_back(k_ref, c_ref);
     if (mu > 0.0 && c_lin > 0.0)
       impratio = std::max(impratio, mu * f / (std::max(1e-6, v_ramp) * c_lin));
+    if (!std::isfinite(impratio))
+      throw std::invalid_argument("MuJoCo peer: " + what +
+                                  ": the friction rows' impratio mu F / (v C) = " + core::shortestNumber(mu) + " * " +
+                                  core::shortestNumber(f) + " N / (" + core::shortestNumber(std::max(1e-6, v_ramp)) +
+                                  " m/s * " + core::shortestNumber(c_lin) + " N s/m) is not finite");
     return std::make_pair(k_lin, c_lin);
+  };
+  // where a pair's (K, C) come from, for a refusal
+  const auto sourceOf = [](core::ContactLaw law, const std::string& section, double k, double f)
+  {
+    return law == core::ContactLaw::kLinear ?
+               section + ".stiffness and " + section + ".damping (law 'linear')" :
+               "the Hertz stiffness " + core::roundedNumber(k, 6) +
+                   " N/m^1.5 (the materials' youngs_modulus) at the force scale F* = " + core::shortestNumber(f) + " N";
   };
   if (hasContact())
     for (int i = 0; i < static_cast<int>(model.checked_pairs.size()); ++i)
@@ -729,10 +794,13 @@ void MujocoPeer::Impl::setContactParameters(mjModel* m)
       const int j = compiled("geom" + std::to_string(p.body_a), p.body_b);
       const double inv_mass = m->body_invweight0[2 * body_id[p.body_a]] + m->body_invweight0[2 * body_id[p.body_b]];
       const core::ContactSettings& c = model.contact;
-      const auto [k_lin, c_lin] = set(j,
-                                      linearOf(c.law, p.stiffness90, options.contact_force, inv_mass, c.restitution,
-                                               c.linear_stiffness, c.linear_damping),
-                                      options.contact_force, inv_mass, c.friction, c.slip_velocity - c.stick_velocity);
+      const auto [k_lin, c_lin] =
+          set(j,
+              linearOf(c.law, p.stiffness90, options.contact_force, inv_mass, c.restitution, c.linear_stiffness,
+                       c.linear_damping),
+              options.contact_force, inv_mass, c.friction, c.slip_velocity - c.stick_velocity,
+              "the contact of struts '" + model.bodies[p.body_a].name + "' and '" + model.bodies[p.body_b].name + "'",
+              sourceOf(c.law, "contact", p.stiffness90, options.contact_force));
       pair_of_checked[i] = j;
       pair_stiffness[i] = k_lin;
       pair_damping[i] = c_lin;
@@ -750,7 +818,9 @@ void MujocoPeer::Impl::setContactParameters(mjModel* m)
     const double inv_mass = m->body_invweight0[2 * body_id[body]];
     set(compiled("ground", body),
         linearOf(gs.law, g.stiffness, ground_force, inv_mass, gs.restitution, gs.linear_stiffness, gs.linear_damping),
-        ground_force, inv_mass, gs.friction, gs.slip_velocity - gs.stick_velocity);
+        ground_force, inv_mass, gs.friction, gs.slip_velocity - gs.stick_velocity,
+        "the ground contact of '" + model.bodies[body].name + "'",
+        sourceOf(gs.law, "ground", g.stiffness, ground_force));
   }
   m->opt.impratio = impratio;
 }
@@ -765,6 +835,7 @@ MujocoPeer::MujocoPeer(const core::Model& model, const MujocoOptions& options)
   im.mapConnects(im.mapDrivenNodes(), tr);
   im.mapCables(tr);
   xml_ = im.mjcf(tr);
+  refuseNonFinite(xml_);
   m_ = options.xml_file.empty() ? loadMjcf(xml_) : loadMjcfFile(options.xml_file);
   d_ = mj_makeData(m_);
   im.findIds(m_, tr);
@@ -807,6 +878,7 @@ std::string MujocoPeer::exportXml() const
       "  masses are not bodies here. Loaded alone, with no controls, the cables carry nothing and the\n"
       "  drives hold still. -->\n";
   const size_t root = out.find("<mujoco");
+  refuseNonFinite(out);
   out.insert(root == std::string::npos ? 0 : root, header);
   return out;
 }
@@ -826,6 +898,7 @@ void MujocoPeer::reset()
   for (int w = 0; w < mjNWARNING; ++w)
     d_->warning[w].number = 0;
   message_.clear();
+  diverged_ = false;
   forward();
 }
 
@@ -867,18 +940,22 @@ bool MujocoPeer::step()
     {
       message_ = std::string("MuJoCo warning '") + kWarningNames[w] + "' in the step from t = " + num(t0) + " s" +
                  (g_warning.empty() ? "" : ": " + g_warning);
+      // MuJoCo's own signs of an unstable simulation (it resets the state after them)
+      diverged_ = w == mjWARN_BADQPOS || w == mjWARN_BADQVEL || w == mjWARN_BADQACC || w == mjWARN_BADCTRL;
       return false;
     }
   for (int i = 0; i < m_->nq; ++i)
     if (!std::isfinite(d_->qpos[i]))
     {
       message_ = "non-finite position in the step from t = " + num(t0) + " s";
+      diverged_ = true;
       return false;
     }
   for (int i = 0; i < m_->nv; ++i)
     if (!std::isfinite(d_->qvel[i]))
     {
       message_ = "non-finite velocity in the step from t = " + num(t0) + " s";
+      diverged_ = true;
       return false;
     }
   return true;
@@ -1115,6 +1192,13 @@ MujocoTrace runMujoco(const core::Model& model, const MujocoOptions& options)
   if (model.analysis.type != core::AnalysisType::kDynamic)
     throw std::invalid_argument("MuJoCo peer: the scene's analysis must be dynamic");
   MujocoPeer peer(model, options);
+  tr.size = core::structureSize(model, model.q0);
+  // the pins and ball joints (three rows of a point on a point, no drive): how far their two points part
+  std::vector<const core::Constraint*> joints;
+  for (const core::Constraint& c : model.constraints)
+    if (c.kind == core::Constraint::Kind::kPoints && c.actuator < 0 && c.directions.size() == 3)
+      joints.push_back(&c);
+  const core::Constraint* worst = nullptr;
   const double dt = options.timestep;
   const long n_steps = std::lround(std::ceil(model.analysis.duration / dt - 1e-9));
   const double interval = model.analysis.output_interval > 0.0 ? model.analysis.output_interval : dt;
@@ -1146,6 +1230,27 @@ MujocoTrace runMujoco(const core::Model& model, const MujocoOptions& options)
       tr.peak = f;
       tr.peak_t = peer.time();
     }
+    for (const core::Constraint* c : joints)
+    {
+      const double drift = (peer.pointPosition(c->a) - peer.pointPosition(c->b)).norm();
+      if (!(drift <= tr.joint_drift))  // (NaN included)
+      {
+        tr.joint_drift = drift;
+        worst = c;
+      }
+    }
+  };
+  // a run whose pins and joints have come apart is no longer the structure, however finite its numbers
+  const auto torn = [&]()
+  {
+    if (!(tr.joint_drift > kMaxJointDrift * tr.size))
+      return false;
+    tr.status = "diverged";
+    tr.message = "the joint '" + (worst ? worst->name : std::string("?")) + "' came apart by " +
+                 core::roundedNumber(tr.joint_drift, 3) + " m at t = " + core::roundedNumber(peer.time(), 6) +
+                 " s, more than " + core::shortestNumber(kMaxJointDrift) + " of the structure's size (" +
+                 core::roundedNumber(tr.size, 3) + " m)";
+    return true;
   };
   output();
   double next_output = interval;
@@ -1159,7 +1264,7 @@ MujocoTrace runMujoco(const core::Model& model, const MujocoOptions& options)
     tr.solver_iterations += peer.mujocoData()->solver_iter;
     if (!ok)
     {
-      tr.status = "mujoco_failed";
+      tr.status = peer.diverged() ? "diverged" : "mujoco_failed";
       tr.message = peer.message();
       break;
     }
@@ -1175,6 +1280,8 @@ MujocoTrace runMujoco(const core::Model& model, const MujocoOptions& options)
     {
       output();
       next_output += interval;
+      if (torn())
+        break;
     }
   }
   return tr;

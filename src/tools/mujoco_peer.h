@@ -110,6 +110,13 @@ public:
   /// One MuJoCo step (mj_step) with the drives set for its start; false (and message()) when MuJoCo raised
   /// a warning or a number became non-finite.
   bool step();
+  /// Whether the last step that failed diverged: a non-finite position or velocity, or one of MuJoCo's warnings of
+  /// an unstable simulation (bad qpos, qvel, qacc or ctrl: a NaN, an infinity or a value above 1e10); false
+  /// for its other warnings (a full contact or constraint list, a near-singular inertia).
+  bool diverged() const
+  {
+    return diverged_;
+  }
   /// Recomputes everything derived (positions, tendon lengths, tensions, constraint and contact forces) at
   /// the current state (mj_forward): call before reading results.
   void forward();
@@ -156,6 +163,7 @@ private:
   std::unique_ptr<Impl> impl_;
   std::string xml_;
   std::string message_;
+  bool diverged_ = false;
   mjModel_* m_ = nullptr;
   mjData_* d_ = nullptr;
 };
@@ -172,6 +180,11 @@ struct MujocoTrace
   double wall_time = 0.0;  // s, mj_step calls and the drives only
   long steps = 0;
   long solver_iterations = 0;  // MuJoCo's constraint solver iterations, summed over steps
+  double size = 0.0;           // m: the structure's size at the start (core::structureSize)
+  double joint_drift = 0.0;    // m: the largest distance between the two points of a pin or ball joint at an output
+  /// "converged"; "diverged" (MujocoPeer::diverged(), or a pin or ball joint drifted apart by more than
+  /// kMaxJointDrift of the structure's size: the run is no longer the structure); "mujoco_failed" (MuJoCo's
+  /// other warnings). `message` says what and when.
   std::string status = "converged";
   std::string message;
   bool ok() const
@@ -179,6 +192,10 @@ struct MujocoTrace
     return status == "converged";
   }
 };
+
+/// The largest drift of a pin or ball joint, as a fraction of the structure's size, that a MuJoCo run may show
+/// before it counts as diverged: its soft connects give way by micrometres to millimetres in a sound run.
+constexpr double kMaxJointDrift = 0.1;
 
 /// Runs model.analysis (dynamic: duration, output_interval, the actuation schedule) in MuJoCo.
 MujocoTrace runMujoco(const core::Model& model, const MujocoOptions& options);

@@ -6,6 +6,11 @@
 // linear contact law (MuJoCo's own), whose impacts MuJoCo must then follow to within its step's error; everywhere
 // else the distance is measured, not asserted (tensegrity_bench work-precision --mujoco-dts, docs/benchmarks.md).
 #include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <map>
+#include <sstream>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -14,6 +19,7 @@
 
 #include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/contact.h"
+#include "active_tensegrity/core/generators.h"
 #include "active_tensegrity/core/scene.h"
 #include "command.h"
 #include "mujoco_peer.h"
@@ -441,4 +447,130 @@ TEST(MujocoPeer, OnTheLinearContactLawMuJoCoFollowsOurImpacts)
               peak);
   EXPECT_LT(distance, 2e-4);
   EXPECT_NEAR(tr.peak, peak, 5e-3 * peak);
+}
+
+// A run that blows up says so: a five-strut prism pressed into contact at 2 m/s, MuJoCo's implicit integrator at
+// 1 ms (the struts fly apart: 3 m off a structure 1.6 m across, contact forces of 4e6 N against 2e5 N, with every
+// number finite and no warning from MuJoCo: it said "converged"). Its pins and joints come apart; at 0.25 ms it
+// stays together.
+TEST(MujocoPeer, ARunThatBlowsUpSaysDiverged)
+{
+  at::PrismSpec spec;
+  spec.struts = 5;
+  spec.pinned = true;
+  spec.driven = true;
+  const at::Model model = at::loadSceneFromString(
+      at::prismScene(spec), "prism5",
+      { at::parseOverride("analysis.type=dynamic"), at::parseOverride("analysis.max_actuation=0.6"),
+        at::parseOverride("actuation.speed=2"), at::parseOverride("analysis.duration=1.5") });
+  tools::MujocoOptions o;
+  o.integrator = tools::MujocoIntegrator::kImplicit;
+  o.timestep = 1e-3;
+  o.contact_force = 1.9e5;  // about the fold's peak (the bench's default: the reference's)
+  const tools::MujocoTrace blown = tools::runMujoco(model, o);
+  std::printf("[ measured ] 1 ms: %s, joint drift %.3g m of a size %.3g m, peak %.3g N: %s\n", blown.status.c_str(),
+              blown.joint_drift, blown.size, blown.peak, blown.message.c_str());
+  EXPECT_EQ(blown.status, "diverged") << blown.message;
+  EXPECT_FALSE(blown.ok());
+  EXPECT_NE(blown.message.find("came apart"), std::string::npos) << blown.message;
+  o.timestep = 2.5e-4;
+  const tools::MujocoTrace sound = tools::runMujoco(model, o);
+  std::printf("[ measured ] 0.25 ms: %s, joint drift %.3g m\n", sound.status.c_str(), sound.joint_drift);
+  EXPECT_TRUE(sound.ok()) << sound.message;
+  EXPECT_LT(sound.joint_drift, 0.01 * sound.size);
+  // the free prism at 1 ms with Euler: MuJoCo's own warning of an unstable simulation ("mujoco_failed" before)
+  const at::Model free = at::loadSceneFromString(at::prismScene({ 5 }), "prism5_free");
+  const tools::MujocoTrace unstable = tools::runMujoco(free, tools::MujocoOptions{});
+  EXPECT_EQ(unstable.status, "diverged") << unstable.message;
+  EXPECT_NE(unstable.message.find("bad qacc"), std::string::npos) << unstable.message;
+}
+
+// A value of the translation that overflows is refused, named, instead of written as "-inf nan" (a contact force
+// scale of 1e300 N squares the Hertz stiffness beyond floating point), and tensegrity_export refuses a material
+// beyond any solid at the scene's load
+TEST(MujocoPeer, ANonFiniteTranslationIsRefusedByName)
+{
+  const at::Model model =
+      scene("quadruplex.yaml", { "analysis.type=dynamic", "actuation.speed=0.5", "contact.enabled=true" });
+  tools::MujocoOptions o;
+  o.contact_force = 1e300;
+  try
+  {
+    tools::MujocoPeer peer(model, o);
+    FAIL() << "accepted";
+  }
+  catch (const std::invalid_argument& e)
+  {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("the contact of struts 'S"), std::string::npos) << what;
+    EXPECT_NE(what.find("is not finite"), std::string::npos) << what;
+    EXPECT_NE(what.find("F* = 1e+300 N"), std::string::npos) << what;
+  }
+  // any other number of the text that overflows: the equality constraints' time constant, twice the step
+  tools::MujocoOptions huge_step;
+  huge_step.timestep = 1e308;
+  try
+  {
+    tools::MujocoPeer peer(model, huge_step);
+    FAIL() << "accepted";
+  }
+  catch (const std::invalid_argument& e)
+  {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("<connect 'P1.pin'> solref=\"inf 1\" is not finite"), std::string::npos) << what;
+  }
+  const std::string out = active_tensegrity::test::scratchPath("e1e300.xml");
+  const active_tensegrity::test::CommandResult r = active_tensegrity::test::runCommand(
+      std::string(TENSEGRITY_EXPORT_PATH) + " " + kScenes +
+      "quadruplex.yaml --set analysis.type=dynamic --set actuation.speed=0.5 --set contact.enabled=true --set "
+      "materials.steel.youngs_modulus=1e300 --mjcf " +
+      out + " 2>&1");
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find("materials.steel.youngs_modulus: must lie in (0, 1e+14] Pa"), std::string::npos) << r.output;
+  EXPECT_FALSE(std::ifstream(out).good()) << "a refused export wrote its file";
+}
+
+// tensegrity_bench work-precision puts it in the status column: the prism of ARunThatBlowsUpSaysDiverged, whose
+// MuJoCo rows at 1 ms said "converged" with a position error of 1.2 to 3 m
+TEST(MujocoPeer, WorkPrecisionLabelsADivergedPeerRun)
+{
+  const std::string scene = active_tensegrity::test::scratchPath("prism5_driven.yaml"),
+                    csv = active_tensegrity::test::scratchPath("prism5_wp.csv");
+  at::PrismSpec spec;
+  spec.struts = 5;
+  spec.pinned = true;
+  spec.driven = true;
+  std::ofstream(scene) << at::prismScene(spec);
+  const active_tensegrity::test::CommandResult r = active_tensegrity::test::runCommand(
+      std::string(TENSEGRITY_BENCH_PATH) + " work-precision " + scene +
+      " --set analysis.type=dynamic --set analysis.max_actuation=0.6 --set actuation.speed=2"
+      " --set analysis.duration=1.5 --schemes generalized_alpha --dts 5e-4 --ref-dt 1e-4 --mujoco-dts 1e-3,2.5e-4"
+      " --mujoco-integrators implicit --csv " +
+      csv + " 2>&1");
+  ASSERT_EQ(r.code, 0) << r.output;
+  std::ifstream in(csv);
+  std::map<std::string, std::string> status;  // "scheme dt" -> status
+  for (std::string line; std::getline(in, line);)
+  {
+    std::vector<std::string> cells;
+    std::stringstream row(line);
+    for (std::string cell; std::getline(row, cell, ',');)
+      cells.push_back(cell);
+    ASSERT_GE(cells.size(), 4u) << line;
+    status[cells[0] + " " + cells[1]] = cells[3];
+  }
+  EXPECT_EQ(status["mujoco_implicit 0.001"], "diverged") << r.output;
+  EXPECT_EQ(status["mujoco_implicit 0.00025"], "converged") << r.output;
+  EXPECT_EQ(status["generalized_alpha 0.0005"], "converged") << r.output;
+  EXPECT_NE(r.output.find("came apart"), std::string::npos) << r.output;
+  // a run that ends finite, its joints together, 1.2 m off a structure 1.5 m across: the quadruplex pressed into
+  // steel-on-steel contact, MuJoCo's RK4 at 1 ms
+  const active_tensegrity::test::CommandResult q = active_tensegrity::test::runCommand(
+      std::string(TENSEGRITY_BENCH_PATH) + " work-precision " + kScenes +
+      "quadruplex.yaml --set analysis.type=dynamic --set actuation.speed=0.5 --set contact.enabled=true"
+      " --set analysis.max_actuation=1.2 --set analysis.duration=1.5 --schemes generalized_alpha --dts 1e-3"
+      " --mujoco-dts 1e-3 --mujoco-integrators rk4 2>&1");
+  ASSERT_EQ(q.code, 0) << q.output;
+  EXPECT_NE(q.output.find("mujoco_rk4,0.001,0,diverged,"), std::string::npos) << q.output;
+  EXPECT_NE(q.output.find("more than 0.5 of the structure's size 1.5 m"), std::string::npos) << q.output;
 }

@@ -23,6 +23,8 @@
 #include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/contact.h"
 #include "active_tensegrity/core/scene.h"
+#include "active_tensegrity/core/structure_check.h"
+#include "active_tensegrity/core/text.h"
 #include "../cli.h"
 #ifdef ACTIVE_TENSEGRITY_HAVE_MUJOCO
 #include "../mujoco_peer.h"
@@ -161,6 +163,24 @@ Errors compare(const at::Model& model, const Trace& tr, const Trace& ref)
   return e;
 }
 
+/// A run's position error above this fraction of the structure's size (core::structureSize): the run left the
+/// structure behind, whatever its solver said (a MuJoCo run that blew up to finite numbers, 1.5 m off a 1.6 m
+/// prism with contact forces of 4e7 N, "converged").
+constexpr double kDivergedError = 0.5;
+
+/// The status column of a run: `status`, or "diverged" when a converged run's position error is above
+/// kDivergedError of the structure's size `size`; `why` says so.
+std::string rowStatus(const std::string& status, const Errors& e, double size, std::string& why)
+{
+  if (status == "converged" && !(e.position <= kDivergedError * size))
+  {
+    why = "position error " + at::roundedNumber(e.position, 3) + " m, more than " + at::shortestNumber(kDivergedError) +
+          " of the structure's size " + at::roundedNumber(size, 3) + " m";
+    return "diverged";
+  }
+  return status;
+}
+
 #ifdef ACTIVE_TENSEGRITY_HAVE_MUJOCO
 /// The MuJoCo peer's rows: the scene translated into MuJoCo (mujoco_peer.h) with each integrator over the
 /// ladder `dts`, measured against the same reference as our runs (docs/benchmarks.md); `force` is the
@@ -193,16 +213,18 @@ void mujocoRows(const at::Model& base, const Trace& ref, const std::vector<std::
       }
       const Errors e = compare(base, tr, ref);
       const std::string name = "mujoco_" + integrator;
+      std::string why = mj.message;
+      const std::string status = rowStatus(mj.status, e, mj.size, why);
       writePath(paths, base, name, dt, tr);
-      out << name << "," << dt << ",0," << mj.status << "," << mj.steps << "," << mj.solver_iterations << ","
+      out << name << "," << dt << ",0," << status << "," << mj.steps << "," << mj.solver_iterations << ","
           << mj.wall_time << "," << e.position << "," << e.height << "," << e.force << "," << e.peak << ","
           << e.peak_time << "," << e.impulse << "," << mj.peak << "," << ref.peak << "\n";
       out.flush();
       std::fprintf(stderr,
                    "  %-30s dt  %-8g %-10s wall %7.2f s  position err %.3e m  force err %.3e  peak err %.3e  "
                    "impulse err %.3e%s\n",
-                   name.c_str(), dt, mj.status.c_str(), mj.wall_time, e.position, e.force, e.peak, e.impulse,
-                   mj.ok() ? "" : ("  (" + mj.message + ")").c_str());
+                   name.c_str(), dt, status.c_str(), mj.wall_time, e.position, e.force, e.peak, e.impulse,
+                   why.empty() ? "" : ("  (" + why + ")").c_str());
     }
 }
 #endif
@@ -320,6 +342,7 @@ int workPrecision(const std::string& scene, const std::vector<std::string>& args
   out << "scheme,dt,tolerance,status,steps,newton_iterations,wall_time,position_error,height_error,force_error,"
          "peak_force_error,peak_time_error,impulse_error,peak_force,reference_peak_force\n";
   const double tol = base.solver.newton_tolerance;
+  const double size = at::structureSize(base, base.q0);
   for (const Scheme& sc : schemes)
     for (double x : sc.adaptive ? tols : dts)
     {
@@ -328,17 +351,19 @@ int workPrecision(const std::string& scene, const std::vector<std::string>& args
       const Errors e = compare(base, tr, ref);
       const double wall = tr.result.wall_time - tr.result.callback_time;
       const double dt = sc.adaptive ? base.analysis.duration / std::max(1, tr.result.solver_steps) : x;
+      std::string why = tr.result.summary.message;
+      const std::string status = rowStatus(at::toString(tr.result.summary.status), e, size, why);
       writePath(paths, base, sc.name, dt, tr);
-      out << sc.name << "," << dt << "," << (sc.adaptive ? x : 0.0) << "," << at::toString(tr.result.summary.status)
-          << "," << tr.result.solver_steps << "," << tr.result.summary.iterations << "," << wall << "," << e.position
-          << "," << e.height << "," << e.force << "," << e.peak << "," << e.peak_time << "," << e.impulse << ","
-          << tr.peak << "," << ref.peak << "\n";
+      out << sc.name << "," << dt << "," << (sc.adaptive ? x : 0.0) << "," << status << "," << tr.result.solver_steps
+          << "," << tr.result.summary.iterations << "," << wall << "," << e.position << "," << e.height << ","
+          << e.force << "," << e.peak << "," << e.peak_time << "," << e.impulse << "," << tr.peak << "," << ref.peak
+          << "\n";
       out.flush();
       std::fprintf(stderr,
                    "  %-30s %s %-8g %-10s wall %7.2f s  position err %.3e m  force err %.3e  peak err %.3e  "
-                   "impulse err %.3e\n",
-                   sc.name, sc.adaptive ? "tol" : "dt ", x, at::toString(tr.result.summary.status), wall, e.position,
-                   e.force, e.peak, e.impulse);
+                   "impulse err %.3e%s\n",
+                   sc.name, sc.adaptive ? "tol" : "dt ", x, status.c_str(), wall, e.position, e.force, e.peak,
+                   e.impulse, why.empty() ? "" : ("  (" + why + ")").c_str());
     }
 #ifdef ACTIVE_TENSEGRITY_HAVE_MUJOCO
   mujocoRows(base, ref, mujoco_integrators, mujoco_dts, mujoco_force, out, paths);
