@@ -5,6 +5,7 @@
 #include <stdexcept>
 #include <vector>
 
+#include "active_tensegrity/core/model.h"
 #include "active_tensegrity/core/rotation.h"
 #include "active_tensegrity/core/text.h"
 
@@ -18,10 +19,23 @@ std::string vec(const Vec3& v)
   return "[" + n(v.x()) + ", " + n(v.y()) + ", " + n(v.z()) + "]";
 }
 
-void requirePositive(const std::string& what, double v)
+static_assert(kMaxTowerStages + 2 <= Cable::kMaxPoints, "a tower's sliding cable has stages + 2 nodes");
+
+void requireRange(const std::string& what, double v, double lo, double hi, const std::string& unit)
 {
-  if (!(std::isfinite(v) && v > 0.0))
-    throw std::invalid_argument(what + ": must be positive and finite, got " + shortestNumber(v));
+  if (!(v >= lo && v <= hi))
+    throw std::invalid_argument(what + ": must lie in [" + shortestNumber(lo) + ", " + shortestNumber(hi) + "] " +
+                                unit + ", got " + shortestNumber(v));
+}
+
+void requireLength(const std::string& what, double v)
+{
+  requireRange(what, v, kMinGeneratedLength, kMaxGeneratedLength, "m");
+}
+
+void requirePrestress(const std::string& what, double v)
+{
+  requireRange(what, v, kMinGeneratedPrestress, kMaxGeneratedPrestress, "N");
 }
 
 const char* kMaterials = "materials:\n"
@@ -44,10 +58,15 @@ std::string prismScene(const PrismSpec& s)
 {
   if (s.struts < 3 || s.struts > 64)
     throw std::invalid_argument("struts: a prism has 3 to 64 struts, got " + std::to_string(s.struts));
-  requirePositive("radius", s.radius);
-  requirePositive("height", s.height);
-  requirePositive("ring_prestress", s.ring_prestress);
-  requirePositive("strut_radius", s.strut_radius);
+  requireLength("radius", s.radius);
+  requireLength("height", s.height);
+  requirePrestress("ring_prestress", s.ring_prestress);
+  requireLength("strut_radius", s.strut_radius);
+  // (degrees to radians and back may be off by an ulp: 360 degrees is in)
+  if (!std::isnan(s.twist) && !(std::abs(s.twist * 180.0 / M_PI) <= kMaxGeneratedTwist * (1.0 + 1e-12)))
+    throw std::invalid_argument("twist: must lie in [" + shortestNumber(-kMaxGeneratedTwist) + ", " +
+                                shortestNumber(kMaxGeneratedTwist) + "] degrees, got " +
+                                shortestNumber(s.twist * 180.0 / M_PI));
   if (s.driven && !s.pinned)
     throw std::invalid_argument("driven: a driven prism must be pinned (its top nodes are pushed against its base)");
   const double twist = std::isnan(s.twist) ? prismTwist(s.struts) : s.twist;
@@ -119,8 +138,8 @@ std::string prismScene(const PrismSpec& s)
 
 std::string octahedronScene(const OctahedronSpec& s)
 {
-  requirePositive("strut_length", s.strut_length);
-  requirePositive("prestress", s.prestress);
+  requireLength("strut_length", s.strut_length);
+  requirePrestress("prestress", s.prestress);
   const double a = s.strut_length / 4.0, b = s.strut_length / 2.0;
   // struts along z at y = +-a, along x at z = +-a, along y at x = +-a: the cyclic permutations of (0, +-a, +-b)
   std::vector<Vec3> nodes;
@@ -182,9 +201,11 @@ std::string octahedronScene(const OctahedronSpec& s)
 
 std::string towerScene(const TowerSpec& s)
 {
-  if (s.stages < 1 || s.stages > 40)
-    throw std::invalid_argument("stages: a tower has 1 to 40 stages, got " + std::to_string(s.stages));
-  requirePositive("width", s.width);
+  if (s.stages < 1 || s.stages > kMaxTowerStages)
+    throw std::invalid_argument("stages: a tower has 1 to " + std::to_string(kMaxTowerStages) +
+                                " stages (its sliding cables run through every level: stages + 2 nodes, at most " +
+                                std::to_string(Cable::kMaxPoints) + "), got " + std::to_string(s.stages));
+  requireLength("width", s.width);
   const int top = s.stages;
   const double h = s.width / 2.0;
   const auto name = [](int level, int k)

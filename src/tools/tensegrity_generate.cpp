@@ -1,4 +1,5 @@
 // tensegrity_generate: writes the scene of a standard structure (core/generators.h, lattice.h), ready to run.
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <iostream>
@@ -7,6 +8,7 @@
 
 #include "active_tensegrity/core/generators.h"
 #include "active_tensegrity/core/scene.h"
+#include "active_tensegrity/core/text.h"
 #include "cli.h"
 #include "lattice.h"
 
@@ -18,27 +20,55 @@ namespace
 const char* kUsage =
     "usage: tensegrity_generate STRUCTURE [options] [--out FILE.yaml]\n"
     "  Writes the scene of a standard structure (stdout without --out); every scene loads as it is.\n"
+    "  Lengths (R, H, r, L, P, W) lie in [0.001, 1000] m, prestresses (T) in [0.001, 1e6] N.\n"
     "  prism --struts N [--radius R] [--height H] [--twist DEG] [--prestress T] [--strut-radius r]\n"
     "        [--pinned [--driven]]\n"
     "      class-1 prism of N (3..64) struts, rings of radius R (0.5 m) H (0.8 m) apart; at the form's twist\n"
-    "      -(90 + 180/N) deg unless --twist is given (then a start for tensegrity_formfind); ring cables at\n"
-    "      T N (100), verticals and struts at the form's prestress; struts of radius r (0.012 m); --pinned\n"
-    "      fixes the bottom nodes; --driven adds the actuator press, which pushes the top nodes down (a\n"
-    "      static fold to 0.3 H with contact between the struts)\n"
+    "      -(90 + 180/N) deg unless --twist is given (-360..360; then a start for tensegrity_formfind); ring\n"
+    "      cables at T N (100), verticals and struts at the form's prestress; struts of radius r (0.012 m);\n"
+    "      --pinned fixes the bottom nodes; --driven adds the actuator press, which pushes the top nodes down\n"
+    "      (a static fold to 0.3 H with contact between the struts)\n"
     "  octahedron [--strut-length L] [--prestress T] [--pinned]\n"
     "      expanded octahedron of six struts of L (1 m), its 24 cables at T N (100); --pinned fixes three\n"
     "      nodes of its lowest cable triangle\n"
     "  quadruplex-lattice --cells AxB [--pitch P] [--height H] [--top-radius R] [--strut-radius r]\n"
-    "      A x B quadruplex cells (4 struts each) on the ground, P (1 m) apart, top nodes on circles of R\n"
-    "      (0.3 m) at H (0.5 m); bracing cables pulled in (a dynamic fold with contact)\n"
+    "      A x B quadruplex cells (4 struts each; at most 900 cells) on the ground, P (1 m) apart, top nodes\n"
+    "      on circles of R (0.3 m, below P/2) at H (0.5 m); bracing cables pulled in by 0.4 m, or by 0.8 of\n"
+    "      their rest length when that is less (a dynamic fold with contact)\n"
     "  tower --stages K [--width W]\n"
-    "      clustered quadruplex tower of K (1..40) stages of W/2 (W = 1 m), four sliding cables folding it\n"
+    "      clustered quadruplex tower of K (1..30) stages of W/2 (W = 1 m), four sliding cables folding it\n"
+    "  -h, --help (anywhere) prints this.\n"
     "  Exit status: 0 written, 1 cannot write, 2 bad arguments.\n";
 
-double number(tools::Args& args, const std::string& option)
+/// `--help` or `-h` among a structure's options.
+struct HelpRequested
 {
-  return tools::parsePositive<double>(option, args.value(option));
+};
+
+/// A number in [lo, hi] (unit) for `option`, else BadArgument naming the option, the range and the value.
+double bounded(tools::Args& args, const std::string& option, double lo, double hi, const std::string& unit)
+{
+  const std::string text = args.value(option);
+  const double v = tools::parsePositive<double>(option, text);
+  if (v < lo || v > hi)
+    throw tools::BadArgument(option + ": must lie in [" + at::shortestNumber(lo) + ", " + at::shortestNumber(hi) +
+                             "] " + unit + ", got '" + text + "'");
+  return v;
 }
+
+double length(tools::Args& args, const std::string& option)
+{
+  return bounded(args, option, at::kMinGeneratedLength, at::kMaxGeneratedLength, "m");
+}
+
+double prestress(tools::Args& args, const std::string& option)
+{
+  return bounded(args, option, at::kMinGeneratedPrestress, at::kMaxGeneratedPrestress, "N");
+}
+
+// at most this many lattice cells: the loader pairs every two struts that share no node (auto pairs), and
+// 900 cells (3600 struts, 6.5 million pairs) take 0.4 GB and a second to load
+constexpr int kMaxLatticeCells = 900;
 
 std::string generate(const std::string& structure, tools::Args& args, std::string& out_path)
 {
@@ -51,15 +81,17 @@ std::string generate(const std::string& structure, tools::Args& args, std::strin
     while (args.more())
     {
       const std::string arg = args.option();
+      if (arg == "-h" || arg == "--help")
+        throw HelpRequested{};
       if (arg == "--struts")
       {
         s.struts = tools::parsePositive<int>(arg, args.value(arg));
         struts = true;
       }
       else if (arg == "--radius")
-        s.radius = number(args, arg);
+        s.radius = length(args, arg);
       else if (arg == "--height")
-        s.height = number(args, arg);
+        s.height = length(args, arg);
       else if (arg == "--twist")
       {
         const std::string v = args.value(arg);
@@ -74,15 +106,18 @@ std::string generate(const std::string& structure, tools::Args& args, std::strin
         }
         if (used != v.size() || v.empty() || !std::isfinite(s.twist))
           throw tools::BadArgument("--twist: expected an angle in degrees, got '" + v + "'");
+        if (std::abs(std::stod(v)) > at::kMaxGeneratedTwist)
+          throw tools::BadArgument("--twist: must lie in [" + at::shortestNumber(-at::kMaxGeneratedTwist) + ", " +
+                                   at::shortestNumber(at::kMaxGeneratedTwist) + "] degrees, got '" + v + "'");
       }
       else if (arg == "--prestress")
-        s.ring_prestress = number(args, arg);
+        s.ring_prestress = prestress(args, arg);
       else if (arg == "--pinned")
         s.pinned = true;
       else if (arg == "--driven")
         s.driven = true;
       else if (arg == "--strut-radius")
-        s.strut_radius = number(args, arg);
+        s.strut_radius = length(args, arg);
       else if (arg == "--out")
         out_path = args.value(arg);
       else
@@ -102,10 +137,12 @@ std::string generate(const std::string& structure, tools::Args& args, std::strin
     while (args.more())
     {
       const std::string arg = args.option();
+      if (arg == "-h" || arg == "--help")
+        throw HelpRequested{};
       if (arg == "--strut-length")
-        s.strut_length = number(args, arg);
+        s.strut_length = length(args, arg);
       else if (arg == "--prestress")
-        s.prestress = number(args, arg);
+        s.prestress = prestress(args, arg);
       else if (arg == "--pinned")
         s.pinned = true;
       else if (arg == "--out")
@@ -118,10 +155,12 @@ std::string generate(const std::string& structure, tools::Args& args, std::strin
   if (structure == "quadruplex-lattice")
   {
     tools::LatticeOptions o;
-    bool cells = false;
+    bool cells = false, top_radius_given = false;
     while (args.more())
     {
       const std::string arg = args.option();
+      if (arg == "-h" || arg == "--help")
+        throw HelpRequested{};
       if (arg == "--cells")
       {
         const std::string v = args.value(arg);
@@ -130,18 +169,22 @@ std::string generate(const std::string& structure, tools::Args& args, std::strin
           throw tools::BadArgument("--cells: expected AxB (e.g. 2x3), got '" + v + "'");
         o.nx = tools::parsePositive<int>(arg, v.substr(0, x));
         o.ny = tools::parsePositive<int>(arg, v.substr(x + 1));
-        if (o.nx > 100 || o.ny > 100)
-          throw tools::BadArgument("--cells: at most 100x100 cells, got '" + v + "'");
+        if (static_cast<long>(o.nx) * o.ny > kMaxLatticeCells)
+          throw tools::BadArgument("--cells: at most " + std::to_string(kMaxLatticeCells) +
+                                   " cells (e.g. 30x30), got '" + v + "'");
         cells = true;
       }
       else if (arg == "--pitch")
-        o.pitch = number(args, arg);
+        o.pitch = length(args, arg);
       else if (arg == "--height")
-        o.height = number(args, arg);
+        o.height = length(args, arg);
       else if (arg == "--top-radius")
-        o.top_radius = number(args, arg);
+      {
+        o.top_radius = length(args, arg);
+        top_radius_given = true;
+      }
       else if (arg == "--strut-radius")
-        o.strut_radius = number(args, arg);
+        o.strut_radius = length(args, arg);
       else if (arg == "--out")
         out_path = args.value(arg);
       else
@@ -150,8 +193,14 @@ std::string generate(const std::string& structure, tools::Args& args, std::strin
     if (!cells)
       throw tools::BadArgument("quadruplex-lattice: --cells AxB is required");
     if (!(o.top_radius < o.pitch / 2.0))
-      throw tools::BadArgument("--top-radius: must be below half the pitch (" + std::to_string(o.pitch / 2.0) +
-                               " m), got '" + std::to_string(o.top_radius) + "'");
+      throw tools::BadArgument("--top-radius: must be below half the pitch (" + at::shortestNumber(o.pitch / 2.0) +
+                               " m), got '" + at::shortestNumber(o.top_radius) + "'" +
+                               (top_radius_given ? "" : " (its default; give --top-radius)"));
+    // the bracings' pull-in leaves them a fifth of their rest length at least (lattice.cpp: prestress 400 N/m
+    // times the length, EA 2463 N)
+    const double h = o.pitch / 2.0;
+    const double bracing = std::sqrt((h - o.top_radius) * (h - o.top_radius) + h * h + o.height * o.height);
+    o.max_actuation = std::min(o.max_actuation, 0.8 * bracing / (1.0 + 400.0 * bracing / 2463.0));
     return tools::quadruplexLatticeYaml(o);
   }
   if (structure == "tower")
@@ -161,13 +210,15 @@ std::string generate(const std::string& structure, tools::Args& args, std::strin
     while (args.more())
     {
       const std::string arg = args.option();
+      if (arg == "-h" || arg == "--help")
+        throw HelpRequested{};
       if (arg == "--stages")
       {
         s.stages = tools::parsePositive<int>(arg, args.value(arg));
         stages = true;
       }
       else if (arg == "--width")
-        s.width = number(args, arg);
+        s.width = length(args, arg);
       else if (arg == "--out")
         out_path = args.value(arg);
       else
@@ -175,8 +226,10 @@ std::string generate(const std::string& structure, tools::Args& args, std::strin
     }
     if (!stages)
       throw tools::BadArgument("tower: --stages K is required");
-    if (s.stages > 40)
-      throw tools::BadArgument("--stages: a tower has 1 to 40 stages, got '" + std::to_string(s.stages) + "'");
+    if (s.stages > at::kMaxTowerStages)
+      throw tools::BadArgument("--stages: a tower has 1 to " + std::to_string(at::kMaxTowerStages) +
+                               " stages (its sliding cables run through every level and end at a driven body: " +
+                               "at most 32 nodes), got '" + std::to_string(s.stages) + "'");
     return at::towerScene(s);
   }
   throw tools::BadArgument("unknown structure '" + structure + "' (prism, octahedron, quadruplex-lattice, tower)");
@@ -199,6 +252,11 @@ int main(int argc, char** argv)
       return 0;
     }
     yaml = generate(structure, args, out_path);
+  }
+  catch (const HelpRequested&)
+  {
+    std::cout << kUsage;
+    return 0;
   }
   catch (const std::exception& e)  // BadArgument, a missing value, a generator's refusal
   {

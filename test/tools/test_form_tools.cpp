@@ -125,7 +125,20 @@ TEST(TensegrityGenerate, BadArgumentsNameTheOptionAndValue)
     { "octahedron --struts 5", "unknown option '--struts'" },
     { "quadruplex-lattice --cells 3", "--cells: expected AxB" },
     { "quadruplex-lattice --cells 2x2 --top-radius 0.6", "--top-radius: must be below half the pitch" },
-    { "tower --stages 41", "1 to 40 stages, got '41'" },
+    { "tower --stages 31", "1 to 30 stages (its sliding cables run through every level" },
+    { "tower --stages 2 --width 1e-4", "--width: must lie in [0.001, 1000] m, got '1e-4'" },
+    { "prism --struts 65", "3 to 64 struts, got '65'" },
+    { "prism --struts 5 --radius 1001", "--radius: must lie in [0.001, 1000] m, got '1001'" },
+    { "prism --struts 5 --height 0.0009", "--height: must lie in [0.001, 1000] m, got '0.0009'" },
+    { "prism --struts 5 --strut-radius 1e300", "--strut-radius: must lie in [0.001, 1000] m, got '1e300'" },
+    { "prism --struts 5 --prestress 2e6", "--prestress: must lie in [0.001, 1e+06] N, got '2e6'" },
+    { "prism --struts 5 --twist 1e30", "--twist: must lie in [-360, 360] degrees, got '1e30'" },
+    { "octahedron --strut-length 1e-300", "--strut-length: must lie in [0.001, 1000] m, got '1e-300'" },
+    { "octahedron --prestress 1e-4", "--prestress: must lie in [0.001, 1e+06] N, got '1e-4'" },
+    { "quadruplex-lattice --cells 30x31", "--cells: at most 900 cells (e.g. 30x30), got '30x31'" },
+    { "quadruplex-lattice --cells 2x2 --pitch 1e4", "--pitch: must lie in [0.001, 1000] m, got '1e4'" },
+    { "quadruplex-lattice --cells 2x2 --pitch 0.5",
+      "--top-radius: must be below half the pitch (0.25 m), got '0.3' (its default; give --top-radius)" },
     { "prism --struts 4 --driven", "--driven needs --pinned" },
   };
   for (const auto& [args, message] : cases)
@@ -137,6 +150,99 @@ TEST(TensegrityGenerate, BadArgumentsNameTheOptionAndValue)
   const Result r = generate("prism --struts 4 --out /nonexistent/dir/p.yaml");
   EXPECT_EQ(r.code, 1) << r.output;
   EXPECT_NE(r.output.find("cannot write '/nonexistent/dir/p.yaml'"), std::string::npos) << r.output;
+}
+
+// Every boundary of every documented range gives a scene that loads (tower --stages 31, in the documented 1..40,
+// wrote a scene the loader refused: its sliding cables had 33 nodes), alone and with the other options at theirs
+TEST(TensegrityGenerate, EveryBoundaryOfEveryRangeLoads)
+{
+  std::vector<std::string> cases;
+  for (const char* n : { "3", "64" })
+    for (const char* base : { "", " --pinned", " --pinned --driven" })
+    {
+      const std::string prism = std::string("prism --struts ") + n + base;
+      cases.push_back(prism);
+      for (const char* option : { "--radius", "--height", "--strut-radius" })
+        for (const char* v : { "0.001", "1000" })
+          cases.push_back(prism + " " + option + " " + v);
+      for (const char* v : { "0.001", "1e6" })
+        cases.push_back(prism + " --prestress " + v);
+      for (const char* v : { "-360", "360" })
+        cases.push_back(prism + " --twist " + v);
+      cases.push_back(prism + " --radius 0.001 --height 0.001 --strut-radius 1000 --prestress 1e6 --twist -360");
+      cases.push_back(prism + " --radius 1000 --height 1000 --strut-radius 0.001 --prestress 0.001 --twist 360");
+    }
+  for (const char* pinned : { "", " --pinned" })
+    for (const char* l : { "0.001", "1000" })
+      for (const char* t : { "0.001", "1e6" })
+        cases.push_back(std::string("octahedron --strut-length ") + l + " --prestress " + t + pinned);
+  for (const char* k : { "1", "30" })
+    for (const char* w : { "0.001", "1000" })
+      cases.push_back(std::string("tower --stages ") + k + " --width " + w);
+  for (const char* c : { "1x1", "1x900", "30x30" })
+    cases.push_back(std::string("quadruplex-lattice --cells ") + c);
+  for (const char* p : { "0.0021", "1000" })
+    for (const char* h : { "0.001", "1000" })
+      for (const char* r : { "0.001", "1000" })
+      {
+        const std::string lattice = std::string("quadruplex-lattice --cells 2x2 --pitch ") + p + " --height " + h +
+                                    " --strut-radius " + r + " --top-radius ";
+        cases.push_back(lattice + "0.001");
+        cases.push_back(lattice + (std::string(p) == "1000" ? "499.99" : "0.00104"));
+      }
+  const std::string out = tmp("boundary.yaml");
+  for (const std::string& args : cases)
+  {
+    const Result r = generate(args + " --out " + out);
+    ASSERT_EQ(r.code, 0) << args << ": " << r.output;
+    EXPECT_NO_THROW(at::loadScene(out)) << args;
+  }
+}
+
+// Every tool and every subcommand answers --help and -h with its usage, status 0 ("tensegrity_generate octahedron
+// --help" said "unknown option")
+TEST(ToolHelp, EveryToolAndSubcommandAnswersHelp)
+{
+  const std::vector<std::pair<std::string, std::string>> tools = {
+    { TENSEGRITY_GENERATE_PATH, "usage: tensegrity_generate" },
+    { TENSEGRITY_FORMFIND_PATH, "usage: tensegrity_formfind" },
+    { TENSEGRITY_EXPORT_PATH, "usage: tensegrity_export" },
+    { TENSEGRITY_BENCH_PATH, "usage: tensegrity_bench" },
+  };
+  for (const auto& [tool, usage] : tools)
+    for (const char* help : { "--help", "-h" })
+    {
+      const Result r = active_tensegrity::test::runCommand(tool + " " + help + " 2>&1");
+      EXPECT_EQ(r.code, 0) << tool << " " << help << ": " << r.output;
+      EXPECT_EQ(r.output.rfind(usage, 0), 0u) << tool << " " << help << ": " << r.output;
+    }
+  const std::vector<std::pair<std::string, std::string>> subcommands = {
+    { std::string(TENSEGRITY_GENERATE_PATH) + " octahedron", "usage: tensegrity_generate" },
+    { std::string(TENSEGRITY_GENERATE_PATH) + " prism --struts 5", "usage: tensegrity_generate" },
+    { std::string(TENSEGRITY_GENERATE_PATH) + " quadruplex-lattice --cells 2x2", "usage: tensegrity_generate" },
+    { std::string(TENSEGRITY_GENERATE_PATH) + " tower", "usage: tensegrity_generate" },
+    { std::string(TENSEGRITY_FORMFIND_PATH) + " in.yaml --out out.yaml", "usage: tensegrity_formfind" },
+    { std::string(TENSEGRITY_EXPORT_PATH) + " scene.yaml --mjcf out.xml", "usage: tensegrity_export" },
+    { std::string(TENSEGRITY_BENCH_PATH) + " steps scene.yaml", "usage: tensegrity_bench steps" },
+    { std::string(TENSEGRITY_BENCH_PATH) + " steps", "usage: tensegrity_bench steps" },
+    { std::string(TENSEGRITY_BENCH_PATH) + " contact-pair", "usage: tensegrity_bench contact-pair" },
+    { std::string(TENSEGRITY_BENCH_PATH) + " broad-phase", "usage: tensegrity_bench broad-phase" },
+    { std::string(TENSEGRITY_BENCH_PATH) + " plan scene.yaml", "usage: tensegrity_bench plan" },
+    { std::string(TENSEGRITY_BENCH_PATH) + " work-precision scene.yaml", "usage: tensegrity_bench work-precision" },
+    { std::string(TENSEGRITY_BENCH_PATH) + " stress", "usage: tensegrity_bench stress" },
+    { std::string(TENSEGRITY_BENCH_PATH) + " lattice", "usage: tensegrity_bench lattice" },
+  };
+  for (const auto& [command, usage] : subcommands)
+    for (const char* help : { "--help", "-h" })
+    {
+      const Result r = active_tensegrity::test::runCommand(command + " " + help + " 2>&1");
+      EXPECT_EQ(r.code, 0) << command << " " << help << ": " << r.output;
+      EXPECT_EQ(r.output.rfind(usage, 0), 0u) << command << " " << help << ": " << r.output;
+    }
+  // an unknown subcommand is still refused, with the whole usage
+  const Result bogus = active_tensegrity::test::runCommand(std::string(TENSEGRITY_BENCH_PATH) + " bogus 2>&1");
+  EXPECT_EQ(bogus.code, 2) << bogus.output;
+  EXPECT_NE(bogus.output.find("unknown command 'bogus'"), std::string::npos) << bogus.output;
 }
 
 // A seven-strut prism generated 15 degrees off its twist: tensegrity_formfind takes it to the form, and the

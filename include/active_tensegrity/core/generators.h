@@ -6,6 +6,17 @@
 
 namespace active_tensegrity::core
 {
+/// The ranges of the generators' parameters: every value in them gives a scene that loads (the generators and
+/// tensegrity_generate refuse the rest, naming the parameter and the value).
+constexpr double kMinGeneratedLength = 1e-3;     // m: radii, heights, lengths, widths, pitches
+constexpr double kMaxGeneratedLength = 1e3;      // m
+constexpr double kMinGeneratedPrestress = 1e-3;  // N
+constexpr double kMaxGeneratedPrestress = 1e6;   // N
+constexpr double kMaxGeneratedTwist = 360.0;     // degrees, either way
+/// A tower's sliding cables run from its top through every level over a ground node to a driven body:
+/// stages + 2 nodes, at most Cable::kMaxPoints (32).
+constexpr int kMaxTowerStages = 30;
+
 /// The class-1 n-strut prism: bottom nodes B1..Bn on a circle at z = 0 (B1 on the +y axis, counter-clockwise),
 /// top nodes T1..Tn on the same circle at z = height, turned by `twist` about z; struts Si from Bi to Ti,
 /// ring cables (one family) around the bottom and the top, verticals Vi from Bi to T(i+1). At the twist
@@ -16,15 +27,16 @@ namespace active_tensegrity::core
 struct PrismSpec
 {
   int struts = 3;                                           // 3 ... 64
-  double radius = 0.5;                                      // m
-  double height = 0.8;                                      // m
-  double twist = std::numeric_limits<double>::quiet_NaN();  // rad; NaN: the form's -(pi/2 + pi/n)
-  double ring_prestress = 100.0;                            // N
+  double radius = 0.5;                                      // m (kMinGeneratedLength ... kMaxGeneratedLength)
+  double height = 0.8;                                      // m (as radius)
+  double twist = std::numeric_limits<double>::quiet_NaN();  // rad, within +-kMaxGeneratedTwist degrees; NaN: the
+                                                            // form's -(pi/2 + pi/n)
+  double ring_prestress = 100.0;                            // N (kMinGeneratedPrestress ... kMaxGeneratedPrestress)
   bool pinned = false;                                      // the bottom nodes fixed (a static analysis)
   /// (with pinned) an actuator `press` drives the top nodes down (each along -z only, free across): a
   /// static fold to 0.3 height with contact between the struts (radius strut_radius)
   bool driven = false;
-  double strut_radius = 0.012;  // m
+  double strut_radius = 0.012;  // m (as radius)
 };
 
 /// The twist of the n-strut prism's form, rad: -(pi/2 + pi/n).
@@ -37,8 +49,8 @@ std::string prismScene(const PrismSpec& spec);
 /// In its form the cables' force density is q and the struts' -1.5 q.
 struct OctahedronSpec
 {
-  double strut_length = 1.0;  // m
-  double prestress = 100.0;   // N, every cable
+  double strut_length = 1.0;  // m (kMinGeneratedLength ... kMaxGeneratedLength)
+  double prestress = 100.0;   // N, every cable (kMinGeneratedPrestress ... kMaxGeneratedPrestress)
   bool pinned = false;        // three nodes of one face fixed (a static analysis)
 };
 
@@ -56,8 +68,8 @@ std::string octahedronScene(const OctahedronSpec& spec);
 /// tower of the package (tower.yaml).
 struct TowerSpec
 {
-  int stages = 4;      // 1 ... 40
-  double width = 1.0;  // m: the big squares' side
+  int stages = 4;      // 1 ... kMaxTowerStages
+  double width = 1.0;  // m: the big squares' side (kMinGeneratedLength ... kMaxGeneratedLength)
 };
 
 std::string towerScene(const TowerSpec& spec);
