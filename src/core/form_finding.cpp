@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <map>
 #include <set>
 
 #include <Eigen/Dense>
@@ -167,6 +168,176 @@ FormTopology readFormTopology(const std::string& yaml, const std::string& name)
     }
   }
   return t;
+}
+
+std::vector<std::string> formChanges(const FormTopology& t, const std::vector<Vec3>& form)
+{
+  std::vector<std::string> out;
+  const std::vector<Vec3>& given = t.positions;
+  const double size = meanMemberLength(t, given, false);
+  if (!(size > 0.0) || form.size() != given.size())
+    return out;
+  const double tol = 1e-6 * size;
+  const auto number = [&](double v) { return roundedNumber(std::abs(v) < 1e-12 * size ? 0.0 : v, 6); };
+  const auto value = [&](double v) { return number(v) + " m"; };
+  const auto changed = [&](const std::string& what, double before, double after)
+  {
+    if (std::abs(after - before) > tol)
+      out.push_back(what + ": " + value(before) + " in the scene, " + value(after) + " in the form");
+  };
+  const auto names = [&](const std::vector<int>& items, bool nodes)
+  {
+    std::vector<std::string> n;
+    for (int i : items)
+      n.push_back(nodes ? t.node_names[i] : t.members[i].name);
+    std::string text;
+    for (size_t i = 0; i < n.size() && i < 3; ++i)
+      text += (i ? ", " : "") + quoted(n[i]);
+    return n.size() > 3 ? text + " ..." : text;
+  };
+  // the structure's height
+  double lo = std::numeric_limits<double>::infinity(), hi = -lo, lo_f = lo, hi_f = hi;
+  for (size_t i = 0; i < given.size(); ++i)
+  {
+    lo = std::min(lo, given[i].z());
+    hi = std::max(hi, given[i].z());
+    lo_f = std::min(lo_f, form[i].z());
+    hi_f = std::max(hi_f, form[i].z());
+  }
+  if (hi - lo > tol)
+    changed("height (the nodes' z extent)", hi - lo, hi_f - lo_f);
+  // levels: at least three nodes at one height in the scene, lowest first
+  std::vector<int> order(given.size());
+  for (size_t i = 0; i < order.size(); ++i)
+    order[i] = static_cast<int>(i);
+  std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return given[a].z() < given[b].z(); });
+  std::vector<std::vector<int>> levels;
+  std::vector<int> level_of(given.size(), -1);
+  for (size_t k = 0; k < order.size();)
+  {
+    size_t end = k + 1;
+    while (end < order.size() && given[order[end]].z() - given[order[k]].z() <= tol)
+      ++end;
+    if (end - k >= 3)
+    {
+      for (size_t j = k; j < end; ++j)
+        level_of[order[j]] = static_cast<int>(levels.size());
+      levels.emplace_back(order.begin() + static_cast<long>(k), order.begin() + static_cast<long>(end));
+      std::sort(levels.back().begin(), levels.back().end());  // named in the scene's order
+    }
+    k = end;
+  }
+  const auto meanZ = [&](const std::vector<Vec3>& x, int level)
+  {
+    double z = 0.0;
+    for (int i : levels[level])
+      z += x[i].z() / static_cast<double>(levels[level].size());
+    return z;
+  };
+  for (size_t l = 0; l < levels.size(); ++l)
+  {
+    const int li = static_cast<int>(l);
+    const std::string level = "level of nodes " + names(levels[l], true) + " (z = " + value(meanZ(given, li)) + ")";
+    const auto radius = [&](const std::vector<Vec3>& x)
+    {
+      Vec3 c = Vec3::Zero();
+      for (int i : levels[l])
+        c += x[i] / static_cast<double>(levels[l].size());
+      double r = 0.0;
+      for (int i : levels[l])
+        r += (x[i] - c).head<2>().norm() / static_cast<double>(levels[l].size());
+      return r;
+    };
+    changed("radius of the " + level, radius(given), radius(form));
+    double zmin = std::numeric_limits<double>::infinity(), zmax = -zmin;
+    for (int i : levels[l])
+    {
+      zmin = std::min(zmin, form[i].z());
+      zmax = std::max(zmax, form[i].z());
+    }
+    if (zmax - zmin > tol)
+      out.push_back("flatness of the " + level + ": its nodes at one height in the scene, spread over z " +
+                    number(zmin) + " to " + value(zmax) + " in the form");
+  }
+  // stages: the struts between the same two levels
+  std::map<std::pair<int, int>, std::vector<int>> stage_struts;
+  for (size_t e = 0; e < t.members.size(); ++e)
+  {
+    const FormTopology::Member& m = t.members[e];
+    if (m.family >= 0 || m.nodes.size() != 2)
+      continue;
+    const int a = level_of[m.nodes[0]], b = level_of[m.nodes[1]];
+    if (a >= 0 && b >= 0 && a != b)
+      stage_struts[{ std::min(a, b), std::max(a, b) }].push_back(static_cast<int>(e));
+  }
+  struct Stage
+  {
+    int lower, upper;
+    std::vector<int> struts;
+  };
+  std::vector<Stage> stages;
+  for (const auto& [levels_of, struts] : stage_struts)
+    stages.push_back({ levels_of.first, levels_of.second, struts });
+  const auto stageName = [&](const Stage& s)
+  {
+    return "stage " + names(s.struts, false) + " (z " + number(meanZ(given, s.lower)) + " to " +
+           value(meanZ(given, s.upper)) + ")";
+  };
+  // a stage's twist: the mean turn about z of its struts, from the lower end to the upper one, each end's
+  // azimuth taken about the centroid of its level
+  const auto twist = [&](const Stage& s, const std::vector<Vec3>& x)
+  {
+    const auto centroid = [&](int level)
+    {
+      Vec3 c = Vec3::Zero();
+      for (int i : levels[level])
+        c += x[i] / static_cast<double>(levels[level].size());
+      return c;
+    };
+    const Vec3 c_lo = centroid(s.lower), c_hi = centroid(s.upper);
+    double sum = 0.0;
+    for (int e : s.struts)
+    {
+      const std::vector<int>& n = t.members[e].nodes;
+      const bool first_low = level_of[n[0]] == s.lower;
+      const Vec3 a = x[first_low ? n[0] : n[1]] - c_lo, b = x[first_low ? n[1] : n[0]] - c_hi;
+      sum += std::remainder(std::atan2(b.y(), b.x()) - std::atan2(a.y(), a.x()), 2.0 * M_PI);
+    }
+    return sum / static_cast<double>(s.struts.size()) * 180.0 / M_PI;
+  };
+  for (const Stage& s : stages)
+  {
+    changed("height of " + stageName(s), meanZ(given, s.upper) - meanZ(given, s.lower),
+            meanZ(form, s.upper) - meanZ(form, s.lower));
+    const double before = twist(s, given), after = twist(s, form);
+    if (std::abs(after - before) > 1e-6 * 180.0 / M_PI)
+      out.push_back("twist of " + stageName(s) + ": " + roundedNumber(before, 6) + " degrees in the scene, " +
+                    roundedNumber(after, 6) + " degrees in the form");
+  }
+  for (const Stage& a : stages)
+    for (const Stage& b : stages)
+    {
+      // b starts inside a and ends above it (levels are in ascending height)
+      if (!(a.lower < b.lower && b.lower < a.upper && a.upper < b.upper))
+        continue;
+      changed("overlap of " + stageName(a) + " and " + stageName(b), meanZ(given, a.upper) - meanZ(given, b.lower),
+              meanZ(form, a.upper) - meanZ(form, b.lower));
+    }
+  // struts' lengths
+  int strut_changes = 0;
+  for (const FormTopology::Member& m : t.members)
+  {
+    if (m.family >= 0)
+      continue;
+    const double before = memberLength(m, given), after = memberLength(m, form);
+    if (std::abs(after - before) <= tol)
+      continue;
+    if (++strut_changes <= kMaxNamed)
+      changed("length of strut " + quoted(m.name), before, after);
+  }
+  if (strut_changes > kMaxNamed)
+    out.push_back("the lengths of " + std::to_string(strut_changes - kMaxNamed) + " more struts");
+  return out;
 }
 
 FormEquations::FormEquations(const FormTopology& topology, const std::map<int, std::pair<Kind, double>>& held,
@@ -777,6 +948,7 @@ FormFindingResult findForm(const std::string& yaml, const std::string& name, con
   if (loaded)
     result.notes.push_back("the form is self-equilibrated: the scene's loads and gravity are not part of it, and "
                            "its start is not in equilibrium under them");
+  result.changes = formChanges(t, x);
   const std::string header = "# " + how + " (tensegrity_formfind) of " + clipped(name) + "\n";
   result.scene = writeScene(yaml, t, x, tension, header, result.notes);
   result.check = checkWritten(result.scene, name, std::find(t.fixed.begin(), t.fixed.end(), char(1)) != t.fixed.end());

@@ -4,7 +4,6 @@
 #include <cstdio>
 #include <fstream>
 #include <iostream>
-#include <sstream>
 #include <string>
 
 #include "active_tensegrity/core/form_finding.h"
@@ -70,6 +69,12 @@ void report(std::ostream& out, const at::FormFindingResult& r, const at::FormFin
   for (const at::FormMember& m : r.members)
     out << "  " << m.name << ": [" << m.family << ", " << at::roundedNumber(m.tension, 9) << ", "
         << at::roundedNumber(m.length, 9) << "]\n";
+  if (!r.changes.empty())
+  {
+    out << "changes:  # of the scene's layout, made by the form\n";
+    for (const std::string& c : r.changes)
+      out << "  - \"" << c << "\"\n";
+  }
   if (!r.notes.empty())
   {
     out << "notes:\n";
@@ -159,11 +164,14 @@ int main(int argc, char** argv)
     return 2;
   }
 
-  std::ifstream in(in_path);
-  std::ostringstream text;
-  if (!(in && text << in.rdbuf()))
+  std::string text;
+  try
   {
-    std::cerr << "tensegrity_formfind: cannot read '" << in_path << "'\n";
+    text = at::readSceneFile(in_path);  // a regular file of bounded size (not /dev/zero)
+  }
+  catch (const at::SceneError& e)
+  {
+    std::cerr << "tensegrity_formfind: cannot read '" << in_path << "': " << e.what() << "\n";
     return 1;
   }
   // the output is opened before the work, so that a bad path costs nothing; a file made for the check is
@@ -191,7 +199,7 @@ int main(int argc, char** argv)
   at::FormFindingResult r;
   try
   {
-    r = at::findForm(text.str(), in_path, o);
+    r = at::findForm(text, in_path, o);
   }
   catch (const at::SceneError& e)
   {
@@ -218,6 +226,8 @@ int main(int argc, char** argv)
     }
   }
   report(log, r, o);
+  for (const std::string& c : r.changes)
+    std::cerr << "tensegrity_formfind: warning: form-finding changed the " << c << "\n";
   if (!r.check.overlapping.empty())
     std::cerr << "tensegrity_formfind: warning: struts overlap in the form: " << r.check.overlapping.front()
               << (r.check.overlapping.size() > 1 ? " ..." : "") << "\n";

@@ -1,10 +1,13 @@
 // Form-finding (core/form_finding.h, docs/form_finding.md): the equations' Jacobian against finite
 // differences, closed forms (the n-strut prism's twist and force densities, the expanded octahedron's
 // proportions, the quadruplex's prestress of paper Table 1), the written scene's own check, and refusals.
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <random>
 #include <sstream>
+#include <string>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -438,4 +441,85 @@ TEST(FormFinding, SlidingCableInsideStrutsNeedsTheirOwnForceDensities)
   // the struts the cable runs inside carry its tension on top of S1's compression
   EXPECT_NEAR(member(r, "S2").tension - member(r, "S1").tension, -member(r, "V").tension, 1e-6);
   EXPECT_TRUE(r.check.prestress_stable);
+}
+
+// What the scene's layout gave and the form changed, named with both values: a two-stage tower whose stages
+// overlap by 0.3 m, its middle ring moved up onto the lower stage's top (the overlap to 0)
+TEST(FormChanges, TheOverlapOfTwoStagesAndTheOtherLayoutParameters)
+{
+  const std::string yaml = R"(name: tower2
+materials:
+  alu: {youngs_modulus: 70.0e9, density: 2700.0}
+  fib: {youngs_modulus: 73.0e9, density: 2450.0}
+nodes:
+  B1: {position: [0.5, 0.0, 0.0], fixed: true}
+  B2: {position: [-0.25, 0.4330127, 0.0], fixed: true}
+  B3: {position: [-0.25, -0.4330127, 0.0], fixed: true}
+  T1: {position: [-0.4330127, 0.25, 1.0]}
+  T2: {position: [0.0, -0.5, 1.0]}
+  T3: {position: [0.4330127, 0.25, 1.0]}
+  M1: {position: [0.25, 0.4330127, 0.7]}
+  M2: {position: [-0.5, 0.0, 0.7]}
+  M3: {position: [0.25, -0.4330127, 0.7]}
+  U1: {position: [-0.4330127, -0.25, 1.7]}
+  U2: {position: [0.4330127, -0.25, 1.7]}
+  U3: {position: [0.0, 0.5, 1.7]}
+struts:
+  radius: 0.01
+  material: alu
+  members: {S1: [B1, T1], S2: [B2, T2], S3: [B3, T3], R1: [M1, U1], R2: [M2, U2], R3: [M3, U3]}
+cables:
+  rings:
+    material: fib
+    radius: 0.001
+    prestress: 100
+    members: {b1: [B1, B2], b2: [B2, B3], b3: [B3, B1], t1: [U1, U2], t2: [U2, U3], t3: [U3, U1]}
+  verticals:
+    material: fib
+    radius: 0.001
+    members: {v1: [B1, T2], v2: [B2, T3], v3: [B3, T1], v4: [M1, U2], v5: [M2, U3], v6: [M3, U1]}
+  saddle:
+    material: fib
+    radius: 0.001
+    members: {s1: [T1, M1], s2: [T2, M2], s3: [T3, M3], s4: [T1, M2], s5: [T2, M3], s6: [T3, M1]}
+analysis: {type: static, steps: 10}
+)";
+  const at::FormTopology t = at::readFormTopology(yaml, "tower2");
+  EXPECT_TRUE(at::formChanges(t, t.positions).empty());
+  std::vector<at::Vec3> x = t.positions;
+  for (size_t i = 0; i < x.size(); ++i)
+    if (t.node_names[i][0] == 'M')
+      x[i].z() += 0.3;
+  const std::vector<std::string> changes = at::formChanges(t, x);
+  const auto has = [&](const std::string& text)
+  { return std::find(changes.begin(), changes.end(), text) != changes.end(); };
+  std::string all;
+  for (const std::string& c : changes)
+    all += c + "\n";
+  EXPECT_TRUE(
+      has("overlap of stage 'S1', 'S2', 'S3' (z 0 to 1 m) and stage 'R1', 'R2', 'R3' (z 0.7 to 1.7 m): 0.3 m in "
+          "the scene, 0 m in the form"))
+      << all;
+  EXPECT_TRUE(has("height of stage 'R1', 'R2', 'R3' (z 0.7 to 1.7 m): 1 m in the scene, 0.7 m in the form")) << all;
+  EXPECT_TRUE(has("length of strut 'R1': 1.39033 m in the scene, 1.1929 m in the form")) << all;
+  // the structure's height, the lower stage and the rings' radii did not change: not named
+  EXPECT_EQ(all.find("height (the nodes' z extent)"), std::string::npos) << all;
+  EXPECT_EQ(all.find("stage 'S1', 'S2', 'S3' (z 0 to 1 m): "), std::string::npos) << all;
+  EXPECT_EQ(all.find("radius"), std::string::npos) << all;
+  // a ring that is no longer level, a ring turned (the stage's twist) and widened
+  x = t.positions;
+  x[t.node_names.size() - 1].z() += 0.05;  // U3
+  for (size_t i = 0; i < x.size(); ++i)
+    if (t.node_names[i][0] == 'T')
+      x[i] = at::Vec3(1.2 * x[i].x(), 1.2 * x[i].y(), x[i].z());
+  all.clear();
+  for (const std::string& c : at::formChanges(t, x))
+    all += c + "\n";
+  EXPECT_NE(all.find("flatness of the level of nodes 'U1', 'U2', 'U3' (z = 1.7 m): its nodes at one height in the "
+                     "scene, spread over z 1.7 to 1.75 m in the form"),
+            std::string::npos)
+      << all;
+  EXPECT_NE(all.find("radius of the level of nodes 'T1', 'T2', 'T3' (z = 1 m): 0.5 m in the scene, 0.6 m in the form"),
+            std::string::npos)
+      << all;
 }

@@ -259,9 +259,16 @@ TEST(TensegrityFormfind, GeneratedStartToFormAndFixedPoint)
   EXPECT_NE(r.output.find("slack_cables: 0"), std::string::npos) << r.output;
   const at::Model model = at::loadScene(form);
   EXPECT_NE(text(form).find("prestress: 80\n"), std::string::npos) << text(form);
+  // the twist it was given and the one of the form, named (nothing was said)
+  EXPECT_NE(r.output.find("warning: form-finding changed the twist of stage 'S1', 'S2', 'S3' ... (z 0 to 0.8 m): "
+                          "-130 degrees in the scene, -115.714 degrees in the form"),
+            std::string::npos)
+      << r.output;
   const Result a = formfind(form + " --out " + again);
   ASSERT_EQ(a.code, 0) << a.output;
   EXPECT_LT(reported(a.output, "max_move"), 1e-9) << a.output;
+  EXPECT_EQ(a.output.find("form-finding changed"), std::string::npos) << a.output;  // nothing changes
+  EXPECT_EQ(a.output.find("\nchanges:"), std::string::npos) << a.output;
   // to stdout, the report on stderr
   const Result s = formfind(form + " --out -");
   ASSERT_EQ(s.code, 0) << s.output;
@@ -321,4 +328,82 @@ TEST(TensegrityFormfind, RefusalsNameTheOptionAndValue)
   const Result r = formfind(bad + " --out " + out);
   EXPECT_EQ(r.code, 1) << r.output;
   EXPECT_NE(r.output.find("scene refused"), std::string::npos) << r.output;
+}
+
+// Form-finding that changes what the scene's layout gave says so, naming the parameter and both values: a
+// two-stage tower whose stages overlap by 0.3 m (its nodes in rings at z = 0, 0.7, 1 and 1.7 m) comes out with
+// 0.42 m (it said nothing)
+TEST(TensegrityFormfind, ChangedLayoutParametersAreWarnedAbout)
+{
+  const std::string scene = tmp("tower2.yaml"), form = tmp("tower2_form.yaml");
+  std::ofstream(scene) << R"(name: tower2
+materials:
+  alu: {youngs_modulus: 70.0e9, density: 2700.0}
+  fib: {youngs_modulus: 73.0e9, density: 2450.0}
+nodes:
+  B1: {position: [0.5, 0.0, 0.0], fixed: true}
+  B2: {position: [-0.25, 0.4330127, 0.0], fixed: true}
+  B3: {position: [-0.25, -0.4330127, 0.0], fixed: true}
+  T1: {position: [-0.4330127, 0.25, 1.0]}
+  T2: {position: [0.0, -0.5, 1.0]}
+  T3: {position: [0.4330127, 0.25, 1.0]}
+  M1: {position: [0.25, 0.4330127, 0.7]}
+  M2: {position: [-0.5, 0.0, 0.7]}
+  M3: {position: [0.25, -0.4330127, 0.7]}
+  U1: {position: [-0.4330127, -0.25, 1.7]}
+  U2: {position: [0.4330127, -0.25, 1.7]}
+  U3: {position: [0.0, 0.5, 1.7]}
+struts:
+  radius: 0.01
+  material: alu
+  members: {S1: [B1, T1], S2: [B2, T2], S3: [B3, T3], R1: [M1, U1], R2: [M2, U2], R3: [M3, U3]}
+cables:
+  bottom:
+    material: fib
+    radius: 0.001
+    prestress: 100
+    members: {b1: [B1, B2], b2: [B2, B3], b3: [B3, B1]}
+  top: {material: fib, radius: 0.001, members: {t1: [U1, U2], t2: [U2, U3], t3: [U3, U1]}}
+  verticals:
+    material: fib
+    radius: 0.001
+    members: {v1: [B1, T2], v2: [B2, T3], v3: [B3, T1], v4: [M1, U2], v5: [M2, U3], v6: [M3, U1]}
+  saddle:
+    material: fib
+    radius: 0.001
+    members: {s1: [T1, M1], s2: [T2, M2], s3: [T3, M3], s4: [T1, M2], s5: [T2, M3], s6: [T3, M1]}
+  inter:
+    material: fib
+    radius: 0.001
+    members: {i1: [B1, M1], i2: [B2, M2], i3: [B3, M3], i4: [T1, U1], i5: [T2, U2], i6: [T3, U3]}
+analysis: {type: static, steps: 10}
+)";
+  const Result r = formfind(scene + " --out " + form + " --supports react");
+  ASSERT_EQ(r.code, 0) << r.output;
+  const std::string overlap = "warning: form-finding changed the overlap of stage 'S1', 'S2', 'S3' (z 0 to 1 m) and "
+                              "stage 'R1', 'R2', 'R3' (z 0.7 to 1.7 m): 0.3 m in the scene, 0.42";
+  EXPECT_NE(r.output.find(overlap), std::string::npos) << r.output;
+  for (const char* changed :
+       { "warning: form-finding changed the height (the nodes' z extent): 1.7 m in the scene, 1.72",
+         "warning: form-finding changed the height of stage 'S1', 'S2', 'S3' (z 0 to 1 m): 1 m in the scene, 1.06",
+         "warning: form-finding changed the radius of the level of nodes 'T1', 'T2', 'T3' (z = 1 m): 0.5 m in the "
+         "scene, 0.56",
+         "warning: form-finding changed the twist of stage 'R1', 'R2', 'R3' (z 0.7 to 1.7 m): 150 degrees in the "
+         "scene, 175",
+         "warning: form-finding changed the length of strut 'S1': 1.39" })
+    EXPECT_NE(r.output.find(changed), std::string::npos) << changed << "\n" << r.output;
+  // and in the report
+  EXPECT_NE(r.output.find("\nchanges:  # of the scene's layout, made by the form\n  - \"height (the nodes' z extent)"),
+            std::string::npos)
+      << r.output;
+  EXPECT_NE(r.output.find("\n  - \"overlap of stage 'S1', 'S2', 'S3'"), std::string::npos) << r.output;
+}
+
+TEST(TensegrityFormfind, OnlyRegularSceneFilesAreRead)
+{
+  // /dev/zero was read without end
+  const Result r = formfind("/dev/zero --out " + tmp("zero.yaml"));
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_NE(r.output.find("cannot read '/dev/zero': /dev/zero: is not a regular file (a device)"), std::string::npos)
+      << r.output;
 }

@@ -97,6 +97,9 @@ struct FormFindingResult
   double scale = 1.0;               // the factor the free-standing form was scaled by (1: not scaled)
   int self_stress_states = 0;       // prestress mode: of the given geometry
   std::vector<std::string> notes;   // families split, scaling, loads left out ...
+  /// The geometric parameters of the scene's layout that the form changed (formChanges), one text each naming
+  /// the parameter and both values: warnings, since the scene gave them.
+  std::vector<std::string> changes;
   FormCheck check;
 };
 
@@ -128,6 +131,19 @@ struct FormTopology
 
 /// The topology of a scene the loader accepts (SceneError otherwise).
 FormTopology readFormTopology(const std::string& yaml, const std::string& name);
+
+/// The geometric parameters a scene's layout gives, as a person designing it would name them, that differ in
+/// `form` (the topology's nodes, moved) by more than 1e-6 of the mean member length; one text each, naming the
+/// parameter and its value in the scene and in the form, e.g.
+///   "overlap of stages 'S1', 'S2', 'S3' (z 0 to 1 m) and 'R1', 'R2', 'R3' (z 0.7 to 1.7 m): 0.3 m in the
+///    scene, 0 m in the form".
+/// Levels are the sets of at least three nodes at one height in the scene; a stage is the struts that join the
+/// same two levels. The parameters: the structure's height (z extent of its nodes), each stage's height (its
+/// levels' distance) and twist (the mean turn about z of its struts from the lower level to the upper one, in
+/// degrees), the overlap of two stages where one starts below the other's top (the upper one's lower
+/// level below the lower one's upper level), each level's radius (mean distance of its nodes from their
+/// centroid) and flatness, each strut's length.
+std::vector<std::string> formChanges(const FormTopology& topology, const std::vector<Vec3>& form);
 
 /// The equilibrium equations of a topology (see the header comment) as functions of
 ///   z = [positions of the nodes that are not fixed (3 each, the scene's order); the free parameters],
