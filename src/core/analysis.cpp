@@ -681,8 +681,11 @@ void runAdaptive(const Model& model, DynamicsSolver& solver, const ActuationLaw&
     result.callback_time += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   };
   // (a std::function made once: advanceTo takes one, and a lambda of this size converted at each call allocates)
+  double last_t = state.t;
   const std::function<void(const State&)> each_step = [&](const State& s)
   {
+    result.energy.add(stepper.lastEnergy(), s.t - last_t, s.t, stepper.lastEnergyCheck());
+    last_t = s.t;
     timed(
         [&]()
         {
@@ -895,6 +898,7 @@ RunResult run(const Model& model, const std::function<void(const State&)>& user_
     watch(state);
     on_output(state);
     ++result.steps;
+    result.energy.begin(energyPoint(solver.system(), state, activeContacts(model, state)));
     // after each step: the yield watch, and the caller's on_step with the step's contacts, whose forces the solver
     // forms in its pass over the step's end for such an on_step alone (setContactsEveryStep above; without one
     // nothing forms them)
@@ -908,8 +912,14 @@ RunResult run(const Model& model, const std::function<void(const State&)>& user_
       // a last step shorter than dt_min is merged into the one before
       if (n_steps > 1 && an.duration - static_cast<double>(n_steps - 1) * dt < model.solver.dt_min)
         --n_steps;
-      const double interval = an.output_interval > 0.0 ? an.output_interval : dt;
-      double next_output = interval;
+      // output rows: every step (output_interval 0), else the first step at or after each multiple of the interval
+      // (counted, not summed: a sum of intervals drifts from the step times and skips or doubles rows)
+      const bool every_step = !(an.output_interval > 0.0);
+      const double interval = an.output_interval;
+      long next_row = 1;
+      double step_start = state.t;
+      bool touched = false;  // contacts active at the last step's end
+      std::vector<ContactPairState> found_contacts;
       for (long k = 1; k <= n_steps; ++k)
       {
         const double t_target = k == n_steps ? an.duration : std::min(an.duration, k * dt);
@@ -925,14 +935,32 @@ RunResult run(const Model& model, const std::function<void(const State&)>& user_
           result.summary.message = s.message;
           break;
         }
+        const double h = t_target - step_start;
+        step_start = t_target;
         state.t = t_target;  // no drift from summing steps
+        {
+          const std::vector<ContactPairState>* contacts = solver.contactsAt(state);
+          if (!contacts)
+          {
+            found_contacts = activeContacts(model, state);
+            contacts = &found_contacts;
+          }
+          const EnergyPoint end = energyPoint(solver.system(), state, *contacts);
+          const bool in_contact = touched || !contacts->empty();
+          result.energy.add(end, h, state.t,
+                            checkStepEnergy(result.energy.now, end, h, model.solver.energy_tolerance,
+                                            stepEnergyRoundoff(solver.system(), state.q, h), in_contact));
+          touched = !contacts->empty();
+        }
         const auto callbacks = std::chrono::steady_clock::now();
         after_step(state);
-        if (state.t >= next_output - 1e-9 * dt || k == n_steps)
+        if (every_step || k == n_steps || state.t >= static_cast<double>(next_row) * interval - 1e-9 * dt)
         {
           on_output(state);
           ++result.steps;
-          next_output += interval;
+          if (!every_step)
+            while (static_cast<double>(next_row) * interval - 1e-9 * dt <= state.t)
+              ++next_row;
         }
         result.callback_time += std::chrono::duration<double>(std::chrono::steady_clock::now() - callbacks).count();
         if (on_progress && k % 256 == 0)
@@ -940,6 +968,28 @@ RunResult run(const Model& model, const std::function<void(const State&)>& user_
       }
     }
     result.timings = solver.timings();
+    const EnergyAccount& e = result.energy;
+    const std::string where =
+        model.solver.adaptive ? " (at solver.dt_min; lower it)" : " at solver.dt (use solver.adaptive or a smaller dt)";
+    const auto percent = [&e](double energy)
+    { return roundedNumber(100.0 * energy / std::max(e.peak_mechanical, 1e-300), 3) + " %"; };
+    if (e.gainedMaterially(model.solver.energy_tolerance))
+      result.summary.warnings.push_back(
+          "the integrator gained " + roundedNumber(-e.numerical_dissipation, 3) + " J over the run (" +
+          percent(-e.numerical_dissipation) + " of the largest kinetic and elastic energy; " +
+          std::to_string(e.gaining_steps) + " steps gained more than solver.energy_tolerance " +
+          shortestNumber(model.solver.energy_tolerance) + ", the first at t = " + roundedNumber(e.first_unresolved_t) +
+          " s): impacts, cables going slack and taut or an actuator starting without blend_time were under-resolved" +
+          where + " (energy in the summary)");
+    if (e.contactsUnresolved(model.solver.energy_tolerance))
+      result.summary.warnings.push_back(
+          "impacts under-resolved" + where + ": steps in contact changed the energy by " +
+          roundedNumber(e.contact_unresolved_energy, 3) + " J (" + percent(e.contact_unresolved_energy) +
+          " of the largest kinetic and elastic energy) that no force accounts for, each more than "
+          "solver.energy_tolerance " +
+          shortestNumber(model.solver.energy_tolerance) + " (" + std::to_string(e.gaining_steps) + " gained, " +
+          std::to_string(e.contact_loss_steps) + " lost; the first at t = " + roundedNumber(e.first_unresolved_t) +
+          " s): rebounds and contact forces are off by about as much (energy in the summary)");
     with_yield_warnings(result.summary);
   }
   with_crossing_warnings(result.summary);
