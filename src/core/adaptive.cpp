@@ -1,5 +1,7 @@
 #include "active_tensegrity/core/adaptive.h"
 
+#include "active_tensegrity/core/analysis.h"
+
 #include <algorithm>
 #include <cmath>
 #include <sstream>
@@ -13,12 +15,34 @@ constexpr double kSafety = 0.9;     // proposed step = kSafety * h * (1 / err)^(
 constexpr double kMaxGrowth = 2.0;  // per accepted step
 constexpr double kMinShrink = 0.1;  // per rejected step
 constexpr double kKeepBand = 1.2;   // a proposal in [h, kKeepBand h] keeps h (and the factorization)
+// after a step refused for its energy gain, the steps stay below kEnergyMargin times the refused one, a bound that
+// grows by kEnergyRelease per accepted step (the event that made it may pass)
+constexpr double kEnergyMargin = 0.9;
+constexpr double kEnergyRelease = 1.01;
 }  // namespace
 
 AdaptiveStepper::AdaptiveStepper(DynamicsSolver& solver, const SolverOptions& options)
   : solver_(solver), options_(options), h_(std::clamp(options.dt, options.dt_min, options.dt_max))
 {
   solver_.setVariableSteps(true);
+}
+
+const EnergyPoint& AdaptiveStepper::startEnergy(const State& s)
+{
+  if (!start_energy_valid_ || start_energy_t_ != s.t)
+  {
+    const std::vector<ContactPairState>* contacts = solver_.contactsAt(s);
+    if (!contacts)
+    {
+      found_contacts_ = activeContacts(solver_.system().model(), s);
+      contacts = &found_contacts_;
+    }
+    start_energy_ = energyPoint(solver_.system(), s, *contacts);
+    in_contact_ = !contacts->empty();
+    start_energy_t_ = s.t;
+    start_energy_valid_ = true;
+  }
+  return start_energy_;
 }
 
 Summary AdaptiveStepper::advanceTo(State& s, double t_end, const ActuationLaw& law,
@@ -84,9 +108,34 @@ Summary AdaptiveStepper::advanceTo(State& s, double t_end, const ActuationLaw& l
       h_ = std::max(options_.dt_min, h * std::clamp(kSafety * std::cbrt(1.0 / err), kMinShrink, kSafety));
       continue;
     }
-    if (at_min && (err > 1.0 || e.onset_depth > options_.onset_depth))
+    // a step that gained energy no force accounts for did not resolve a stiff event (a contact or a cable going taut
+    // within it): halved, as a failed step
+    const std::vector<ContactPairState>* contacts = solver_.contactsAt(trial_);
+    if (!contacts)
+    {
+      found_contacts_ = activeContacts(solver_.system().model(), trial_);
+      contacts = &found_contacts_;
+    }
+    const EnergyPoint end_energy = energyPoint(solver_.system(), trial_, *contacts);
+    const StepEnergyCheck energy =
+        checkStepEnergy(startEnergy(s), end_energy, h, options_.energy_tolerance,
+                        stepEnergyRoundoff(solver_.system(), s.q, h), in_contact_ || !contacts->empty());
+    if (!at_min && !energy.ok())
+    {
+      ++stats_.rejected_energy;
+      solver_.stepRefused();
+      h_ = std::max(options_.dt_min, 0.5 * h);
+      energy_bound_ = kEnergyMargin * h;
+      continue;
+    }
+    if (at_min && (err > 1.0 || e.onset_depth > options_.onset_depth || !energy.ok()))
       ++stats_.at_min_step;
     std::swap(s, trial_);
+    start_energy_ = end_energy;
+    start_energy_t_ = s.t;
+    start_energy_valid_ = true;
+    last_check_ = energy;
+    in_contact_ = !contacts->empty();
     ++stats_.accepted;
     stats_.h_min = stats_.accepted == 1 ? h : std::min(stats_.h_min, h);
     stats_.h_max = std::max(stats_.h_max, h);
@@ -95,12 +144,16 @@ Summary AdaptiveStepper::advanceTo(State& s, double t_end, const ActuationLaw& l
     double ratio = std::clamp(kSafety * std::cbrt(1.0 / std::max(err, 1e-12)), kMinShrink, kMaxGrowth);
     if (ratio >= 1.0 && ratio <= kKeepBand)
       ratio = 1.0;
-    const double proposal = std::clamp(h * ratio, options_.dt_min, options_.dt_max);
+    energy_bound_ *= kEnergyRelease;
+    const double proposal =
+        std::clamp(std::min(h * ratio, std::max(energy_bound_, h)), options_.dt_min, options_.dt_max);
     // a step shortened to land on t_end says little about the longer one: only shrink from it
     if (!clipped || proposal < h)
       h_ = proposal;
   }
   s.t = t_end;  // no drift from summing steps
+  if (start_energy_valid_)
+    start_energy_t_ = s.t;  // (the loop ends at an accepted step's end, or where the last call left it)
   return total;
 }
 

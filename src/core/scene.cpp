@@ -1203,6 +1203,7 @@ private:
     o.dt_min = s.positive("dt_min", o.dt_min);
     o.dt_max = s.positive("dt_max", o.dt_max);
     o.onset_depth = s.bounded("onset_depth", o.onset_depth, kMaxOnsetDepth, "m");
+    o.energy_tolerance = s.bounded("energy_tolerance", o.energy_tolerance, 1.0, "of the kinetic and elastic energy");
     if (o.dt_min > o.dt_max)
       s.fail(s.key("dt_min"),
              "must not exceed dt_max = " + shortestNumber(o.dt_max) + ", got " + shortestNumber(o.dt_min));

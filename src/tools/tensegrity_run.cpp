@@ -511,9 +511,30 @@ int main(int argc, char** argv)
             << "  rejected_error: " << a.rejected_error << "\n"
             << "  rejected_onset: " << a.rejected_onset << "\n"
             << "  rejected_solver: " << a.rejected_solver << "\n"
+            << "  rejected_energy: " << a.rejected_energy << "\n"
             << "  at_min_step: " << a.at_min_step << "\n"
             << "  smallest: " << csvNumber(a.h_min) << "\n"
             << "  largest: " << csvNumber(a.h_max) << "\n";
+  }
+  if (model.analysis.type == at::AnalysisType::kDynamic)
+  {
+    // E = kinetic + elastic + gravity; start + actuator_work - damping - contact - numerical = end, each term summed
+    // over every accepted step
+    const at::EnergyAccount& e = result.energy;
+    summary << "energy:  # J over every step: start + actuator_work - damping - contact - numerical = end\n"
+            << "  start: {kinetic: " << csvNumber(e.start.kinetic) << ", elastic: " << csvNumber(e.start.elastic)
+            << ", gravity: " << csvNumber(e.start.gravity) << ", total: " << csvNumber(e.start.total()) << "}\n"
+            << "  end: {kinetic: " << csvNumber(e.now.kinetic) << ", elastic: " << csvNumber(e.now.elastic)
+            << ", gravity: " << csvNumber(e.now.gravity) << ", total: " << csvNumber(e.now.total()) << "}\n"
+            << "  actuator_work: " << csvNumber(e.actuator_work) << "\n"
+            << "  damping_dissipation: " << csvNumber(e.damping_dissipation) << "\n"
+            << "  contact_dissipation: " << csvNumber(e.contact_dissipation) << "\n"
+            << "  numerical_dissipation: " << csvNumber(e.numerical_dissipation) << "\n"
+            << "  largest_step_gain: {value: " << csvNumber(e.largest_step_gain)
+            << ", t: " << csvNumber(e.largest_gain_t) << "}\n"
+            << "  gaining_steps: " << e.gaining_steps << "\n"
+            << "  contact_loss_steps: " << e.contact_loss_steps << "\n"
+            << "  contact_unresolved: " << csvNumber(e.contact_unresolved_energy) << "\n";
   }
   summary << "warnings:" << (result.summary.warnings.empty() ? " []" : "") << "\n";
   for (const std::string& w : result.summary.warnings)

@@ -1,12 +1,15 @@
 /// Variable time steps for DynamicsSolver (solver.adaptive): the step follows a local error estimate
 /// (StepEstimate::error against solver.error_tolerance), a step that brings a pair into contact deeper
-/// than solver.onset_depth is refused and retried at the interpolated onset time, and the step grows
-/// again after (docs/physics.md, "Adaptive time steps").
+/// than solver.onset_depth is refused and retried at the interpolated onset time, a step that gains energy
+/// no force accounts for, or loses it in contact, beyond solver.energy_tolerance (energy.h) is refused and halved, and
+/// the step grows again after (docs/physics.md, "Adaptive time steps").
 #pragma once
 
 #include <functional>
+#include <limits>
 
 #include "active_tensegrity/core/dynamics.h"
+#include "active_tensegrity/core/energy.h"
 #include "active_tensegrity/core/summary.h"
 
 namespace active_tensegrity::core
@@ -17,8 +20,9 @@ struct AdaptiveStats
   long accepted = 0;
   long rejected_error = 0;   // local error above the tolerance
   long rejected_onset = 0;   // a new contact entered too deep: retried at the interpolated onset
+  long rejected_energy = 0;  // the step gained energy no force accounts for (a stiff event it did not resolve)
   long rejected_solver = 0;  // Newton failed or a pair would pass through: the step was cut
-  long at_min_step = 0;      // steps accepted at dt_min with the error or onset depth still too large
+  long at_min_step = 0;      // steps accepted at dt_min with the error, onset depth or energy gain still too large
   double h_min = 0.0;        // smallest and largest accepted step (s)
   double h_max = 0.0;
 };
@@ -35,6 +39,17 @@ public:
   Summary advanceTo(State& state, double t_end, const ActuationLaw& law,
                     const std::function<void(const State&)>& on_step = {});
 
+  /// The energy at the last accepted step's end (energy.h), and that step's energy check (failed only for a step
+  /// accepted at dt_min).
+  const EnergyPoint& lastEnergy() const
+  {
+    return start_energy_;
+  }
+  const StepEnergyCheck& lastEnergyCheck() const
+  {
+    return last_check_;
+  }
+
   /// The step the controller will try next (s).
   double nextStep() const
   {
@@ -46,11 +61,21 @@ public:
   }
 
 private:
+  /// The energy of `s` (the start of the next step): kept from the last accepted step's end when s is that state.
+  const EnergyPoint& startEnergy(const State& s);
+
   DynamicsSolver& solver_;
   SolverOptions options_;
   double h_;
   State trial_;
   AdaptiveStats stats_;
+  EnergyPoint start_energy_;
+  double start_energy_t_ = 0.0;
+  bool start_energy_valid_ = false;
+  StepEnergyCheck last_check_;
+  bool in_contact_ = false;                       // contacts active at the last accepted step's end
+  std::vector<ContactPairState> found_contacts_;  // contacts of a state the solver did not end a step in
+  double energy_bound_ = std::numeric_limits<double>::infinity();  // steps gaining energy were refused above it (s)
 };
 
 }  // namespace active_tensegrity::core

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "active_tensegrity/core/adaptive.h"
+#include "active_tensegrity/core/energy.h"
 #include "active_tensegrity/core/broad_phase.h"
 #include "active_tensegrity/core/dynamics.h"
 #include "active_tensegrity/core/state.h"
@@ -192,6 +193,8 @@ struct RunResult
   double callback_time = 0.0;
   /// Dynamic runs with solver.adaptive: accepted and rejected steps, smallest and largest step.
   AdaptiveStats adaptive;
+  /// Dynamic runs: the energy account over every accepted step (energy.h).
+  EnergyAccount energy;
   State final_state;
 };
 

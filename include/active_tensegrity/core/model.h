@@ -243,6 +243,9 @@ struct SolverOptions
   double dt_min = 1e-7;           // s: below this a step is taken (or fails) without error control
   double dt_max = 1e-2;           // s
   double onset_depth = 1e-5;      // m: deepest penetration a step may end with in a pair it brought into contact
+  /// largest energy one step may gain that no force accounts for, relative to the kinetic and elastic energy at
+  /// its ends (adaptive steps refuse and halve such a step; fixed steps cut it: energy.h)
+  double energy_tolerance = 1e-4;
 };
 
 enum class AnalysisType
