@@ -498,7 +498,8 @@ void SimNode::publishStatus()
   status_pub_.publish(s);
 }
 
-void SimNode::publishState(core::State& state, const ros::Time& stamp)
+void SimNode::publishState(core::State& state, const ros::Time& stamp,
+                           const std::vector<core::ContactPairState>* contacts)
 {
   if (params_.publish_clock)
   {
@@ -510,7 +511,7 @@ void SimNode::publishState(core::State& state, const ros::Time& stamp)
   // publication they were about 40 % of the node's publishing time on the tower)
   const WallClock::time_point now = WallClock::now();
   const bool markers = params_.marker_rate <= 0.0 || now >= next_markers_;
-  const Snapshot snap = builder_.build(state, stamp, solver_.contactsAt(state), markers);
+  const Snapshot snap = builder_.build(state, stamp, contacts, markers);
   tf_.sendTransform(snap.transforms);
   contacts_pub_.publish(snap.contacts);
   cables_pub_.publish(snap.cables);
@@ -526,6 +527,9 @@ void SimNode::publishState(core::State& state, const ros::Time& stamp)
   else
   {
     std::swap(last_published_, state);  // (the caller's copy, not used after this)
+    last_have_contacts_ = contacts != nullptr;
+    if (contacts)
+      last_contacts_ = *contacts;
     last_stamp_ = stamp;
   }
 }
@@ -535,7 +539,8 @@ void SimNode::publishMissedMarkers()
   if (!markers_missed_)
     return;
   markers_missed_ = false;
-  markers_pub_.publish(builder_.build(last_published_, last_stamp_, solver_.contactsAt(last_published_)).markers);
+  markers_pub_.publish(
+      builder_.build(last_published_, last_stamp_, last_have_contacts_ ? &last_contacts_ : nullptr).markers);
 }
 
 void SimNode::run()
@@ -559,6 +564,10 @@ void SimNode::run()
     core::State to_publish;
     ros::Time to_stamp;
     bool publish_now = false;
+    // the state's contacts as the solver formed them, copied here: publishing runs outside the mutex, when a
+    // callback may re-initialize the solver (~reset)
+    std::vector<core::ContactPairState> to_contacts;
+    bool have_contacts = false;
     {
       std::unique_lock<std::mutex> lock(mutex_);
       if (clear_markers_)
@@ -593,6 +602,11 @@ void SimNode::run()
         to_publish = state_;
         to_stamp = stamp(state_.t);
         publish_now = true;
+        if (const std::vector<core::ContactPairState>* c = solver_.contactsAt(state_))
+        {
+          to_contacts = *c;
+          have_contacts = true;
+        }
         next_publish = state_.t + period;
       }
       else
@@ -637,7 +651,7 @@ void SimNode::run()
     if (publish_now)
     {
       const WallClock::time_point t0 = WallClock::now();
-      publishState(to_publish, to_stamp);
+      publishState(to_publish, to_stamp, have_contacts ? &to_contacts : nullptr);
       window_publish += seconds(WallClock::now() - t0);
       const double wall = seconds(WallClock::now() - window_wall);
       if (wall >= 1.0)

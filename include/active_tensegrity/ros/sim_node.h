@@ -68,8 +68,10 @@ private:
   /// Logs and counts a rejected command (mutex held).
   void reject(const std::string& what, const std::string& reason);
   /// Builds and publishes every topic for `state` (loop thread only); ~markers only when due (~marker_rate),
-  /// else the state is kept in last_published_ for publishMissedMarkers.
-  void publishState(core::State& state, const ros::Time& stamp);
+  /// else the state is kept in last_published_ for publishMissedMarkers. `contacts`: the state's active contacts
+  /// as the solver formed them, copied under the mutex (the solver is not touched here: a ~reset re-initializes
+  /// it from a callback thread meanwhile), or null.
+  void publishState(core::State& state, const ros::Time& stamp, const std::vector<core::ContactPairState>* contacts);
   /// The markers of the last published state, when its publication went without them (loop thread only:
   /// when the simulation stops, so that rviz shows where it stopped).
   void publishMissedMarkers();
@@ -91,6 +93,8 @@ private:
   WallClock::time_point next_markers_ = WallClock::time_point::min();
   bool markers_missed_ = false;
   core::State last_published_;
+  std::vector<core::ContactPairState> last_contacts_;
+  bool last_have_contacts_ = false;
   ros::Time last_stamp_;
 
   std::mutex mutex_;  // guards everything below that callbacks touch
