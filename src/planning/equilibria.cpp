@@ -16,6 +16,16 @@ double actuationDistance(const std::vector<double>& a, const std::vector<double>
   return d;
 }
 
+std::vector<std::vector<double>> pathWaypoints(const std::shared_ptr<const PathNode>& path)
+{
+  std::vector<std::vector<double>> w;
+  for (const PathNode* n = path.get(); n; n = n->before.get())
+    if (w.empty() || n->values != w.back())  // (a segment of no length: a follow to where it was)
+      w.push_back(n->values);
+  std::reverse(w.begin(), w.end());
+  return w;
+}
+
 /// A StaticSolver taken from the pool for one scope (or made when the pool is empty).
 class EquilibriumOracle::SolverLease
 {
@@ -63,6 +73,8 @@ void EquilibriumOracle::restart(const Equilibrium& start)
 {
   const std::lock_guard<std::mutex> lock(mutex_);
   start_ = start;
+  if (!start_.path)
+    start_.path = std::make_shared<const PathNode>(PathNode{ values(start_.state), nullptr });
   cache_.clear();
   cache_.push_back({ start_, values(start_.state), ~0ul });
 }
@@ -108,6 +120,16 @@ double EquilibriumOracle::bestHeight() const
   return best_height_;
 }
 
+std::vector<std::vector<double>> EquilibriumOracle::bestPath() const
+{
+  std::shared_ptr<const PathNode> path;
+  {
+    const std::lock_guard<std::mutex> lock(mutex_);
+    path = best_path_;
+  }
+  return pathWaypoints(path);
+}
+
 Equilibrium EquilibriumOracle::measure(const core::State& s, const core::Summary& sum) const
 {
   Equilibrium e;
@@ -146,13 +168,15 @@ void EquilibriumOracle::remember(const Equilibrium& e) const
 {
   if (!e.converged)
     return;
-  const double d = distance_ && valid(e) ? distance_(e) : std::numeric_limits<double>::infinity();
+  // the best counts only equilibria reached from the start through valid ones: a path to it exists
+  const double d = distance_ && e.path && valid(e) ? distance_(e) : std::numeric_limits<double>::infinity();
   std::vector<double> v = values(e.state);
   const std::lock_guard<std::mutex> lock(mutex_);
   if (d < best_distance_)
   {
     best_distance_ = d;
     best_height_ = e.height;
+    best_path_ = e.path;
   }
   if (cache_.size() >= kCacheCapacity)
   {
@@ -177,6 +201,9 @@ bool EquilibriumOracle::follow(const Equilibrium& from, const std::vector<double
   SolverLease solver(*this);
   core::State s = from.state;
   end = from;
+  // the equilibria of this line are reached from the start through valid ones while `from` was and every
+  // increment so far is valid: each is then the end of a straight segment from `from`
+  bool connected = from.path != nullptr && valid(from);
   for (int k = 1; k <= n; ++k)
   {
     if (stop_ && stop_())
@@ -199,6 +226,9 @@ bool EquilibriumOracle::follow(const Equilibrium& from, const std::vector<double
     end = measure(s, sum);
     if (!end.converged)
       return false;
+    connected = connected && valid(end);
+    if (connected)
+      end.path = std::make_shared<const PathNode>(PathNode{ values(end.state), from.path });
     remember(end);
     if (visit)
       visit(end);

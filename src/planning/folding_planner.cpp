@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
-#include <deque>
 #include <cmath>
 #include <functional>
 #include <map>
@@ -12,7 +11,6 @@
 #include <set>
 #include <sstream>
 
-#include <ompl/base/PlannerData.h>
 #include <ompl/base/PlannerTerminationCondition.h>
 #include <ompl/base/ProblemDefinition.h>
 #include <ompl/base/SpaceInformation.h>
@@ -409,6 +407,21 @@ public:
     answering_ = false;
     end_ = main_;
   }
+  /// The last report, once the answer is made: phase "done" with the figures of the returned path's end.
+  void done(double best_height, double best_distance)
+  {
+    if (!control_.progress)
+      return;
+    const std::lock_guard<std::mutex> lock(report_mutex_);
+    PlanProgress p;
+    p.elapsed = elapsed();
+    p.phase = "done";
+    p.best_height = best_height;
+    p.best_distance = best_distance;
+    if (oracle_)
+      p.equilibrium_solves = oracle_->solves();
+    control_.progress(p);
+  }
   bool timedOut() const
   {
     return timed_out_;
@@ -707,52 +720,11 @@ std::vector<Values> shortcut(const ob::SpaceInformationPtr& si, const std::vecto
   return simple;
 }
 
-/// When the search found no path: the path in the planner's graph from the start to the known valid state
-/// nearest to the goal (nearer than the start), or empty.
-std::vector<Values> bestPartialPath(const ob::SpaceInformationPtr& si, const ob::Planner& planner,
-                                    const EquilibriumOracle& oracle, const PlanRequest& r, size_t n)
-{
-  ob::PlannerData data(si);
-  planner.getPlannerData(data);
-  const auto distance = goalDistance(oracle, r);
-  double best = distance(oracle.start());
-  long best_vertex = -1;
-  std::vector<long> parent(data.numVertices(), -2);
-  std::deque<unsigned> queue;
-  for (unsigned i = 0; i < data.numStartVertices(); ++i)
-  {
-    parent[data.getStartIndex(i)] = -1;
-    queue.push_back(data.getStartIndex(i));
-  }
-  std::vector<unsigned> edges;
-  while (!queue.empty())
-  {
-    const unsigned v = queue.front();
-    queue.pop_front();
-    Equilibrium e;
-    if (oracle.known(stateValues(data.getVertex(v).getState(), n), e) && oracle.valid(e) && distance(e) < best)
-    {
-      best = distance(e);
-      best_vertex = v;
-    }
-    data.getEdges(v, edges);
-    for (unsigned w : edges)
-      if (parent[w] == -2)
-      {
-        parent[w] = v;
-        queue.push_back(w);
-      }
-  }
-  std::vector<Values> path;
-  for (long v = best_vertex; v >= 0; v = parent[v])
-    path.push_back(stateValues(data.getVertex(static_cast<unsigned>(v)).getState(), n));
-  std::reverse(path.begin(), path.end());
-  return path;
-}
-
 /// One search from the oracle's start: the OMPL problem, its sampler and goal seeded by `seed`, solved within the
-/// clock. `raw` is the solution path (`solved`), or, when the clock stopped a search without one, the best path
-/// in the planner's graph (bestPartialPath); empty when there is none.
+/// clock. `raw` is the solution path (`solved`), or, when the clock stopped a search without an exact one, the path
+/// to the valid equilibrium nearest the goal reached from the request's start through valid equilibria (the
+/// oracle's best, which the progress reports) when that is nearer the goal than the oracle's start and than the end
+/// of the planner's approximate path; empty when there is none.
 struct Search
 {
   ob::PlannerStatus status;
@@ -834,8 +806,21 @@ Search searchOnce(const EquilibriumOracle& oracle, const PlanRequest& r, const o
     for (size_t k = 0; k < path->getStateCount(); ++k)
       out.raw.push_back(stateValues(path->getState(k), n));
   }
-  else if (clock.out())
-    out.raw = bestPartialPath(si, *planner, oracle, r, n);  // stopped: the best the search has, as an approximation
+  if (clock.out() && !(out.solved && pdef->hasExactSolution()))
+  {
+    // stopped without reaching the goal: the best the request has, the oracle's best path (what the progress
+    // reported), unless the planner's own approximate path ends nearer the goal
+    const auto distance = goalDistance(oracle, r);
+    double have = distance(oracle.start());
+    Equilibrium e;
+    if (out.solved && !out.raw.empty() && oracle.known(out.raw.back(), e) && oracle.valid(e))
+      have = std::min(have, distance(e));
+    if (oracle.bestDistance() < have)
+    {
+      out.raw = oracle.bestPath();
+      out.solved = false;
+    }
+  }
   return out;
 }
 
@@ -1118,6 +1103,7 @@ PlanResult planFolding(const core::Model& model, const core::State& given, const
       out.stopped_by_time_limit = clock.timedOut();
       out.cancelled = clock.cancelled();
       out.planning_time = clock.elapsed();
+      clock.done(std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity());
       return out;
     }
   }
@@ -1136,6 +1122,15 @@ PlanResult planFolding(const core::Model& model, const core::State& given, const
     out.equilibrium_solves = oracle.solves();
     out.solver_timings = oracle.timings();
     out.planning_time = clock.elapsed();
+    // the last progress report: where the returned path ends
+    double height = std::numeric_limits<double>::infinity(), distance = height;
+    if (!out.waypoints.empty())
+    {
+      height = out.final_height;
+      distance = r.target_values.empty() ? std::max(0.0, out.final_height - r.target_height) :
+                                           actuationDistance(out.waypoints.back(), r.target_values);
+    }
+    clock.done(height, distance);
     return out;
   };
   std::string why;
@@ -1215,10 +1210,20 @@ PlanResult planFolding(const core::Model& model, const core::State& given, const
     // the answer from here: the path as it will be followed, within the deadline or, past it, a grace period
     clock.answering(0.3);
     clock.phase("follow");
+    // a later search stopped without a path answers with the oracle's best path, which starts at the request's
+    // start: it replaces the earlier searches' path (it gets nearer the goal than where that one was cut)
+    const bool from_first = search > 0 && !found.solved;
+    if (from_first)
+    {
+      oracle.restart(first);
+      out.waypoints.clear();
+      out.min_gap = std::numeric_limits<double>::infinity();
+      out.peak_contact_force = 0.0;
+    }
     const std::vector<Values> before = out.waypoints;  // followed by the earlier searches, ending at this start
     std::string cut_at;
     end = followFromStart(oracle, r, simple, clock, out, cut_at, before.empty() ? 0 : before.size() - 1);
-    if (search > 0)
+    if (search > 0 && !from_first)
     {
       std::vector<Values> joined = before;
       joined.insert(joined.end(), out.waypoints.begin() + 1, out.waypoints.end());

@@ -392,6 +392,7 @@ struct Watcher
   double elapsed_at_stop = 0.0;
   int reports = 0;
   std::string last_phase;
+  ap::PlanProgress last, at_stop;  // the last report, and the one when the deadline passed or the cancel came
   ap::PlanControl control()
   {
     ap::PlanControl c;
@@ -400,10 +401,12 @@ struct Watcher
     {
       ++reports;
       last_phase = p.phase;
+      last = p;
       if (solves_at_stop < 0 && (p.elapsed > time_limit || (cancel_at >= 0 && p.equilibrium_solves >= cancel_at)))
       {
         solves_at_stop = p.equilibrium_solves;
         elapsed_at_stop = p.elapsed;
+        at_stop = p;
       }
     };
     c.cancelled = [this] { return cancel_at >= 0 && solves_at_stop >= 0; };
@@ -549,52 +552,56 @@ TEST(FoldingPlanner, AHeightBelowTheFullPullIsAnsweredEarly)
 TEST(FoldingPlanner, CancelAnswersWithTheBestPathSoFar)
 {
   // the tower to 0.95 m with 5 mm of clearance (1-4 s of search), cancelled after 400 equilibrium solves:
-  // it answers with the path to the valid state nearest the goal that the search has reached (followed from
-  // the start), doing no more than following that path
+  // it answers with the path to the valid state nearest the goal that the request has reached from the start
+  // through valid equilibria (followed from the start again), doing no more than following that path; the
+  // progress reported that state, and its last report ("done") is the returned path's end
   const at::Model model = scene("tower.yaml");
   const at::State start = startEquilibrium(model);
   const double h0 = at::structureHeight(model, start.q);
   ap::PlanRequest req = towerRequest();
   req.target_height = 0.95;
   req.limits.min_clearance = 0.005;
-  int approximate = 0;
+  int answered = 0;
   const auto cancelled = [&](const char* planner, long cancel_at)
   {
     req.planner = planner;
     Watcher w;
     w.cancel_at = cancel_at;
     const ap::PlanResult p = ap::planFolding(model, start, req, w.control());
-    std::printf("[ measured ] %s cancelled at %ld solves, %.3f s: %s, %ld solves, %.3f s, %zu waypoints, final height "
-                "%.4f m (%s)\n",
-                planner, w.solves_at_stop, w.elapsed_at_stop, ap::toString(p.status), p.equilibrium_solves,
-                p.planning_time, p.waypoints.size(), p.final_height, p.message.c_str());
+    std::printf("[ measured ] %s cancelled at %ld solves, %.3f s (best height reported %.4f m): %s, %ld solves, "
+                "%.3f s, %zu waypoints, final height %.4f m (%s)\n",
+                planner, w.solves_at_stop, w.elapsed_at_stop, w.at_stop.best_height, ap::toString(p.status),
+                p.equilibrium_solves, p.planning_time, p.waypoints.size(), p.final_height, p.message.c_str());
     EXPECT_TRUE(p.cancelled) << planner;
+    // the last report describes the answer: the returned path's end (+inf without a path)
+    EXPECT_EQ(w.last.phase, "done") << planner;
+    EXPECT_EQ(w.last.best_height, p.waypoints.empty() ? INFINITY : p.final_height) << planner;
+    EXPECT_EQ(w.last.best_distance, p.waypoints.empty() ? INFINITY : std::max(0.0, p.final_height - req.target_height))
+        << planner;
+    EXPECT_EQ(w.last.equilibrium_solves, p.equilibrium_solves) << planner;
     EXPECT_FALSE(p.stopped_by_time_limit) << planner;
     ASSERT_GE(w.solves_at_stop, cancel_at) << planner;
     EXPECT_LE(p.equilibrium_solves - w.solves_at_stop, answerCost(model, req, p) + 4) << planner;
-    if (p.status == ap::PlanStatus::kApproximateSolution)
+    if (p.status == ap::PlanStatus::kApproximateSolution || p.status == ap::PlanStatus::kExactSolution)
     {
-      // the best path so far, followed from the start: valid, lower than the start, a trajectory to drive
-      ++approximate;
+      // the best path so far, followed from the start: valid, lower than the start, a trajectory to drive (exact
+      // when the request had already reached the goal through valid equilibria: the reachability continuation,
+      // every cable pulled alike, passes 0.95 m with the clearance kept)
+      ++answered;
+      ASSERT_GE(p.waypoints.size(), 2u) << planner;
       EXPECT_GE(p.min_gap, req.limits.min_clearance) << planner;
-      EXPECT_GT(p.final_height, req.target_height) << planner;
       EXPECT_LT(p.final_height, h0) << planner;
       EXPECT_EQ(p.positions.back(), p.waypoints.back()) << planner;
+      // what the progress reported at the cancel, the returned path reaches (followed again from the start, in
+      // increments that may differ: within a continuation step's worth of height)
+      EXPECT_NEAR(p.final_height, w.at_stop.best_height, 0.02) << planner;
     }
     else
-      EXPECT_TRUE(p.status == ap::PlanStatus::kExactSolution || p.status == ap::PlanStatus::kTimeout)
-          << planner << ": " << ap::toString(p.status);
+      EXPECT_EQ(p.status, ap::PlanStatus::kTimeout) << planner << ": " << ap::toString(p.status);
   };
   for (const char* planner : { "RRTConnect", "RRT", "PRM", "KPIECE1" })
     cancelled(planner, 400);
-  // RRT and KPIECE1 have a best path to give, but which one depends on OMPL's process-wide random numbers (the
-  // tests run before) and on when the cancel is seen: a path whose following fails is no answer (seen for RRT in
-  // a whole-suite run), so they search longer before the test gives up on seeing one
-  for (long later : { 800L, 1600L })
-    for (const char* planner : { "RRT", "KPIECE1" })
-      if (approximate == 0)
-        cancelled(planner, later);
-  EXPECT_GE(approximate, 1);
+  EXPECT_GE(answered, 1);
 }
 
 TEST(FoldingPlanner, TheEquilibriumCacheIsBounded)

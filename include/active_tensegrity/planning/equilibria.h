@@ -32,6 +32,15 @@ struct ValidityLimits
   double max_cable_stress = std::numeric_limits<double>::infinity();
 };
 
+/// The way an equilibrium was reached from the oracle's start: straight segments in actuation space, each
+/// followed by continuation through valid equilibria only. An immutable list shared between equilibria: a
+/// node holds one waypoint (the chosen actuators' values) and the node before it (null at the start).
+struct PathNode
+{
+  std::vector<double> values;
+  std::shared_ptr<const PathNode> before;
+};
+
 /// One quasi-static equilibrium and the figures validity needs.
 struct Equilibrium
 {
@@ -42,7 +51,13 @@ struct Equilibrium
   double max_contact = 0.0;       // N, largest quasi-static contact force
   double max_cable_stress = 0.0;  // Pa
   double height = 0.0;            // m (the scene's height nodes)
+  /// how it was reached from the start through valid equilibria only (continuation from an equilibrium that
+  /// was, every increment valid); null when it was not (from another branch, or past an invalid one)
+  std::shared_ptr<const PathNode> path;
 };
+
+/// The waypoints of a path, from the start.
+std::vector<std::vector<double>> pathWaypoints(const std::shared_ptr<const PathNode>& path);
 
 /// Most equilibria an oracle keeps (about 3 kB each for the tower).
 constexpr size_t kCacheCapacity = 4096;
@@ -102,13 +117,17 @@ public:
     stop_ = std::move(stop);
   }
   /// The goal's distance of an equilibrium (>= 0, 0 at the goal): the oracle keeps the valid equilibrium
-  /// nearest to the goal it has seen (bestDistance, bestHeight; +inf before the first).
+  /// nearest to the goal among those reached from the start through valid equilibria only (bestDistance,
+  /// bestHeight, bestPath; +inf and no path before the first).
   void setGoalDistance(std::function<double(const Equilibrium&)> distance)
   {
     distance_ = std::move(distance);
   }
   double bestDistance() const;
   double bestHeight() const;
+  /// The waypoints that reached the best equilibrium from the start (each segment followed by continuation
+  /// through valid equilibria); empty before the first.
+  std::vector<std::vector<double>> bestPath() const;
 
 private:
   class SolverLease;
@@ -137,6 +156,7 @@ private:
   mutable long solves_ = 0;
   mutable double best_distance_ = std::numeric_limits<double>::infinity();
   mutable double best_height_ = std::numeric_limits<double>::infinity();
+  mutable std::shared_ptr<const PathNode> best_path_;
 };
 
 /// Max-norm distance between two actuation vectors.

@@ -88,7 +88,9 @@ struct PlanProgress
   /// above the target, or the max-norm distance to the target values); +inf before the first
   double best_height = std::numeric_limits<double>::infinity();
   double best_distance = std::numeric_limits<double>::infinity();
-  std::string phase;  // "start", "reachability", "search", "shortcut", "follow", "blend", "verify"
+  /// "start", "reachability", "search", "shortcut", "follow", "blend", "verify"; "done" once, last, when the
+  /// answer is made: best_height and best_distance are then those of the returned path's end (+inf without one)
+  std::string phase;
 };
 
 /// Hooks of a running request (all optional). Both are called from the planning thread.
@@ -97,7 +99,9 @@ struct PlanControl
   /// polled often (between equilibrium increments); true stops the request, which answers within
   /// 0.5 s with the best path found so far (approximate) and PlanResult::cancelled set
   std::function<bool()> cancelled;
-  /// called at most every progress_period s
+  /// called at most every progress_period s, and once more with phase "done" when the answer is made. During
+  /// the search the best equilibrium is the one nearest the goal among those reached from the start through
+  /// valid equilibria only: a stopped request answers with the path to it (followed again from the start)
   std::function<void(const PlanProgress&)> progress;
   double progress_period = 0.2;
 };
