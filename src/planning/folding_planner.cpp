@@ -494,29 +494,132 @@ double restWindow(const core::Model& model, const core::State& end)
   return 1.0;
 }
 
-/// Simulates `plan` slowed by `scale` from `start` at rest, then until the structure is at rest or its
-/// motion decays (or for settle_time); polls `stop` every step.
-DynamicPeaks simulate(const core::Model& model, const core::State& start, const PlanRequest& r, const PlanResult& plan,
-                      double scale, double rest_window, const std::function<bool()>& stop)
+/// How the chosen actuators, moving at the start, come to rest: each braked from its rate at its acceleration
+/// limit (the time-optimal stop), sampled as the first part of the trajectory.
+struct Stop
+{
+  std::vector<double> values;  // where each comes to rest
+  double duration = 0.0;       // s until the last is at rest (0: all at rest already)
+  Trajectory prefix;           // from the start's values and rates to rest (no points when duration is 0)
+};
+
+/// The stop of the chosen actuators from `now` (their values and rates at the start); "" or why not (a stop
+/// outside an actuator's range).
+std::string stopping(const core::Model& model, const std::vector<int>& idx, const core::ActuationValues& now,
+                     const PlanRequest& r, Stop& stop)
+{
+  const size_t n = idx.size();
+  std::vector<double> value(n), rate(n), accel(n), at_rest(n, 0.0);
+  stop.values.assign(n, 0.0);
+  stop.duration = 0.0;
+  stop.prefix = Trajectory();
+  for (size_t i = 0; i < n; ++i)
+  {
+    const core::Actuator& a = model.actuators[idx[i]];
+    value[i] = now[idx[i]].value;
+    rate[i] = now[idx[i]].rate;
+    accel[i] = r.max_accelerations[r.max_accelerations.size() == 1 ? 0 : i];
+    stop.values[i] = value[i];
+    if (rate[i] == 0.0)
+      continue;
+    at_rest[i] = std::abs(rate[i]) / accel[i];
+    stop.values[i] = value[i] + 0.5 * rate[i] * at_rest[i];
+    stop.duration = std::max(stop.duration, at_rest[i]);
+    if (stop.values[i] < a.min_value - 1e-9 || stop.values[i] > a.max_value + 1e-9)
+    {
+      std::ostringstream msg;
+      msg << "actuator " << core::quoted(a.name) << " moves at " << rate[i] << " m/s at " << value[i]
+          << " m: braked at its max_acceleration " << accel[i] << " m/s^2 it stops at " << stop.values[i]
+          << " m, outside its range [" << a.min_value << ", " << a.max_value << "] m";
+      return msg.str();
+    }
+  }
+  if (stop.duration == 0.0)
+    return "";
+  // every sample_dt, and where each actuator comes to rest (so that the controller's cubic pieces between the
+  // points are exactly the quadratic braking and the rest after it)
+  std::vector<double> times;
+  for (long k = 0; static_cast<double>(k) * r.sample_dt < stop.duration; ++k)
+    times.push_back(static_cast<double>(k) * r.sample_dt);
+  for (double t : at_rest)
+    if (t > 0.0)
+      times.push_back(t);
+  std::sort(times.begin(), times.end());
+  std::vector<double> kept;
+  for (double t : times)
+  {
+    // a grid point just before a stop time goes (strictly increasing times, no piece shorter than 1e-6 s)
+    if (!kept.empty() && t - kept.back() < 1e-6)
+    {
+      if (kept.size() > 1)
+        kept.back() = t;
+      continue;
+    }
+    kept.push_back(t);
+  }
+  for (double t : kept)
+  {
+    std::vector<double> p(n), v(n), acc(n);
+    for (size_t i = 0; i < n; ++i)
+    {
+      if (t >= at_rest[i])
+      {
+        p[i] = stop.values[i];
+        continue;
+      }
+      const double dir = rate[i] > 0.0 ? 1.0 : -1.0;
+      p[i] = value[i] + rate[i] * t - 0.5 * dir * accel[i] * t * t;
+      v[i] = rate[i] - dir * accel[i] * t;
+      acc[i] = -dir * accel[i];
+    }
+    stop.prefix.times.push_back(t);
+    stop.prefix.positions.push_back(p);
+    stop.prefix.velocities.push_back(v);
+    stop.prefix.accelerations.push_back(acc);
+  }
+  stop.prefix.duration = stop.duration;
+  return "";
+}
+
+/// The trajectory as it runs: the stop, then the path's trajectory from where it ends (its first point, at
+/// rest there, is the stop's last), slowed by `scale`.
+Trajectory executed(const Stop& stop, const PlanResult& path, double scale)
+{
+  Trajectory t = stop.prefix;
+  for (size_t k = 0; k < path.times.size(); ++k)
+  {
+    if (k == 0 && !t.times.empty())
+      continue;
+    t.times.push_back(stop.duration + path.times[k] * scale);
+    t.positions.push_back(path.positions[k]);
+    Values v = path.velocities[k], a = path.accelerations[k];
+    for (double& x : v)
+      x /= scale;
+    for (double& x : a)
+      x /= scale * scale;
+    t.velocities.push_back(v);
+    t.accelerations.push_back(a);
+  }
+  t.duration = stop.duration + path.duration * scale;
+  return t;
+}
+
+/// Simulates `trajectory` (times from start.t) from `start` as it is (positions, velocities, contact memory),
+/// the chosen actuators taken over from `law` at start.t, the others following it; then until the structure
+/// is at rest or its motion decays (or for settle_time); polls `stop` every step.
+DynamicPeaks simulate(const core::Model& model, const core::State& start, const core::ActuationController& law_given,
+                      const PlanRequest& r, const Trajectory& trajectory, double rest_window,
+                      const std::function<bool()>& stop)
 {
   DynamicPeaks peaks;
   core::Model dyn = model;
   dyn.analysis.type = core::AnalysisType::kDynamic;
   core::State s = start;
-  s.t = 0.0;
-  s.qd.setZero(dyn.nq);
-  core::ActuationController control(dyn, s.u);
-  std::vector<double> times;
-  std::vector<Values> vel;
-  for (size_t k = 0; k < plan.times.size(); ++k)
-  {
-    times.push_back(plan.times[k] * scale);
-    Values v = plan.velocities[k];
-    for (double& x : v)
-      x /= scale;
-    vel.push_back(v);
-  }
-  const std::string err = control.setTrajectory(0.0, r.actuators, times, plan.positions, vel);
+  if (s.qd.size() != dyn.nq)
+    s.qd.setZero(dyn.nq);
+  core::ActuationController control = law_given;
+  const std::string err =
+      control.setTrajectory(s.t, r.actuators, trajectory.times, trajectory.positions, trajectory.velocities);
   if (!err.empty())
   {
     peaks.message = "trajectory refused: " + err;
@@ -531,7 +634,8 @@ DynamicPeaks simulate(const core::Model& model, const core::State& start, const 
       core::ActuationLaw::writing([&control](double t, core::ActuationValues& u) { control.values(t, u); });
   core::Summary sum = solver.initialize(s, law);
   const double dt = dyn.solver.dt;
-  const double t_end = times.back();
+  const double t0 = s.t;
+  const double t_end = t0 + trajectory.duration;
   const double settle_limit = r.settle_time > 0.0 ? r.settle_time : r.max_settle_time;
   // after the end, windows of rest_window s: at rest when the RMS speed stayed under rest_speed through one;
   // decaying when one set no new extreme (gap, contact force, bending stress) and its largest kinetic
@@ -543,20 +647,9 @@ DynamicPeaks simulate(const core::Model& model, const core::State& start, const 
   } window, previous;
   int windows = 0;
   double window_start = t_end;
-  for (long k = 1; sum.ok(); ++k)
+  // the extremes of the state s (a new one after the trajectory's end is the window's)
+  const auto record = [&](bool after)
   {
-    if (stop())
-    {
-      std::ostringstream msg;
-      msg << "stopped by the time limit (or cancelled) at t = " << s.t << " s of " << t_end << " s";
-      peaks.message = msg.str();
-      return peaks;
-    }
-    sum = solver.step(s, k * dt - s.t, law);
-    if (!sum.ok())
-      break;
-    s.t = k * dt;
-    const bool after = s.t > t_end;
     const std::vector<core::ContactPairState> contacts = core::activeContacts(dyn, s);
     for (const core::ContactPairState& c : contacts)
       if (c.normal_force > peaks.contact)
@@ -576,6 +669,24 @@ DynamicPeaks simulate(const core::Model& model, const core::State& start, const 
       peaks.min_gap = gap;
       window.new_extreme = window.new_extreme || after;
     }
+  };
+  if (sum.ok())
+    record(false);  // the start itself: moving, it may already press struts together
+  for (long k = 1; sum.ok(); ++k)
+  {
+    if (stop())
+    {
+      std::ostringstream msg;
+      msg << "stopped by the time limit (or cancelled) at t = " << s.t - t0 << " s of " << t_end - t0 << " s";
+      peaks.message = msg.str();
+      return peaks;
+    }
+    sum = solver.step(s, t0 + static_cast<double>(k) * dt - s.t, law);
+    if (!sum.ok())
+      break;
+    s.t = t0 + static_cast<double>(k) * dt;
+    const bool after = s.t > t_end;
+    record(after);
     if (!after)
       continue;
     peaks.settle = s.t - t_end;
@@ -613,7 +724,7 @@ DynamicPeaks simulate(const core::Model& model, const core::State& start, const 
   }
   peaks.ran = sum.ok();
   if (!sum.ok())
-    peaks.message = "the simulation failed at t = " + core::shortestNumber(s.t) + " s: " + sum.message;
+    peaks.message = "the simulation failed at t = " + core::shortestNumber(s.t - t0) + " s: " + sum.message;
   else if (!peaks.settled)
   {
     std::ostringstream msg;
@@ -644,7 +755,7 @@ bool meetsGoal(const EquilibriumOracle& oracle, const PlanRequest& r, const Equi
 }
 
 /// A one-point plan: the start meets the goal.
-void stayAtStart(const EquilibriumOracle& oracle, const PlanRequest& r, PlanResult& out)
+void stayAtStart(const EquilibriumOracle& oracle, PlanResult& out)
 {
   const Values v = oracle.values(oracle.start().state);
   out.status = PlanStatus::kExactSolution;
@@ -656,13 +767,6 @@ void stayAtStart(const EquilibriumOracle& oracle, const PlanRequest& r, PlanResu
   out.min_gap = oracle.start().min_gap;
   out.peak_contact_force = oracle.start().max_contact;
   out.final_height = oracle.start().height;
-  if (r.verify_dynamics || r.find_speed_limit)
-  {
-    // no motion: the start is an equilibrium at rest
-    out.dynamics_verified = out.dynamics_within_limits = true;
-    out.dynamic_peak_contact_force = oracle.start().max_contact;
-    out.dynamic_min_gap = oracle.start().min_gap;
-  }
 }
 
 /// Cheap necessary conditions: for a height target, one continuation to every actuator's upper bound, and a
@@ -952,9 +1056,10 @@ void blend(const EquilibriumOracle& oracle, const PlanRequest& r, RequestClock& 
   out.message += "; corners not blended (the blended path could not be checked within the limits and the time)";
 }
 
-/// The dynamic verification (and the speed-limit search) of out's trajectory; scales it in place.
-void verify(const core::Model& model, const core::State& start, const PlanRequest& r, const core::State& end,
-            RequestClock& clock, PlanResult& out)
+/// The dynamic verification (and the speed-limit search) of out's trajectory, run after `stop` from `start` under
+/// `law`; scales out's trajectory in place (not the stop).
+void verify(const core::Model& model, const core::State& start, const core::ActuationController& law, const Stop& stop,
+            const PlanRequest& r, const core::State& end, RequestClock& clock, PlanResult& out)
 {
   const double window = r.settle_time > 0.0 ? 0.0 : restWindow(model, end);
   const auto within = [&](const DynamicPeaks& p)
@@ -966,11 +1071,11 @@ void verify(const core::Model& model, const core::State& start, const PlanReques
   const auto run = [&](double scale)
   {
     ++out.dynamic_runs;
-    return simulate(model, start, r, out, scale, window, [&clock] { return clock.stop(); });
+    return simulate(model, start, law, r, executed(stop, out, scale), window, [&clock] { return clock.stop(); });
   };
   double scale = 1.0;
   DynamicPeaks peaks = run(scale);
-  if (r.find_speed_limit && !within(peaks) && !clock.out())
+  if (r.find_speed_limit && !within(peaks) && out.duration > 0.0 && !clock.out())
   {
     // double the time scale until within, then bisect (geometrically) to the tolerance
     double lo = 1.0, hi = 2.0;
@@ -1078,11 +1183,14 @@ std::string startEquilibrium(const core::Model& model, const core::State& state,
 }
 
 PlanResult planFolding(const core::Model& model, const core::State& given, const PlanRequest& r,
-                       const PlanControl& control)
+                       const PlanControl& control, const core::ActuationController* actuation)
 {
   PlanResult out;
   std::vector<int> idx;
   out.message = checkRequest(model, r, idx);
+  if (given.u.size() != model.actuators.size() && out.message.empty())
+    out.message = "the start state has " + std::to_string(given.u.size()) + " actuation values for " +
+                  std::to_string(model.actuators.size()) + " actuators";
   if (!out.message.empty())
   {
     out.status = PlanStatus::kInvalidRequest;
@@ -1091,22 +1199,41 @@ PlanResult planFolding(const core::Model& model, const core::State& given, const
   out.names = r.actuators;
   const size_t n = idx.size();
   RequestClock clock(r.time_limit, control);
+  // what the actuators do from the start: the caller's law, or every one at rest where it is
+  const core::ActuationController law = actuation ? *actuation : core::ActuationController(model, given.u);
+  const core::ActuationValues now = law.values(given.t);
+  const auto invalidStart = [&](const std::string& why) -> PlanResult&
+  {
+    out.status = PlanStatus::kInvalidStart;
+    out.message = why;
+    out.stopped_by_time_limit = clock.timedOut();
+    out.cancelled = clock.cancelled();
+    out.planning_time = clock.elapsed();
+    clock.done(std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity());
+    return out;
+  };
+  // the chosen actuators, when they move, are first brought to rest: the path starts where they stop
+  Stop stop;
+  std::string why = stopping(model, idx, now, r, stop);
+  if (!why.empty())
+    return invalidStart(why);
+  if (stop.duration > 0.0 && !r.relax_start)
+    return invalidStart("the chosen actuators move at the start (relax_start plans from where they stop)");
   core::State start = given;
   if (r.relax_start)
   {
+    // the equilibrium nearest to the structure where the actuators come to rest: the chosen ones where they
+    // stop, the others where their law ends
+    core::State resting = given;
+    resting.u = law.values(std::numeric_limits<double>::infinity());
+    for (size_t i = 0; i < n; ++i)
+      resting.u[idx[i]].value = stop.values[i];
     clock.phase("start");
-    const std::string why = startEquilibrium(model, given, start, [&clock] { return clock.stop(); });
+    why = startEquilibrium(model, resting, start, [&clock] { return clock.stop(); });
     if (!why.empty())
-    {
-      out.status = PlanStatus::kInvalidStart;
-      out.message = why;
-      out.stopped_by_time_limit = clock.timedOut();
-      out.cancelled = clock.cancelled();
-      out.planning_time = clock.elapsed();
-      clock.done(std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity());
-      return out;
-    }
+      return invalidStart(why);
   }
+  out.stop_duration = stop.duration;
   // OMPL's own console output off: what it would say (no valid goal sampled, skipped states) is in the
   // status and the message
   ompl::msg::setLogLevel(ompl::msg::LOG_NONE);
@@ -1133,7 +1260,13 @@ PlanResult planFolding(const core::Model& model, const core::State& given, const
     clock.done(height, distance);
     return out;
   };
-  std::string why;
+  // the trajectory from the start: the stop, then the path's (slowed by the verification's time scale)
+  const auto withStop = [&]()
+  {
+    const Trajectory t = executed(stop, out, 1.0);
+    setTrajectory(t, out);
+    out.rest_to_rest_duration += stop.duration;
+  };
   if (!oracle.valid(oracle.start(), &why))
   {
     out.status = PlanStatus::kInvalidStart;
@@ -1142,7 +1275,24 @@ PlanResult planFolding(const core::Model& model, const core::State& given, const
   }
   if (meetsGoal(oracle, r, oracle.start()))
   {
-    stayAtStart(oracle, r, out);
+    stayAtStart(oracle, out);
+    if (r.verify_dynamics || r.find_speed_limit)
+    {
+      if (r.relax_start)
+      {
+        // the structure may still move (or its actuators): simulated from where it is
+        clock.phase("verify");
+        verify(model, given, law, stop, r, oracle.start().state, clock, out);
+      }
+      else
+      {
+        // no motion: the start is an equilibrium at rest
+        out.dynamics_verified = out.dynamics_within_limits = true;
+        out.dynamic_peak_contact_force = oracle.start().max_contact;
+        out.dynamic_min_gap = oracle.start().min_gap;
+      }
+    }
+    withStop();
     return finish();
   }
 
@@ -1277,8 +1427,9 @@ PlanResult planFolding(const core::Model& model, const core::State& given, const
       out.message += clock.cancelled() ? "; no dynamic verification: cancelled" :
                                          "; no dynamic verification: the time limit was reached";
     else
-      verify(model, start, r, end.state, clock, out);
+      verify(model, given, law, stop, r, end.state, clock, out);
   }
+  withStop();
   return finish();
 }
 

@@ -713,6 +713,147 @@ TEST(FoldingPlanner, PlansFromAFoldedMovingTower)
   }
 }
 
+namespace
+{
+/// The largest contact force over a simulation of `trajectory` (times from start.t) by `law` with the chosen
+/// actuators taken over at start.t, from `start` as it is, in steps of the scene's dt for `span` s (every step's
+/// end, and the start; the forces of dynamics, as the node publishes them).
+double simulatedPeak(const at::Model& scene_model, const at::State& start, at::ActuationController law,
+                     const std::vector<std::string>& names, const std::vector<double>& times,
+                     const std::vector<std::vector<double>>& positions,
+                     const std::vector<std::vector<double>>& velocities, double span)
+{
+  EXPECT_EQ(law.setTrajectory(start.t, names, times, positions, velocities), "");
+  at::Model model = scene_model;
+  model.analysis.type = at::AnalysisType::kDynamic;
+  at::State s = start;
+  at::DynamicsSolver solver(model, model.solver);
+  const at::ActuationLaw actuation = [&law](double t) { return law.values(t); };
+  at::Summary sum = solver.initialize(s, actuation);
+  const double dt = model.solver.dt, t0 = s.t;
+  double peak = 0.0;
+  const auto record = [&]
+  {
+    for (const auto& c : at::activeContacts(model, s))
+      peak = std::max(peak, c.normal_force);
+  };
+  record();
+  for (long k = 1; k <= std::lround(span / dt) && sum.ok(); ++k)
+  {
+    sum = solver.step(s, t0 + static_cast<double>(k) * dt - s.t, actuation);
+    s.t = t0 + static_cast<double>(k) * dt;
+    record();
+  }
+  EXPECT_TRUE(sum.ok()) << sum.message;
+  return peak;
+}
+}  // namespace
+
+TEST(FoldingPlanner, VerificationSimulatesFromTheMovingStateItWasGiven)
+{
+  // The tower while its four cables are pulled in at 0.3 m/s towards 1.2 m, 2.5 s into the pull: struts and
+  // actuators move. Planned from there as the node plans (relax_start, the running actuation law), the
+  // trajectory starts at the actuators' values and rates, brakes them at the acceleration limit, then drives the
+  // path from where they stop; the verification simulates all of it from the moving state: an independent
+  // simulation from that state gives the same peak. The same path driven from the equilibrium at rest (what was
+  // verified before, whatever the state) gives a far lower peak: the moving start is what presses the struts.
+  const at::Model model = at::loadScene(std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) + "/config/scenes/tower.yaml",
+                                        { at::parseOverride("solver.dt=1e-3") });
+  const std::vector<std::string> pulls = towerRequest().actuators;
+  std::vector<int> idx;
+  for (const std::string& n : pulls)
+    idx.push_back(model.findActuator(n));
+  at::State moving = at::initialState(model);
+  at::ActuationController control(model, moving.u);
+  ASSERT_EQ(control.setTargets(0.0, pulls, std::vector<double>(4, 1.2), { 0.3 }, { 3.0 }, 0.3, 3.0), "");
+  {
+    at::DynamicsSolver solver(model, model.solver);
+    const at::ActuationLaw law = [&control](double t) { return control.values(t); };
+    at::Summary sum = solver.initialize(moving, law);
+    for (long k = 1; k <= 2500 && sum.ok(); ++k)
+    {
+      sum = solver.step(moving, k * model.solver.dt - moving.t, law);
+      moving.t = k * model.solver.dt;
+    }
+    ASSERT_TRUE(sum.ok()) << sum.message;
+  }
+  const at::ActuationValues now = control.values(moving.t);
+  ASSERT_NEAR(now[idx[0]].rate, 0.3, 1e-12);  // cruising
+  ASSERT_GT(moving.qd.norm(), 1e-2);
+
+  ap::PlanRequest req = towerRequest();
+  req.target_height = 0.5;
+  req.limits.allow_contact = true;
+  req.limits.max_contact_force = 400.0;
+  req.max_speeds = { 0.2 };
+  req.max_accelerations = { 1.0 };
+  req.verify_dynamics = true;
+  req.settle_time = 0.5;  // a fixed span: the independent simulation covers the same steps
+  req.relax_start = true;
+  const ap::PlanResult p = ap::planFolding(model, moving, req, {}, &control);
+  ASSERT_EQ(p.status, ap::PlanStatus::kExactSolution) << p.message;
+  ASSERT_TRUE(p.dynamics_verified) << p.message;
+
+  // from where the actuators are, at their rates; braked at 1 m/s^2 for 0.3 s, they stop 45 mm further in,
+  // where the path starts
+  EXPECT_NEAR(p.stop_duration, 0.3, 1e-12);
+  ASSERT_GT(p.times.size(), 2u);
+  EXPECT_EQ(p.times.front(), 0.0);
+  for (size_t i = 0; i < 4; ++i)
+  {
+    EXPECT_EQ(p.positions.front()[i], now[idx[i]].value);
+    EXPECT_EQ(p.velocities.front()[i], now[idx[i]].rate);
+    EXPECT_NEAR(p.waypoints.front()[i], now[idx[i]].value + 0.045, 1e-12);
+  }
+  for (size_t k = 0; k < p.times.size(); ++k)
+    for (size_t i = 0; i < 4; ++i)
+    {
+      EXPECT_LE(std::abs(p.velocities[k][i]), 0.3 + 1e-12);
+      EXPECT_LE(std::abs(p.accelerations[k][i]), 1.0 + 1e-9);
+    }
+  EXPECT_EQ(p.positions.back(), p.waypoints.back());
+  EXPECT_NEAR(p.duration, p.times.back(), 1e-12);
+
+  // an independent simulation from the moving state, under the same law, over the same span
+  const double peak =
+      simulatedPeak(model, moving, control, pulls, p.times, p.positions, p.velocities, p.duration + p.settle_duration);
+  std::printf("[ measured ] planned 2.5 s into a 0.3 m/s pull: verified peak %.1f N, independent simulation %.1f N "
+              "(quasi-static %.1f N), trajectory %.2f s\n",
+              p.dynamic_peak_contact_force, peak, p.peak_contact_force, p.duration);
+  EXPECT_NEAR(p.dynamic_peak_contact_force, peak, 1e-3 * peak + 1e-6);
+
+  // the path alone, from the equilibrium at rest where the actuators stop
+  at::State resting = moving;
+  for (size_t i = 0; i < 4; ++i)
+    resting.u[idx[i]].value = p.waypoints.front()[i];
+  at::State rest;
+  ASSERT_EQ(ap::startEquilibrium(model, resting, rest), "");
+  std::vector<double> times;
+  std::vector<std::vector<double>> positions, velocities;
+  for (size_t k = 0; k < p.times.size(); ++k)
+    if (p.times[k] >= p.stop_duration)
+    {
+      times.push_back(p.times[k] - p.stop_duration);
+      positions.push_back(p.positions[k]);
+      velocities.push_back(p.velocities[k]);
+    }
+  const double from_rest = simulatedPeak(model, rest, at::ActuationController(model, rest.u), pulls, times, positions,
+                                         velocities, p.duration - p.stop_duration + p.settle_duration);
+  std::printf("[ measured ] the same path from the equilibrium at rest: peak %.1f N\n", from_rest);
+  EXPECT_GT(p.dynamic_peak_contact_force, 1.5 * from_rest);
+
+  // a moving start is refused without relax_start, and so is a stop beyond an actuator's range
+  ap::PlanRequest fixed = req;
+  fixed.relax_start = false;
+  const ap::PlanResult refused = ap::planFolding(model, moving, fixed, {}, &control);
+  EXPECT_EQ(refused.status, ap::PlanStatus::kInvalidStart) << refused.message;
+  ap::PlanRequest soft = req;
+  soft.max_accelerations = { 0.01 };  // 4.5 m to stop
+  const ap::PlanResult beyond = ap::planFolding(model, moving, soft, {}, &control);
+  EXPECT_EQ(beyond.status, ap::PlanStatus::kInvalidStart) << beyond.message;
+  EXPECT_NE(beyond.message.find("outside its range"), std::string::npos) << beyond.message;
+}
+
 TEST(FoldingPlanner, VerificationFollowsTheStructureUntilItIsAtRest)
 {
   // the clearance plan driven slowly (0.05 m/s): the verification simulates until the structure is at rest

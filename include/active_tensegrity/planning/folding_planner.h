@@ -15,6 +15,11 @@
 #include "active_tensegrity/core/state.h"
 #include "active_tensegrity/planning/equilibria.h"
 
+namespace active_tensegrity::core
+{
+class ActuationController;
+}
+
 namespace active_tensegrity::planning
 {
 /// One value per OMPL PlannerStatus (same order), plus a request refused before planning.
@@ -57,8 +62,9 @@ struct PlanRequest
   /// structures that fold as their cables are pulled in and whose equilibria do not depend on the path
   /// taken to them; turn off for others.
   bool reachability_check = true;
-  /// dynamic verification: simulate the trajectory (DynamicsSolver) from the start equilibrium at rest
-  /// until the structure is at rest again; report peak contact force, strut bending stress and the
+  /// dynamic verification: simulate the trajectory (DynamicsSolver) from the state planFolding was given, as
+  /// it is (positions, velocities, contact memory, actuation values and rates, under the actuation law it was
+  /// given), until the structure is at rest again; report peak contact force, strut bending stress and the
   /// smallest gap; with find_speed_limit, slow it down (time scale, bisection) until they stay within
   /// the limits (max_contact_force or min_clearance, max_bending_stress)
   bool verify_dynamics = false;
@@ -71,8 +77,10 @@ struct PlanRequest
   double rest_speed = 1e-3;             // m/s
   double max_settle_time = 30.0;        // s
   double speed_limit_tolerance = 0.05;  // relative width of the final time-scale bracket (> 0)
-  /// `start` is any state (folded, moving): its nearest equilibrium (startEquilibrium) is found first,
-  /// within the request's deadline; false: `start` is a converged equilibrium already
+  /// `start` is any state (folded, moving): the path is planned from the equilibrium nearest to it where the
+  /// actuators come to rest (startEquilibrium, within the request's deadline): the chosen actuators braked
+  /// from their rates at max_accelerations, the others where their law ends. false: `start` is a converged
+  /// equilibrium already, its actuators at rest
   bool relax_start = false;
   /// corners blended within this tube (m, max norm in actuation space) around the validated path,
   /// the blended curve checked by continuation; 0: rest to rest at every waypoint
@@ -112,11 +120,15 @@ struct PlanResult
   std::string message;
   std::vector<std::string> names;
   std::vector<std::vector<double>> waypoints;  // the simplified path (actuation values)
-  // the trajectory: times (s from its start) and per time a value per actuator
+  // the trajectory: times (s from its start) and per time a value per actuator. It starts at the chosen
+  // actuators' values and rates at the start (those of the actuation law planFolding was given) and, when they
+  // moved, first brings them to rest (stop_duration s, each braked at its acceleration limit), then drives the
+  // path from there
   std::vector<double> times;
   std::vector<std::vector<double>> positions, velocities, accelerations;
   double duration = 0.0;
   double rest_to_rest_duration = 0.0;  // the same path stopping at every waypoint (== duration unblended)
+  double stop_duration = 0.0;          // s of braking at the trajectory's start (0: the actuators were at rest)
   // along the path (quasi-static, every continuation increment)
   double min_gap = std::numeric_limits<double>::infinity();
   double peak_contact_force = 0.0;
@@ -138,10 +150,13 @@ struct PlanResult
 };
 
 /// Plans from `start` (a converged quasi-static equilibrium of `model`: startEquilibrium below, or any state
-/// with request.relax_start). Never
-/// throws on a bad request: status kInvalidRequest and a message naming the field and the value.
+/// with request.relax_start). `actuation` is the law the actuators follow from start.t (a running simulation's
+/// controller): the returned trajectory takes the chosen actuators over from it at start.t, the others keep
+/// it; null: every actuator at rest at its value in `start`. The dynamic verification simulates exactly that
+/// from `start` as it is (positions, velocities, contact memory): what running the trajectory from `start`
+/// does. Never throws on a bad request: status kInvalidRequest and a message naming the field and the value.
 PlanResult planFolding(const core::Model& model, const core::State& start, const PlanRequest& request,
-                       const PlanControl& control = {});
+                       const PlanControl& control = {}, const core::ActuationController* actuation = nullptr);
 
 /// The quasi-static equilibrium to plan from, nearest to `state` (folded, moving: velocities and rates
 /// are dropped, then StaticSolver::relax at its actuation, polling `stop`). Empty message on success, else
