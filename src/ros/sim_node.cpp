@@ -96,6 +96,7 @@ void fillAnswer(const planning::PlanResult& plan, Answer& res)
   res.cancelled = plan.cancelled;
   res.duration = plan.duration;
   res.rest_to_rest_duration = plan.rest_to_rest_duration;
+  res.stop_duration = plan.stop_duration;
   res.dynamics_verified = plan.dynamics_verified;
   res.dynamics_within_limits = plan.dynamics_within_limits;
   res.dynamic_peak_contact_force = plan.dynamic_peak_contact_force;
@@ -182,6 +183,7 @@ void SimNode::onActuation(const active_tensegrity::ActuationCommand::ConstPtr& m
     return;
   }
   ++accepted_;
+  ++actuation_epoch_;
   std::ostringstream s;
   for (size_t i = 0; i < msg->names.size(); ++i)
     s << (i ? ", " : "") << core::clipped(msg->names[i]) << " -> " << msg->targets[i] << " m";
@@ -202,6 +204,7 @@ void SimNode::onTrajectory(const trajectory_msgs::JointTrajectory::ConstPtr& msg
     return;
   }
   ++accepted_;
+  ++actuation_epoch_;
   ROS_INFO_STREAM("tensegrity_sim: trajectory of " << msg->points.size() << " points for " << msg->joint_names.size()
                                                    << " actuators from t = " << state_.t << " s, " << times.back()
                                                    << " s long");
@@ -231,8 +234,9 @@ bool SimNode::onReset(std_srvs::Trigger::Request& /*req*/, std_srvs::Trigger::Re
     return true;
   }
   state_ = std::move(fresh);
+  ++actuation_epoch_;
   failed_ = false;
-  solver_status_ = running() ? "running" : "paused";
+  solver_status_ = runState();
   message_ = "reset";
   steps_ = step_cuts_ = 0;
   clear_markers_ = true;
@@ -253,7 +257,7 @@ bool SimNode::onPause(std_srvs::SetBool::Request& req, std_srvs::SetBool::Respon
     return true;
   }
   paused_by_user_ = req.data;
-  solver_status_ = running() ? "running" : "paused";
+  solver_status_ = runState();
   res.success = true;
   res.message = req.data ? "paused" : "running";
   ROS_INFO_STREAM("tensegrity_sim: " << res.message << " at t = " << state_.t << " s");
@@ -281,15 +285,60 @@ void SimNode::plan(const Request& req, Answer& res, const planning::PlanControl&
     return;
   }
   ap::PlanRequest r = planRequest(req, params_);
-  // the start: the quasi-static equilibrium nearest to the live state (folded, moving), found within the
-  // request's deadline
+  // the path from the quasi-static equilibrium nearest to the live state (folded, moving) where the actuators
+  // come to rest, found within the request's deadline; the verification from the live state itself, under the
+  // actuation law in force
   r.relax_start = true;
   core::State live;
+  std::unique_ptr<core::ActuationController> law;
+  uint64_t epoch = 0;
+  // with execute the simulation is held from here to the answer: the trajectory then runs from the state it
+  // was planned and verified from (released on every way out)
+  class Hold
+  {
+  public:
+    Hold(SimNode& node, bool on) : node_(node), on_(on) {}
+    ~Hold()
+    {
+      if (!on_)
+        return;
+      const std::lock_guard<std::mutex> lock(node_.mutex_);
+      release();
+    }
+    Hold(const Hold&) = delete;
+    Hold& operator=(const Hold&) = delete;
+    void take()  // mutex held
+    {
+      if (!on_)
+        return;
+      ++node_.plan_holds_;
+      if (!node_.failed_)
+        node_.solver_status_ = node_.runState();
+      node_.publishStatus();
+    }
+    void release()  // mutex held
+    {
+      if (!on_)
+        return;
+      on_ = false;
+      --node_.plan_holds_;
+      if (!node_.failed_)
+        node_.solver_status_ = node_.runState();
+      node_.publishStatus();
+    }
+
+  private:
+    SimNode& node_;
+    bool on_;
+  } hold(*this, req.execute);
   {
     const std::lock_guard<std::mutex> lock(mutex_);
     live = state_;
+    law = std::make_unique<core::ActuationController>(controller_);
+    epoch = actuation_epoch_;
+    hold.take();
   }
-  const ap::PlanResult result = ap::planFolding(model_, live, r, control);
+  const ap::PlanResult result = ap::planFolding(model_, live, r, control, law.get());
   fillAnswer(result, res);
   ROS_INFO_STREAM("tensegrity_sim: ~plan_folding: " << planning::toString(result.status) << " ("
                                                     << core::clipped(result.message, 4 * core::kMaxEchoLength) << "), "
@@ -311,18 +360,26 @@ void SimNode::plan(const Request& req, Answer& res, const planning::PlanControl&
     return;
   }
   const std::lock_guard<std::mutex> lock(mutex_);
-  const std::string err =
-      controller_.setTrajectory(state_.t, result.names, result.times, result.positions, result.velocities);
+  std::string err;
+  if (actuation_epoch_ != epoch)
+    err = "the actuation or the state changed while planning (a command, a trajectory, a reset or another plan's "
+          "execution): the plan starts from the state the request found";
+  else
+    err = controller_.setTrajectory(state_.t, result.names, result.times, result.positions, result.velocities);
   if (err.empty())
   {
     res.executed = true;
     ++accepted_;
+    ++actuation_epoch_;
+    ROS_INFO_STREAM("tensegrity_sim: ~plan_folding: executing from t = " << state_.t << " s, " << result.duration
+                                                                         << " s long");
   }
   else
   {
     res.message += "; not executed: " + err;
     reject("~plan_folding execution", err);
   }
+  hold.release();  // the simulation runs on (unless paused) with the trajectory in force
 }
 
 void SimNode::onPlanGoal(const active_tensegrity::PlanFoldingGoalConstPtr& goal)
@@ -343,10 +400,10 @@ void SimNode::onPlanGoal(const active_tensegrity::PlanFoldingGoalConstPtr& goal)
   plan(*goal, res, control);
   if (res.cancelled)
     plan_action_->setPreempted(res, res.message);
-  else if (res.status == res.EXACT_SOLUTION)
+  else if (res.status == res.EXACT_SOLUTION && (!goal->execute || res.executed))
     plan_action_->setSucceeded(res, res.message);
   else
-    plan_action_->setAborted(res, res.message);
+    plan_action_->setAborted(res, res.message);  // (an exact plan asked to execute that did not: the message says why)
 }
 
 void SimNode::onFollowGoal(const active_tensegrity::FollowTrajectoryGoalConstPtr& goal)
@@ -374,6 +431,7 @@ void SimNode::onFollowGoal(const active_tensegrity::FollowTrajectoryGoalConstPtr
       reference = std::make_unique<core::ActuationController>(controller_);
       t0 = state_.t;
       ++accepted_;
+      ++actuation_epoch_;
       publishStatus();
     }
     else
@@ -415,6 +473,7 @@ void SimNode::onFollowGoal(const active_tensegrity::FollowTrajectoryGoalConstPtr
       for (int a : idx)
         here.push_back(now[a].value);
       controller_.setTargets(state_.t, names, here, {}, {}, params_.default_speed, params_.default_acceleration);
+      ++actuation_epoch_;
       result.error_code = Result::SUCCESSFUL;
       result.error_string = "preempted: the actuators hold where they were";
       follow_action_->setPreempted(result, result.error_string);

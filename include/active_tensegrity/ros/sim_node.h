@@ -52,8 +52,9 @@ private:
   core::Summary restart(core::State& s);
   bool onReset(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
   bool onPause(std_srvs::SetBool::Request& req, std_srvs::SetBool::Response& res);
-  /// Plans from the quasi-static equilibrium nearest to the live state (the simulation keeps running);
-  /// executes the trajectory when asked.
+  /// Plans from the live state (the path from the quasi-static equilibrium nearest to it, the verification from
+  /// the state itself); with `execute` the simulation is held from the request to the answer, so that the
+  /// trajectory runs from the state it was verified from.
   bool onPlan(active_tensegrity::PlanFolding::Request& req, active_tensegrity::PlanFolding::Response& res);
   /// The ~plan_folding action: as the service, with progress as feedback and cancel (its own thread).
   void onPlanGoal(const active_tensegrity::PlanFoldingGoalConstPtr& goal);
@@ -80,7 +81,12 @@ private:
   ros::Time stamp(double t) const;
   bool running() const
   {
-    return !paused_by_user_ && !failed_;
+    return !paused_by_user_ && !failed_ && plan_holds_ == 0;
+  }
+  /// ~status's solver_status when the solver has not failed (mutex held).
+  std::string runState() const
+  {
+    return running() ? "running" : plan_holds_ > 0 ? "planning" : "paused";
   }
 
   SimParams params_;
@@ -101,6 +107,11 @@ private:
   core::State state_;
   bool paused_by_user_ = false;
   bool failed_ = false;
+  // ~plan_folding requests with execute under way: the simulation does not step while there is one
+  int plan_holds_ = 0;
+  // counts every change of the actuation or the state other than stepping (commands, trajectories, resets, plan
+  // executions): a plan executes only when nothing changed since its request
+  uint64_t actuation_epoch_ = 0;
   bool clear_markers_ = false;
   // with publish_clock, stamps are stamp_origin_ + state.t: the wall time of the start, then simulated time
   // (monotonic across resets)
