@@ -1,4 +1,4 @@
-#!/usr/bin/env python3
+#!/usr/bin/python3
 """rostest of tensegrity_sim's actions on the tower (sim_actions.test).
 
 Waits are generous bounds that only guard against hangs: no outcome depends on the machine's speed. The
@@ -108,7 +108,18 @@ class TestSimActions(unittest.TestCase):
         self.assertTrue(res.cancelled, res.message)
         self.assertFalse(res.stopped_by_time_limit, res.message)
         self.assertNotEqual(res.status, PlanFoldingResult.EXACT_SOLUTION)
-        print("[ measured ] cancelled plan: %s after %.2f s (%s)" % (res.status, res.planning_time, res.message))
+        # the last feedback, sent with the answer, describes the path returned (its end; +inf without one)
+        self.assertTrue(wait_for(lambda: feedback.all()[-1].phase == "done", 60))
+        last = feedback.all()[-1]
+        if res.trajectory.points:
+            self.assertEqual(last.best_height, res.final_height)
+        else:
+            self.assertEqual(last.best_height, float("inf"))
+        self.assertEqual(last.equilibrium_solves, res.equilibrium_solves)
+        before = [m.best_height for m in feedback.all() if m.phase != "done"]
+        print("[ measured ] cancelled plan: %s after %.2f s, final height %.4f m, best height in the feedback before "
+              "the answer %.4f m (%s)" % (res.status, res.planning_time, res.final_height, before[-1] if before else
+                                          float("inf"), res.message))
 
     def test_3_a_trajectory_is_followed_with_feedback(self):
         start = self.values(PULLS)
