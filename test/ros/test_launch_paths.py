@@ -1,4 +1,4 @@
-#!/usr/bin/env python3
+#!/usr/bin/python3
 """rostest of the launch files' paths (launch_paths.test): roslaunch started in a temporary folder takes
 relative bag and scene paths from there (not from $ROS_HOME, where its nodes run) and fails with exit
 status 1 and a message on a bag that does not exist or a bag folder that does not exist; sim.launch

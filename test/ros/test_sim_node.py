@@ -1,4 +1,4 @@
-#!/usr/bin/env python3
+#!/usr/bin/python3
 """rostest of tensegrity_sim on the prism scene (sim_node.test): frames, topics, rate, services,
 actuation ramps, trajectories, bad commands, bad scenes and parameters, solver failure.
 

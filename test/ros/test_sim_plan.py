@@ -1,4 +1,4 @@
-#!/usr/bin/env python3
+#!/usr/bin/python3
 """rostest of tensegrity_sim's ~plan_folding on the tower (sim_plan.test).
 
 The node publishes /clock, so stamps are simulated time: the settling after the fold is measured in

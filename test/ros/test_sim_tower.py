@@ -1,4 +1,4 @@
-#!/usr/bin/env python3
+#!/usr/bin/python3
 """rostest of tensegrity_sim on the tower (sim_tower.test): folding by an actuation command produces
 contacts; a bag recorded from the node plays back with tf and contacts intact.
 
