@@ -22,10 +22,15 @@ constexpr double kEnergyRelease = 1.01;
 }  // namespace
 
 AdaptiveStepper::AdaptiveStepper(DynamicsSolver& solver, const SolverOptions& options)
-  : solver_(solver), options_(options), h_(std::clamp(options.dt, options.dt_min, options.dt_max))
+  : solver_(solver)
+  , options_(options)
+  , h_(std::clamp(options.dt, options.dt_min, options.dt_max))
+  , contacts_(std::make_unique<ContactScan>(solver.system().model()))
 {
   solver_.setVariableSteps(true);
 }
+
+AdaptiveStepper::~AdaptiveStepper() = default;
 
 const EnergyPoint& AdaptiveStepper::startEnergy(const State& s)
 {
@@ -33,10 +38,7 @@ const EnergyPoint& AdaptiveStepper::startEnergy(const State& s)
   {
     const std::vector<ContactPairState>* contacts = solver_.contactsAt(s);
     if (!contacts)
-    {
-      found_contacts_ = activeContacts(solver_.system().model(), s);
-      contacts = &found_contacts_;
-    }
+      contacts = &contacts_->active(s);
     start_energy_ = energyPoint(solver_.system(), s, *contacts);
     in_contact_ = !contacts->empty();
     start_energy_t_ = s.t;
@@ -112,10 +114,7 @@ Summary AdaptiveStepper::advanceTo(State& s, double t_end, const ActuationLaw& l
     // within it): halved, as a failed step
     const std::vector<ContactPairState>* contacts = solver_.contactsAt(trial_);
     if (!contacts)
-    {
-      found_contacts_ = activeContacts(solver_.system().model(), trial_);
-      contacts = &found_contacts_;
-    }
+      contacts = &contacts_->active(trial_);
     const EnergyPoint end_energy = energyPoint(solver_.system(), trial_, *contacts);
     const StepEnergyCheck energy =
         checkStepEnergy(startEnergy(s), end_energy, h, options_.energy_tolerance,

@@ -7,6 +7,7 @@
 
 #include <functional>
 #include <limits>
+#include <memory>
 
 #include "active_tensegrity/core/dynamics.h"
 #include "active_tensegrity/core/energy.h"
@@ -27,11 +28,14 @@ struct AdaptiveStats
   double h_max = 0.0;
 };
 
+class ContactScan;
+
 class AdaptiveStepper
 {
 public:
   /// The first step is options.dt (clamped to [dt_min, dt_max]).
   AdaptiveStepper(DynamicsSolver& solver, const SolverOptions& options);
+  ~AdaptiveStepper();
 
   /// Advances `state` to t_end exactly (the last step is shortened to land on it) with the steps the
   /// error control allows; calls on_step after every accepted step. On failure (a step below dt_min
@@ -73,8 +77,8 @@ private:
   double start_energy_t_ = 0.0;
   bool start_energy_valid_ = false;
   StepEnergyCheck last_check_;
-  bool in_contact_ = false;                       // contacts active at the last accepted step's end
-  std::vector<ContactPairState> found_contacts_;  // contacts of a state the solver did not end a step in
+  bool in_contact_ = false;                // contacts active at the last accepted step's end
+  std::unique_ptr<ContactScan> contacts_;  // the contacts of a state the solver did not end a step in (analysis.h)
   double energy_bound_ = std::numeric_limits<double>::infinity();  // steps gaining energy were refused above it (s)
 };
 
