@@ -25,6 +25,7 @@ AdaptiveStepper::AdaptiveStepper(DynamicsSolver& solver, const SolverOptions& op
   : solver_(solver)
   , options_(options)
   , h_(std::clamp(options.dt, options.dt_min, options.dt_max))
+  , energy_meter_(solver.system())
   , contacts_(std::make_unique<ContactScan>(solver.system().model()))
 {
   solver_.setVariableSteps(true);
@@ -39,7 +40,7 @@ const EnergyPoint& AdaptiveStepper::startEnergy(const State& s)
     const std::vector<ContactPairState>* contacts = solver_.contactsAt(s);
     if (!contacts)
       contacts = &contacts_->active(s);
-    start_energy_ = energyPoint(solver_.system(), s, *contacts);
+    start_energy_ = energy_meter_.at(s, *contacts);
     in_contact_ = !contacts->empty();
     start_energy_t_ = s.t;
     start_energy_valid_ = true;
@@ -115,7 +116,7 @@ Summary AdaptiveStepper::advanceTo(State& s, double t_end, const ActuationLaw& l
     const std::vector<ContactPairState>* contacts = solver_.contactsAt(trial_);
     if (!contacts)
       contacts = &contacts_->active(trial_);
-    const EnergyPoint end_energy = energyPoint(solver_.system(), trial_, *contacts);
+    const EnergyPoint end_energy = energy_meter_.at(trial_, *contacts);
     const StepEnergyCheck energy =
         checkStepEnergy(startEnergy(s), end_energy, h, options_.energy_tolerance,
                         stepEnergyRoundoff(solver_.system(), s.q, h), in_contact_ || !contacts->empty());

@@ -920,6 +920,7 @@ RunResult run(const Model& model, const std::function<void(const State&)>& user_
       double step_start = state.t;
       bool touched = false;  // contacts active at the last step's end
       std::vector<ContactPairState> found_contacts;
+      EnergyMeter energy(solver.system());
       for (long k = 1; k <= n_steps; ++k)
       {
         const double t_target = k == n_steps ? an.duration : std::min(an.duration, k * dt);
@@ -945,7 +946,7 @@ RunResult run(const Model& model, const std::function<void(const State&)>& user_
             found_contacts = activeContacts(model, state);
             contacts = &found_contacts;
           }
-          const EnergyPoint end = energyPoint(solver.system(), state, *contacts);
+          const EnergyPoint end = energy.at(state, *contacts);
           const bool in_contact = touched || !contacts->empty();
           result.energy.add(end, h, state.t,
                             checkStepEnergy(result.energy.now, end, h, model.solver.energy_tolerance,

@@ -38,21 +38,35 @@ double EnergyPoint::scale() const
   return std::abs(kinetic) + std::abs(elastic) + std::abs(gravity);
 }
 
-EnergyPoint energyPoint(const System& system, const State& state, const std::vector<ContactPairState>& contacts)
+EnergyMeter::EnergyMeter(const System& system) : system_(system)
 {
   const Model& model = system.model();
+  for (const Cable& c : model.cables)
+  {
+    first_.push_back(static_cast<int>(slots_.size()));
+    for (const PointRef& p : c.points)
+      slots_.push_back(pointSlot(model, p));
+  }
+}
+
+EnergyPoint EnergyMeter::at(const State& state, const std::vector<ContactPairState>& contacts)
+{
+  const Model& model = system_.model();
   const Eigen::VectorXd& q = state.q;
   EnergyPoint e;
-  e.kinetic = system.kineticEnergy(q, state.qd);
+  e.kinetic = system_.kineticEnergy(q, state.qd);
   if (model.gravity_enabled)
     for (const Body& b : model.bodies)
       e.gravity -= b.mass * model.gravity.dot(q.segment<3>(b.offset) - model.q0.segment<3>(b.offset));
   for (const PointLoad& load : model.loads)
-    e.gravity -= system.loadFactor() *
+    e.gravity -= system_.loadFactor() *
                  load.force.dot(pointPosition(model, load.point, q) - pointPosition(model, load.point, model.q0));
-  for (const Cable& c : model.cables)
+  if (!model.cables.empty())
+    frames_.update(model, q, state.qd);
+  for (size_t k = 0; k < model.cables.size(); ++k)
   {
-    const CableState s = evaluateCable(model, c, q, state.qd, state.u, true, nullptr, nullptr, 0.0, 0.0);
+    const Cable& c = model.cables[k];
+    const CableState s = evaluateCable(c, slots_.data() + first_[k], frames_, q, state.qd, state.u, true);
     e.elastic += cablePotentialEnergy(c, s);
     // the damper's power c (l_dot + s_dot)^2 = T_d^2 / c; the actuator pulls against the whole tension
     if (c.damping > 0.0 && !s.slack)
@@ -73,13 +87,18 @@ EnergyPoint energyPoint(const System& system, const State& state, const std::vec
   }
   // driven constraint rows: the constraint forces -Phi_q^T lambda do work lambda^T Phi_t = -lambda^T rhs, rhs the
   // right-hand side of Phi_q qd = -Phi_t (zero on every undriven row)
-  if (!model.actuators.empty() && state.lambda.size() >= system.nLambda())
+  if (!model.actuators.empty() && state.lambda.size() >= system_.nLambda())
   {
-    thread_local Eigen::VectorXd rhs;
-    system.velocityRhs(state.u, rhs);
-    e.actuator_power -= state.lambda.head(system.nLambda()).dot(rhs);
+    system_.velocityRhs(state.u, rhs_);
+    e.actuator_power -= state.lambda.head(system_.nLambda()).dot(rhs_);
   }
   return e;
+}
+
+EnergyPoint energyPoint(const System& system, const State& state, const std::vector<ContactPairState>& contacts)
+{
+  EnergyMeter meter(system);
+  return meter.at(state, contacts);
 }
 
 double stepNumericalDissipation(const EnergyPoint& a, const EnergyPoint& b, double h)

@@ -77,7 +77,8 @@ private:
   double start_energy_t_ = 0.0;
   bool start_energy_valid_ = false;
   StepEnergyCheck last_check_;
-  bool in_contact_ = false;                // contacts active at the last accepted step's end
+  bool in_contact_ = false;  // contacts active at the last accepted step's end
+  EnergyMeter energy_meter_;
   std::unique_ptr<ContactScan> contacts_;  // the contacts of a state the solver did not end a step in (analysis.h)
   double energy_bound_ = std::numeric_limits<double>::infinity();  // steps gaining energy were refused above it (s)
 };
