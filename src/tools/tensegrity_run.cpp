@@ -139,7 +139,10 @@ std::string structureYaml(const at::StructureReport& r, const std::string& inden
   y << indent << "checked: " << (r.checked ? "true" : "false") << "\n";
   if (!r.note.empty())
     y << indent << "note: " << yamlString(r.note) << "\n";
-  y << indent << "coordinates: " << r.coordinates << "\n" << indent << "members: " << r.members << "\n";
+  y << indent << "coordinates: " << r.coordinates << "\n"
+    << indent << "members: " << r.members << "\n"
+    << indent << "struts: " << r.struts << "\n"
+    << indent << "tension_members: " << r.tension_members << "\n";
   if (!r.checked)
     return y.str();
   y << indent << "free_coordinates: " << r.free_coordinates << "\n"
@@ -402,7 +405,7 @@ int main(int argc, char** argv)
   const auto track_peaks = [&](const at::State& s, const std::vector<at::ContactPairState>* contacts)
   { peaks.add(s, contacts); };
 
-  at::State last;
+  bool started = false;  // the first output row is the start: its values count for the peaks too
   const auto wall_start = std::chrono::steady_clock::now();
   auto last_report = wall_start;
   bool reported = false;
@@ -410,6 +413,11 @@ int main(int argc, char** argv)
       model,
       [&](const at::State& s)
       {
+        if (!started)
+        {
+          peaks.add(s);
+          started = true;
+        }
         const std::vector<double> row = at::csvRow(model, s);
         for (size_t i = 0; i < row.size(); ++i)
           csv << (i ? "," : "") << csvNumber(row[i]);

@@ -210,8 +210,9 @@ TEST(TensegrityRun, CheckPrintsTheDiagnosticsAndRunsNothing)
   // mechanism stiffened by the prestress (test_structure_check derives the counts)
   const Result r = run(scene("prism_pinned.yaml") + " --check");
   ASSERT_EQ(r.code, 0) << r.output;
-  for (const char* line : { "checked: true", "free_coordinates: 6", "self_stress_states: 4", "mechanisms: 1",
-                            "rigid_body_modes: 0", "prestress_stable: true", "slack_cables: []" })
+  for (const char* line : { "checked: true", "members: 12", "struts: 3", "tension_members: 9", "free_coordinates: 6",
+                            "self_stress_states: 4", "mechanisms: 1", "rigid_body_modes: 0", "prestress_stable: true",
+                            "slack_cables: []" })
     EXPECT_NE(r.output.find(std::string("\n") + line + "\n"), std::string::npos) << line << "\n" << r.output;
   EXPECT_EQ(r.output.find("status:"), std::string::npos) << "an analysis ran: " << r.output;
   // overrides apply; the unstressed tower lists its slack elements
