@@ -256,6 +256,9 @@ int main(int argc, char** argv)
       {
         if (i + 1 >= argc)
           throw std::invalid_argument(std::string(name) + " needs a value");
+        // (an empty name opened nothing and wrote nothing, and the run said nothing of it)
+        if (argv[i + 1][0] == '\0')
+          throw std::invalid_argument(std::string(name) + " needs a value, got an empty one ('')");
         return argv[++i];
       };
       if (arg == "-h" || arg == "--help")

@@ -98,6 +98,14 @@ TEST(TensegrityRun, BadArgumentsGiveUsage)
   EXPECT_EQ(run("").code, 2);
   EXPECT_EQ(run(scene("quadruplex.yaml") + " --frobnicate").code, 2);
   EXPECT_EQ(run(scene("quadruplex.yaml") + " --set").code, 2);
+  // an empty file name is refused by its option, not run without output
+  for (const char* option : { "--out", "--summary", "--contacts", "--nodes", "--members", "--vtk", "--bag", "--modes" })
+  {
+    const Result empty = run(scene("quadruplex.yaml") + " " + option + " ''");
+    EXPECT_EQ(empty.code, 2) << option << ": " << empty.output;
+    EXPECT_NE(empty.output.find(std::string(option) + " needs a value, got an empty one"), std::string::npos)
+        << empty.output;
+  }
   const Result missing = run("/nonexistent/scene.yaml");
   EXPECT_EQ(missing.code, 1);
   EXPECT_NE(missing.output.find("/nonexistent/scene.yaml"), std::string::npos) << missing.output;
