@@ -1,4 +1,4 @@
-#!/usr/bin/env python3
+#!/usr/bin/python3
 """Reads a tensegrity_run --vtk directory back with Python's own XML parser, checks that every file is
 well formed VTK PolyData (counts, offsets, connectivity and array lengths agree) and prints, per step of
 the collection, one JSON line: t, the points, and per cell its kind, force, radius, member and points;
