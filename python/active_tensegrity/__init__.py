@@ -163,8 +163,9 @@ def _model(scene, overrides, extra=()):
 def check(scene, overrides=None):
     """The structural diagnostics of a scene's initial state, as tensegrity_run --check prints them: a dict of
     self_stress_states, mechanisms, rigid_body_modes, prestress_stable, the stiffness eigenvalues, slack_cables,
-    equilibrium_residual (N) ... (docs/physics.md). A model above the size the check handles gives
-    checked=False and a note."""
+    equilibrium_residual (N), members (every member: struts + tension_members), struts, tension_members (cables
+    and springs, the equilibrium matrix's columns) ... (docs/physics.md). A model above the size the check
+    handles gives checked=False and a note."""
     return _core.check(_model(scene, overrides))
 
 
@@ -177,8 +178,9 @@ def find_form(scene, mode="free", tension=None, force_density=None, supports="fi
 
     Returns a dict: scene (the written scene, YAML text: load() takes it), node_names, positions (nodes x 3, m),
     members (name, family, strut, tension, length), iterations, residual (N), max_move (m), scale,
-    self_stress_states, notes, check (the written scene's own check). A refused scene raises SceneError; a form
-    that cannot be found raises FormFindingError with the reason."""
+    self_stress_states, notes, changes (the parameters of the scene's layout the form changed, one text each,
+    tensegrity_formfind's warnings), check (the written scene's own check). A refused scene raises SceneError;
+    a form that cannot be found raises FormFindingError with the reason."""
     def choice(what, value, a, b):
         if not isinstance(value, str) or value not in (a, b):
             raise ValueError("find_form: %s must be %r or %r, got %r" % (what, a, b, value))
@@ -218,8 +220,13 @@ def planners():
 
 
 def plan_folding(scene, **request):
-    """The collision-aware folding planner (docs/planning.md). scene: a Model, what load() takes, or a
-    Simulation (the plan starts from its live state's nearest equilibrium; else from the scene's start).
+    """The collision-aware folding planner (docs/planning.md). scene: a Model, what load() takes (the plan starts
+    from the scene's start), or a Simulation: planned as the ROS node plans, from its live state under the
+    actuation in force. The trajectory starts at the chosen actuators' values and rates; when they move, it first
+    brakes them at max_accelerations (stop_duration s), and the path starts at the equilibrium nearest to where
+    they stop. The dynamic verification simulates the trajectory from the live state itself (positions,
+    velocities, contact memory), the other actuators following their commands: Simulation.follow(plan) then runs
+    it.
 
     request: the planner's fields by name: actuators (names), target_height (m) or target_values (one per
     actuator), min_clearance (m), allow_contact, max_contact_force (N), max_cable_stress (Pa), max_speeds,
@@ -228,11 +235,12 @@ def plan_folding(scene, **request):
     blend_tolerance (m). An unknown name raises ValueError; a request the planner refuses comes back with
     status "invalid_request" and the reason.
 
-    Returns a dict: status, message, names; waypoints (points x actuators); the trajectory as times (s) and
-    positions, velocities, accelerations (times x actuators); duration, rest_to_rest_duration, min_gap,
-    peak_contact_force, final_height, equilibrium_solves, planning_time, stopped_by_time_limit; with
-    verify_dynamics: dynamics_verified, dynamics_within_limits, dynamic_peak_contact_force,
-    dynamic_peak_bending_stress, dynamic_min_gap, settle_duration, time_scale."""
+    Returns a dict: status, message, names; waypoints (points x actuators); the trajectory as times (s from the
+    start) and positions, velocities, accelerations (times x actuators); duration, rest_to_rest_duration (both
+    with stop_duration), stop_duration, min_gap, peak_contact_force, final_height, equilibrium_solves,
+    planning_time, stopped_by_time_limit, cancelled; with verify_dynamics: dynamics_verified,
+    dynamics_within_limits, dynamic_peak_contact_force, dynamic_peak_bending_stress, dynamic_min_gap,
+    settle_duration, time_scale, dynamic_runs."""
     target = scene._sim if isinstance(scene, Simulation) else _model(scene, None)
     return _core.plan_folding(target, **request)
 
@@ -257,9 +265,12 @@ class Result:
       force on a (x, y, z).
     summary: tensegrity_run's summary as a dict (but its scene): name, analysis, status, message, output_steps,
       solver_steps, newton_iterations, step_cuts, wall_time, (dynamic runs) duration, real_time_factor,
-      adaptive_steps, warnings, time_breakdown, final ({column: value} of the run's last state), and
-      peaks: {column: {"value", "t"}}, the largest magnitude over every step (not only the output steps) of
-      actuation_force, max_normal_force, max_friction_force, max_strut_bending_stress, max_cable_stress.
+      adaptive_steps, energy (the energy account, J: start and end {kinetic, elastic, gravity, total},
+      actuator_work, damping_dissipation, contact_dissipation, numerical_dissipation, largest_step_gain
+      {"value", "t"}, gaining_steps, contact_loss_steps, contact_unresolved), warnings, time_breakdown, final
+      ({column: value} of the run's last state), and
+      peaks: {column: {"value", "t"}}, the largest magnitude over the start and every step (not only the output
+      steps) of actuation_force, max_normal_force, max_friction_force, max_strut_bending_stress, max_cable_stress.
     extremes: {column: {"max": {"value", "t"}, "min": {"value", "t"}, "states": n}} of the columns run() was
       asked to track: the largest and smallest value over the start and every time or load step, and the time
       (or path parameter) of the first state that reached it; NaN when the column is NaN at any state.
@@ -320,8 +331,8 @@ class Simulation:
         sim.advance(seconds=1.0, callback=lambda s: print(s.t, s.height), every=0.01)
 
     State (read at any time): t (s), steps, height (m), actuation ({name: value}), row (the CSV row as a dict),
-    nodes (array nodes x 3, m). A step that fails raises RuntimeError with the solver's status; the simulation
-    keeps its last good state.
+    nodes (array nodes x 3, m). plan_folding(sim, ...) plans from the live state; follow(plan) runs the plan.
+    A step that fails raises RuntimeError with the solver's status; the simulation keeps its last good state.
     """
 
     def __init__(self, scene, overrides=None):
@@ -332,6 +343,20 @@ class Simulation:
         if name in ("t", "steps", "dt", "height", "actuation", "row", "nodes"):
             return getattr(self._sim, name)
         raise AttributeError(name)
+
+    def follow(self, plan):
+        """Runs a trajectory from now, as the node's ~follow_trajectory: plan is plan_folding's answer (or a dict
+        of names, times (s from now), positions and optionally velocities, times x actuators). The named actuators
+        follow it, the others their commands; a trajectory the controller refuses (times not increasing, a value
+        out of range, an unknown name) raises ValueError and changes nothing."""
+        if not isinstance(plan, dict) or not all(k in plan for k in ("names", "times", "positions")):
+            raise TypeError("follow: expected a plan (a dict of names, times, positions, velocities), got %r"
+                            % (plan,))
+
+        def rows(values):
+            return [[float(x) for x in row] for row in values]
+        self._sim.follow(list(plan["names"]), [float(t) for t in plan["times"]], rows(plan["positions"]),
+                         rows(plan.get("velocities", [])))
 
     def set_targets(self, targets, speed=0.0, accel=0.0):
         """Ramps the named actuators to their targets ({name: value}, m) from now, at most `speed` (m/s) and

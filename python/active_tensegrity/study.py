@@ -61,15 +61,19 @@ SAVED_FILES = {"table": ("--out", ".csv"), "summary": ("--summary", ".yaml"),
 STUDY_KEYS = ["scene", "set", "grid", "points", "collect", "save", "plots"]
 # a run's summary (tensegrity_run's, as run() gives it): the fields collect.summary takes, and the mappings it
 # takes an entry of by a dotted name (peaks.max_normal_force.value): each mapping's entries, then the entries'
-# fields ([] for a number)
+# fields ([] for a number; a dict {entry: fields} where they differ, an entry not in it a number)
 SUMMARY_FIELDS = ["name", "scene", "analysis", "status", "message", "output_steps", "solver_steps",
                   "newton_iterations", "step_cuts", "wall_time", "duration", "duration_note", "real_time_factor",
                   "warnings"]
 SUMMARY_MAPPINGS = {
     "peaks": (["actuation_force", "max_normal_force", "max_friction_force", "max_strut_bending_stress",
                "max_cable_stress"], ["value", "t"]),
-    "adaptive_steps": (["accepted", "rejected_error", "rejected_onset", "rejected_solver", "at_min_step", "smallest",
-                        "largest"], []),
+    "adaptive_steps": (["accepted", "rejected_error", "rejected_onset", "rejected_solver", "rejected_energy",
+                        "at_min_step", "smallest", "largest"], []),
+    "energy": (["start", "end", "actuator_work", "damping_dissipation", "contact_dissipation", "numerical_dissipation",
+                "largest_step_gain", "gaining_steps", "contact_loss_steps", "contact_unresolved"],
+               {"start": ["kinetic", "elastic", "gravity", "total"], "end": ["kinetic", "elastic", "gravity", "total"],
+                "largest_step_gain": ["value", "t"]}),
     "time_breakdown": (["forces", "contact", "constraints", "factorization", "solve", "solver_other", "callbacks",
                         "rest"], ["seconds", "share"]),
 }
@@ -281,7 +285,8 @@ def _check_summary_field(field, where):
         return
     if parts[0] in SUMMARY_MAPPINGS:
         entries, fields = SUMMARY_MAPPINGS[parts[0]]
-        example = ".".join([parts[0], entries[0]] + fields[:1])
+        example = ".".join([parts[0], entries[0]] + (fields.get(entries[0], []) if isinstance(fields, dict)
+                                                     else fields)[:1])
         if len(parts) == 1:
             raise StudyError("%s: %r is a mapping, not one figure: name an entry of it (as %s)%s"
                              % (where, field, example,
@@ -289,6 +294,10 @@ def _check_summary_field(field, where):
         if parts[1] not in entries:
             raise StudyError("%s: %r: %s has no entry %r (its entries: %s)"
                              % (where, field, parts[0], parts[1], ", ".join(entries)))
+        if isinstance(fields, dict):
+            fields = fields.get(parts[1], [])
+            if fields:
+                example = ".".join(parts[:2] + fields[:1])
         if (len(parts) == 2 and fields) or (len(parts) > 2 and (len(parts) > 3 or parts[2] not in fields)):
             raise StudyError("%s: %r: name one figure, as %s" % (where, field, example))
         return

@@ -16,6 +16,7 @@
 #include "active_tensegrity/core/actuation_control.h"
 #include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/dynamics.h"
+#include "active_tensegrity/core/energy.h"
 #include "active_tensegrity/core/form_finding.h"
 #include "active_tensegrity/core/kinematics.h"
 #include "active_tensegrity/core/modal.h"
@@ -313,6 +314,37 @@ private:
   std::vector<double> row_, member_row_;
 };
 
+/// kinetic, elastic, gravity and total energy of a state (J), as tensegrity_run's summary writes them
+py::dict energyPoint(const at::EnergyPoint& p)
+{
+  py::dict d;
+  d["kinetic"] = p.kinetic;
+  d["elastic"] = p.elastic;
+  d["gravity"] = p.gravity;
+  d["total"] = p.total();
+  return d;
+}
+
+/// A dynamic run's energy account with the keys and nesting of tensegrity_run's summary (`energy:`)
+py::dict energy(const at::EnergyAccount& e)
+{
+  py::dict d;
+  d["start"] = energyPoint(e.start);
+  d["end"] = energyPoint(e.now);
+  d["actuator_work"] = e.actuator_work;
+  d["damping_dissipation"] = e.damping_dissipation;
+  d["contact_dissipation"] = e.contact_dissipation;
+  d["numerical_dissipation"] = e.numerical_dissipation;
+  py::dict gain;
+  gain["value"] = e.largest_step_gain;
+  gain["t"] = e.largest_gain_t;
+  d["largest_step_gain"] = gain;
+  d["gaining_steps"] = e.gaining_steps;
+  d["contact_loss_steps"] = e.contact_loss_steps;
+  d["contact_unresolved"] = e.contact_unresolved_energy;
+  return d;
+}
+
 py::dict run(const at::Model& model, const std::vector<std::string>& extremes)
 {
   if (model.analysis.type == at::AnalysisType::kModal)
@@ -332,6 +364,8 @@ py::dict run(const at::Model& model, const std::vector<std::string>& extremes)
         model,
         [&](const at::State& s)
         {
+          if (c.steps == 0)  // the start (the first output row) counts for the peaks, as tensegrity_run counts it
+            peaks.add(s);
           const std::vector<double> row = at::csvRow(model, s);
           c.rows.insert(c.rows.end(), row.begin(), row.end());
           appendNodePositions(model, s.q, c.nodes);
@@ -401,11 +435,13 @@ py::dict run(const at::Model& model, const std::vector<std::string>& extremes)
       adaptive["rejected_error"] = a.rejected_error;
       adaptive["rejected_onset"] = a.rejected_onset;
       adaptive["rejected_solver"] = a.rejected_solver;
+      adaptive["rejected_energy"] = a.rejected_energy;
       adaptive["at_min_step"] = a.at_min_step;
       adaptive["smallest"] = a.h_min;
       adaptive["largest"] = a.h_max;
       summary["adaptive_steps"] = adaptive;
     }
+    summary["energy"] = energy(result.energy);
   }
   summary["warnings"] = result.summary.warnings;
   py::dict breakdown;
@@ -442,6 +478,8 @@ py::dict report(const at::StructureReport& r)
   d["coordinates"] = r.coordinates;
   d["free_coordinates"] = r.free_coordinates;
   d["members"] = r.members;
+  d["struts"] = r.struts;
+  d["tension_members"] = r.tension_members;
   d["equilibrium_matrix_rank"] = r.rank;
   d["self_stress_states"] = r.self_stress_states;
   d["mechanisms"] = r.mechanisms;
@@ -567,8 +605,18 @@ py::dict findForm(const std::string& yaml, const std::string& name, const std::s
   d["scale"] = r.scale;
   d["self_stress_states"] = r.self_stress_states;
   d["notes"] = r.notes;
+  d["changes"] = r.changes;
   d["check"] = check;
   return d;
+}
+
+/// `model` as a dynamic simulation reads it: analysis.type dynamic, so that the contact forces of its rows are
+/// those the solver integrates (with the contacts' damping and memory), not the quasi-static ones of a scene
+/// whose analysis is static
+at::Model dynamicModel(at::Model model)
+{
+  model.analysis.type = at::AnalysisType::kDynamic;
+  return model;
 }
 
 bool finite(const at::State& s)
@@ -582,7 +630,7 @@ class Simulation
 {
 public:
   explicit Simulation(at::Model model)
-    : model_(std::move(model))
+    : model_(dynamicModel(std::move(model)))
     , solver_(model_, model_.solver)
     , controller_(model_, at::initialState(model_).u)
     , state_(at::initialState(model_))
@@ -641,9 +689,23 @@ public:
       throw py::value_error("set_targets: " + err);
   }
 
+  /// Follows timed points from now (ActuationController::setTrajectory: the node's ~follow_trajectory): the
+  /// named actuators go through positions[k] (and velocities[k]) at t + times[k]; the others keep their law.
+  void follow(const std::vector<std::string>& names, const std::vector<double>& times,
+              const std::vector<std::vector<double>>& positions, const std::vector<std::vector<double>>& velocities)
+  {
+    const std::string err = controller_.setTrajectory(state_.t, names, times, positions, velocities);
+    if (!err.empty())
+      throw py::value_error("follow: " + err);
+  }
+
   const at::Model& model() const
   {
     return model_;
+  }
+  const at::ActuationController& controller() const
+  {
+    return controller_;
   }
   const at::State& state() const
   {
@@ -755,9 +817,11 @@ void setRequestField(ap::PlanRequest& req, const std::string& key, const py::han
     throw py::value_error("plan_folding: unknown argument '" + key.substr(0, 200) + "'");
 }
 
-/// The folding planner from a start state (the scene's initial state, or a Simulation's live state: its
-/// nearest equilibrium), the request from keyword arguments named as PlanRequest's fields.
-py::dict plan(const at::Model& model, const at::State* live, const py::dict& args)
+/// The folding planner, the request from keyword arguments named as PlanRequest's fields. Without `live`, from
+/// the scene's initial state (its equilibrium). With it, as the node plans: from a Simulation's live state
+/// (a copy, with a copy of its controller, `law`), the path from the equilibrium nearest to where the actuators
+/// come to rest, verified from the live state itself (positions, velocities, contact memory) under that law.
+py::dict plan(const at::Model& model, const at::State* live, const at::ActuationController* law, const py::dict& args)
 {
   ap::PlanRequest req;
   for (const auto& [k, v] : args)
@@ -775,10 +839,17 @@ py::dict plan(const at::Model& model, const at::State* live, const py::dict& arg
   }
   ap::PlanResult r;
   std::string start_error;
+  if (live)
+  {
+    req.relax_start = true;
+    const py::gil_scoped_release release;
+    r = ap::planFolding(model, *live, req, {}, law);
+  }
+  else
   {
     const py::gil_scoped_release release;
     at::State start;
-    start_error = ap::startEquilibrium(model, live ? *live : at::initialState(model), start);
+    start_error = ap::startEquilibrium(model, at::initialState(model), start);
     if (start_error.empty())
       r = ap::planFolding(model, start, req);
   }
@@ -801,12 +872,14 @@ py::dict plan(const at::Model& model, const at::State* live, const py::dict& arg
   d["accelerations"] = rows(r.accelerations, n);
   d["duration"] = r.duration;
   d["rest_to_rest_duration"] = r.rest_to_rest_duration;
+  d["stop_duration"] = r.stop_duration;
   d["min_gap"] = r.min_gap;
   d["peak_contact_force"] = r.peak_contact_force;
   d["final_height"] = r.final_height;
   d["equilibrium_solves"] = r.equilibrium_solves;
   d["planning_time"] = r.planning_time;
   d["stopped_by_time_limit"] = r.stopped_by_time_limit;
+  d["cancelled"] = r.cancelled;
   d["dynamics_verified"] = r.dynamics_verified;
   d["dynamics_within_limits"] = r.dynamics_within_limits;
   d["dynamic_peak_contact_force"] = r.dynamic_peak_contact_force;
@@ -814,6 +887,7 @@ py::dict plan(const at::Model& model, const at::State* live, const py::dict& arg
   d["dynamic_min_gap"] = r.dynamic_min_gap;
   d["settle_duration"] = r.settle_duration;
   d["time_scale"] = r.time_scale;
+  d["dynamic_runs"] = r.dynamic_runs;
   return d;
 }
 }  // namespace
@@ -880,6 +954,8 @@ PYBIND11_MODULE(_core, m)
           [](py::object self, long steps, const py::object& callback, long every)
           { return self.cast<Simulation&>().advance(steps, self, callback, every); },
           py::arg("steps"), py::arg("callback") = py::none(), py::arg("every") = 1)
+      .def("follow", &Simulation::follow, py::arg("names"), py::arg("times"), py::arg("positions"),
+           py::arg("velocities") = std::vector<std::vector<double>>{})
       .def("set_targets", &Simulation::setTargets, py::arg("names"), py::arg("targets"),
            py::arg("speeds") = std::vector<double>{}, py::arg("accels") = std::vector<double>{}, py::arg("speed") = 0.0,
            py::arg("accel") = 0.0)
@@ -940,12 +1016,17 @@ PYBIND11_MODULE(_core, m)
       {
         if (py::isinstance<Simulation>(scene))
         {
+          // copies: the plan does not read the simulation while it plans with the interpreter's lock released
           const Simulation& sim = scene.cast<const Simulation&>();
-          return plan(sim.model(), &sim.state(), args);
+          const at::State live = sim.state();
+          const at::ActuationController law = sim.controller();
+          return plan(sim.model(), &live, &law, args);
         }
-        return plan(scene.cast<const at::Model&>(), nullptr, args);
+        return plan(scene.cast<const at::Model&>(), nullptr, nullptr, args);
       },
-      py::arg("scene"), "The folding planner (docs/planning.md) from a Model's initial state or a Simulation's state");
+      py::arg("scene"),
+      "The folding planner (docs/planning.md) from a Model's initial state, or from a Simulation's live state under "
+      "its actuation, as the node plans");
   m.def("planners", &ap::plannerNames, "The OMPL planners plan_folding accepts");
   m.def("run", &run, py::arg("model"), py::arg("extremes") = std::vector<std::string>{},
         "Runs the scene's analysis (static or dynamic); a dict of numpy arrays per output step, the summary, and "
