@@ -35,7 +35,8 @@ AdaptiveStepper::~AdaptiveStepper() = default;
 
 const EnergyPoint& AdaptiveStepper::startEnergy(const State& s)
 {
-  if (!start_energy_valid_ || start_energy_t_ != s.t)
+  // (kept only for the very state it was formed at: a caller may put another state in, as the node's reset does)
+  if (!start_energy_valid_ || start_energy_t_ != s.t || start_energy_q_ != s.q)
   {
     const std::vector<ContactPairState>* contacts = solver_.contactsAt(s);
     if (!contacts)
@@ -43,6 +44,7 @@ const EnergyPoint& AdaptiveStepper::startEnergy(const State& s)
     start_energy_ = energy_meter_.at(s, *contacts);
     in_contact_ = !contacts->empty();
     start_energy_t_ = s.t;
+    start_energy_q_ = s.q;
     start_energy_valid_ = true;
   }
   return start_energy_;
@@ -112,7 +114,7 @@ Summary AdaptiveStepper::advanceTo(State& s, double t_end, const ActuationLaw& l
       continue;
     }
     // a step that gained energy no force accounts for did not resolve a stiff event (a contact or a cable going taut
-    // within it): halved, as a failed step
+    // within it), one that lost it in contact damped an impact numerically: halved, as a failed step
     const std::vector<ContactPairState>* contacts = solver_.contactsAt(trial_);
     if (!contacts)
       contacts = &contacts_->active(trial_);
@@ -133,6 +135,7 @@ Summary AdaptiveStepper::advanceTo(State& s, double t_end, const ActuationLaw& l
     std::swap(s, trial_);
     start_energy_ = end_energy;
     start_energy_t_ = s.t;
+    start_energy_q_ = s.q;
     start_energy_valid_ = true;
     last_check_ = energy;
     in_contact_ = !contacts->empty();
