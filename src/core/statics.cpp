@@ -529,8 +529,12 @@ bool StaticSolver::factorizePath(const Eigen::VectorXd& q, const Eigen::VectorXd
 
 void StaticSolver::warnCriticalPoints(Summary& summary) const
 {
-  for (const CriticalPoint& c : critical_points_)
+  // one warning each for the first few; a path through a region of many (a mechanism's slack tower) gets one line
+  // for the rest
+  constexpr size_t kMaxWarnings = 5;
+  for (size_t i = 0; i < std::min(critical_points_.size(), kMaxWarnings); ++i)
   {
+    const CriticalPoint& c = critical_points_[i];
     std::ostringstream msg;
     msg << "a critical point (" << c.kind << ") was passed between path parameters " << c.previous_parameter << " and "
         << c.parameter
@@ -540,6 +544,13 @@ void StaticSolver::warnCriticalPoints(Summary& summary) const
       msg << " (reduced stiffness: eigenvalue nearest zero " << c.eigenvalue_before << " -> " << c.eigenvalue_after
           << " N/m, negative eigenvalues " << c.negative_before << " -> " << c.negative_after << ")";
     summary.warnings.push_back(msg.str());
+  }
+  if (critical_points_.size() > kMaxWarnings)
+  {
+    std::ostringstream more;
+    more << "and " << critical_points_.size() - kMaxWarnings << " more critical points between path parameters "
+         << critical_points_[kMaxWarnings].previous_parameter << " and " << critical_points_.back().parameter;
+    summary.warnings.push_back(more.str());
   }
 }
 
