@@ -749,6 +749,10 @@ int runSimNode()
   {
     params = loadSimParams(pnh);
     model = core::loadScene(params.scene, params.overrides);
+    // the node integrates the scene's dynamics whatever its analysis.type: the contacts evaluated outside the solver
+    // (a published state the solver did not end a step in, status rows) are the dynamic ones, damping and friction
+    // included
+    model.analysis.type = core::AnalysisType::kDynamic;
   }
   catch (const std::exception& e)
   {
