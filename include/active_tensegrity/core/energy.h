@@ -10,8 +10,6 @@
 
 namespace active_tensegrity::core
 {
-class System;
-
 /// The energy of one state (J) and the powers acting on it there (W).
 struct EnergyPoint
 {
