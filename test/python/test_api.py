@@ -12,6 +12,7 @@ import threading
 
 import numpy as np
 import pytest
+import yaml
 
 import active_tensegrity as at
 
@@ -307,8 +308,16 @@ def test_find_form_equals_tensegrity_formfind_and_the_closed_form():
         assert done.returncode == 0, done.stderr
         with open(form) as f:
             theirs = f.read()
+        report = yaml.safe_load(done.stdout)
         ours = at.find_form(start, tension={"rings": 80.0})
     assert ours["scene"] == theirs
+    # what the form changed of the layout (the twist among others) is what the tool reports and warns of
+    assert ours["changes"] == report.get("changes", [])
+    assert any("twist" in c for c in ours["changes"]), ours["changes"]
+    for c in ours["changes"]:
+        assert "tensegrity_formfind: warning: form-finding changed the " + c in done.stderr
+    # a form that keeps the layout changes nothing
+    assert at.find_form(ours["scene"], tension={"rings": 80.0})["changes"] == []
     # the class-1 prism's twist, 90 + 180 / n degrees (here turned the other way), between B1 and T1, to the
     # 1e-6 rad that test_form_finding asks of the core (an AVX2 build ends 2.8e-8 rad off, an AVX-512 one closer)
     p = dict(zip(ours["node_names"], ours["positions"]))

@@ -135,26 +135,6 @@ def test_the_modal_structure_report_counts_struts_and_tension_members():
     assert s["members"] == s["struts"] + s["tension_members"]
 
 
-def test_find_form_gives_the_changes_tensegrity_formfind_reports():
-    with tempfile.TemporaryDirectory() as tmp:
-        start, form = os.path.join(tmp, "start.yaml"), os.path.join(tmp, "form.yaml")
-        # a prism of 7 struts given a twist of -130 degrees: its form turns to -(90 + 180 / 7)
-        subprocess.run([tool("tensegrity_generate"), "prism", "--struts", "7", "--twist", "-130", "--out", start],
-                       check=True, capture_output=True, timeout=600)
-        done = subprocess.run([tool("tensegrity_formfind"), start, "--out", form, "--prestress", "rings=80"],
-                              capture_output=True, text=True, timeout=600)
-        assert done.returncode == 0, done.stderr
-        report = yaml.safe_load(done.stdout)
-        ours = at.find_form(start, tension={"rings": 80.0})
-    assert ours["changes"] == report.get("changes", [])
-    assert any("twist" in c for c in ours["changes"]), ours["changes"]
-    for c in ours["changes"]:
-        assert "tensegrity_formfind: warning: form-finding changed the " + c in done.stderr
-    # a form that keeps the layout changes nothing
-    again = at.find_form(ours["scene"], tension={"rings": 80.0})
-    assert again["changes"] == []
-
-
 PULLS = ["pull1", "pull2", "pull3", "pull4"]
 
 
