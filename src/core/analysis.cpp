@@ -227,16 +227,46 @@ double minimumGroundGap(const Model& model, const Eigen::VectorXd& q)
 {
   double gap = std::numeric_limits<double>::infinity();
   for (size_t i = 0; i < model.ground_contacts.size(); ++i)
-    gap = std::min(gap, contactGeometry(model, static_cast<int>(model.checked_pairs.size() + i), q).gap);
+    gap = std::min(gap, contactGeometry(model, model.pairSlots() + static_cast<int>(i), q).gap);
   return gap;
 }
 
 double minimumGap(const Model& model, const Eigen::VectorXd& q)
 {
+  // (a scene of up to about 90 struts: every pair, no broad phase to build)
+  constexpr int kDirectMostSlots = 4096;
+  if (model.pairSlots() > kDirectMostSlots)
+    return minimumGapNear(model, BroadPhase(model), q);
   double gap = std::numeric_limits<double>::infinity();
-  for (size_t i = 0; i < model.checked_pairs.size(); ++i)
-    gap = std::min(gap, contactGeometry(model, static_cast<int>(i), q).gap);
+  for (int i = 0; i < model.pairSlots(); ++i)
+    if (model.isCheckedPair(i))
+      gap = std::min(gap, contactGeometry(model, i, q).gap);
   return gap;
+}
+
+double minimumGapNear(const Model& model, const BroadPhase& broad, const Eigen::VectorXd& q)
+{
+  if (model.checkedPairCount() == 0)
+    return std::numeric_limits<double>::infinity();
+  if (!q.allFinite())
+    return std::numeric_limits<double>::quiet_NaN();
+  double margin = 0.0;  // the struts' mean radius to start with
+  for (int b : model.all_strut_pairs ? model.pair_struts : std::vector<int>{})
+    margin += model.bodies[b].radius() / static_cast<double>(model.pair_struts.size());
+  if (!(margin > 0.0))
+    margin = 1e-3;
+  std::vector<int> near;
+  for (;;)
+  {
+    broad.candidates(q, margin, near);
+    double gap = std::numeric_limits<double>::infinity();
+    for (int i : near)
+      gap = std::min(gap, contactGeometry(model, i, q).gap);
+    // every pair left out is more than 2 margin apart; all pairs in: the minimum of them all
+    if (gap <= 2.0 * margin || static_cast<long>(near.size()) == model.checkedPairCount())
+      return gap;
+    margin *= 4.0;
+  }
 }
 
 namespace
@@ -359,7 +389,7 @@ void appendActiveContacts(const Model& model, const std::vector<int>& slots, con
   const ContactMode mode = model.analysis.type == AnalysisType::kStatic ? ContactMode::kStatic : ContactMode::kDynamic;
   for (int i : slots)
   {
-    const double v0 = i < static_cast<int>(state.contact_speed.size()) ? state.contact_speed[i] : 0.0;
+    const double v0 = i < state.contact_speed.size() ? state.contact_speed[i] : 0.0;
     const ContactPairState st = evaluateContact(model, i, state.q, state.qd, v0, mode, nullptr);
     if (st.active)
       out.push_back(st);

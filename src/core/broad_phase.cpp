@@ -9,22 +9,18 @@
 
 namespace active_tensegrity::core
 {
-namespace
-{
-std::uint64_t pairKey(int a, int b)
-{
-  if (a > b)
-    std::swap(a, b);
-  return (static_cast<std::uint64_t>(a) << 32) | static_cast<std::uint32_t>(b);
-}
-}  // namespace
-
 BroadPhase::BroadPhase(const Model& model) : model_(model)
 {
   slot_.assign(model.bodies.size(), -1);
-  for (size_t i = 0; i < model.checked_pairs.size(); ++i)
+  if (model.all_strut_pairs && model.pair_struts.size() >= 2)
+    for (int b : model.pair_struts)
+    {
+      slot_[b] = static_cast<int>(struts_.size());
+      struts_.push_back(b);
+    }
+  for (size_t i = 0; i < model.listed_pairs.size(); ++i)
   {
-    const StrutPair& p = model.checked_pairs[i];
+    const StrutPair& p = model.listed_pairs[i];
     for (int b : { p.body_a, p.body_b })
       if (slot_[b] < 0)
       {
@@ -33,11 +29,11 @@ BroadPhase::BroadPhase(const Model& model) : model_(model)
       }
     if (!pair_index_.emplace(pairKey(p.body_a, p.body_b), static_cast<int>(i)).second)
       throw std::invalid_argument("BroadPhase: the pair of bodies " + std::to_string(p.body_a) + " and " +
-                                  std::to_string(p.body_b) + " is listed twice in Model::checked_pairs");
+                                  std::to_string(p.body_b) + " is listed twice in Model::listed_pairs");
   }
   // sorting n boxes costs about n log n comparisons; comparing every listed pair costs one each
   const double n = static_cast<double>(struts_.size());
-  use_sweep_ = static_cast<double>(model.checked_pairs.size()) > 4.0 * n;
+  use_sweep_ = static_cast<double>(model.pairSlots()) > 4.0 * n;
   boxes_.resize(struts_.size());
   order_.resize(struts_.size());
 }
@@ -59,13 +55,15 @@ void BroadPhase::direct(const Eigen::VectorXd& q, double margin, std::vector<int
 {
   out.clear();
   boxes(q, margin);
-  for (size_t i = 0; i < model_.checked_pairs.size(); ++i)
+  for (int i = 0; i < model_.pairSlots(); ++i)
   {
-    const StrutPair& p = model_.checked_pairs[i];
-    const Box& a = boxes_[slot_[p.body_a]];
-    const Box& b = boxes_[slot_[p.body_b]];
+    if (!model_.isCheckedPair(i))
+      continue;
+    const auto [body_a, body_b] = model_.pairBodies(i);
+    const Box& a = boxes_[slot_[body_a]];
+    const Box& b = boxes_[slot_[body_b]];
     if ((a.lo.array() <= b.hi.array()).all() && (b.lo.array() <= a.hi.array()).all())
-      out.push_back(static_cast<int>(i));
+      out.push_back(i);
   }
 }
 
@@ -100,7 +98,15 @@ void BroadPhase::sweep(const Eigen::VectorXd& q, double margin, std::vector<int>
         break;
       if (!((a.lo.array() <= b.hi.array()).all() && (b.lo.array() <= a.hi.array()).all()))
         continue;
-      const auto it = pair_index_.find(pairKey(struts_[order_[i]], struts_[order_[j]]));
+      const int body_a = struts_[order_[i]], body_b = struts_[order_[j]];
+      if (model_.all_strut_pairs)
+      {
+        const int slot = model_.allPairsSlot(body_a, body_b);
+        if (slot >= 0)
+          out.push_back(slot);
+        continue;
+      }
+      const auto it = pair_index_.find(pairKey(body_a, body_b));
       if (it != pair_index_.end())
         out.push_back(it->second);
     }

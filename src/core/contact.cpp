@@ -404,7 +404,7 @@ double contactElasticEnergy(const Model& model, const ContactPairState& st)
 
 void appendGroundCandidates(const Model& model, const Eigen::VectorXd& q, double margin, std::vector<int>& out)
 {
-  const int first = static_cast<int>(model.checked_pairs.size());
+  const int first = model.pairSlots();
   for (size_t i = 0; i < model.ground_contacts.size(); ++i)
   {
     const GroundContact& g = model.ground_contacts[i];
@@ -417,36 +417,6 @@ const std::string& contactBodyName(const Model& model, int body)
 {
   static const std::string ground = "ground";
   return body < 0 ? ground : model.bodies[body].name;
-}
-
-double effectiveModulus(const StrutLayer& la, const StrutLayer& lb)
-{
-  return 1.0 / ((1.0 - la.poisson_ratio * la.poisson_ratio) / la.youngs_modulus +
-                (1.0 - lb.poisson_ratio * lb.poisson_ratio) / lb.youngs_modulus);
-}
-
-double effectiveModulus(const Body& a, const Body& b)
-{
-  return effectiveModulus(a.layers.back(), b.layers.back());
-}
-
-StrutPair makeStrutPair(const Model& model, int body_a, int body_b)
-{
-  StrutPair p;
-  p.body_a = body_a;
-  p.body_b = body_b;
-  const Body& a = model.bodies[body_a];
-  const Body& b = model.bodies[body_b];
-  p.stiffness90 = 4.0 / 3.0 * effectiveModulus(a, b) * std::pow(a.radius() * b.radius(), 0.25);
-  if (a.layers.size() > 1 || b.layers.size() > 1)
-  {
-    // the innermost layers (a strut without a core: its one layer, of thickness 0 here)
-    const StrutLayer& ca = a.layers.front();
-    const StrutLayer& cb = b.layers.front();
-    p.core_gap = (a.radius() - ca.outer_radius) + (b.radius() - cb.outer_radius);
-    p.core_stiffness90 = 4.0 / 3.0 * effectiveModulus(ca, cb) * std::pow(ca.outer_radius * cb.outer_radius, 0.25);
-  }
-  return p;
 }
 
 namespace
@@ -490,12 +460,12 @@ ContactPairState contactGeometry(const Model& model, int pair, const Eigen::Vect
 {
   if (model.isGroundSlot(pair))
     return groundGeometry(model, pair, pointPosition(model, groundPoint(model, pair), q));
-  const StrutPair& p = model.checked_pairs[pair];
-  const StrutAxis a = strutAxis(model.bodies[p.body_a], q, nullptr);
-  const StrutAxis b = strutAxis(model.bodies[p.body_b], q, nullptr);
+  const auto [body_a, body_b] = model.pairBodies(pair);
+  const StrutAxis a = strutAxis(model.bodies[body_a], q, nullptr);
+  const StrutAxis b = strutAxis(model.bodies[body_b], q, nullptr);
   ContactPairState st = baseState(pair, closest(a, b), a, b);
-  st.body_a = p.body_a;
-  st.body_b = p.body_b;
+  st.body_a = body_a;
+  st.body_b = body_b;
   return st;
 }
 
@@ -513,14 +483,14 @@ struct PairMotion
 
 PairMotion pairMotion(const Model& model, int pair, const Eigen::VectorXd& q, const Eigen::VectorXd& qd, bool tangents)
 {
-  const StrutPair& p = model.checked_pairs[pair];
+  const auto [body_a, body_b] = model.pairBodies(pair);
   PairMotion m;
-  m.a = strutAxis(model.bodies[p.body_a], q, &qd, tangents);
-  m.b = strutAxis(model.bodies[p.body_b], q, &qd, tangents);
+  m.a = strutAxis(model.bodies[body_a], q, &qd, tangents);
+  m.b = strutAxis(model.bodies[body_b], q, &qd, tangents);
   m.c = closest(m.a, m.b);
   m.st = baseState(pair, m.c, m.a, m.b);
-  m.st.body_a = p.body_a;
-  m.st.body_b = p.body_b;
+  m.st.body_a = body_a;
+  m.st.body_b = body_b;
   m.dv = (m.a.centre_rate + m.c.s1 * m.a.axis_rate) - (m.b.centre_rate + m.c.s2 * m.b.axis_rate);
   m.st.penetration_rate = -m.c.n.dot(m.dv);
   return m;
@@ -540,7 +510,7 @@ ContactPairState evaluateContact(const Model& model, int pair, const Eigen::Vect
 {
   if (model.isGroundSlot(pair))
     return evaluateGroundContact(model, pair, q, qd, impact_speed, mode, out);
-  const StrutPair& p = model.checked_pairs[pair];
+  const StrutPair p = model.strutPair(pair);
   const ContactSettings& set = model.contact;
   const bool dynamic = mode == ContactMode::kDynamic;
   const bool tangents = out && out->tangents;
@@ -765,9 +735,9 @@ ContactPairState evaluateContact(const Model& model, int pair, const Eigen::Vect
 
 bool passedThrough(const Model& model, int pair, const Eigen::VectorXd& q0, const Eigen::VectorXd& q1)
 {
-  const StrutPair& p = model.checked_pairs[pair];
-  const Body& ba = model.bodies[p.body_a];
-  const Body& bb = model.bodies[p.body_b];
+  const auto [body_a, body_b] = model.pairBodies(pair);
+  const Body& ba = model.bodies[body_a];
+  const Body& bb = model.bodies[body_b];
   const StrutAxis a0 = strutAxis(ba, q0, nullptr), b0 = strutAxis(bb, q0, nullptr);
   const StrutAxis a1 = strutAxis(ba, q1, nullptr), b1 = strutAxis(bb, q1, nullptr);
   const Vec3 m0 = a0.axis.cross(b0.axis), m1 = a1.axis.cross(b1.axis);

@@ -119,8 +119,8 @@ void DynamicsSolver::prepareContact(const State& s, double h)
   const ScopeTimer timer(timings_.contact);
   const Model& model = system_.model();
   // (only the near slots' speeds are read, and findNearContacts sets each of them)
-  if (step_speeds_.size() != static_cast<size_t>(model.contactSlots()))
-    step_speeds_.assign(model.contactSlots(), model.contact.min_impact_speed);
+  if (step_speeds_.size() != model.contactSlots())
+    step_speeds_.reset(model.contactSlots(), model.contact.min_impact_speed);
   start_at_end_ = atEnd(s);
   near_.clear();
   if (!model.anyContact())
@@ -151,15 +151,15 @@ void DynamicsSolver::findNearContacts(const State& s, double motion)
   const bool at_end = start_at_end_;
   for (int i : near_)
   {
-    const double memory = i < static_cast<int>(s.contact_speed.size()) ? s.contact_speed[i] : 0.0;
+    const double memory = i < s.contact_speed.size() ? s.contact_speed[i] : 0.0;
     if (memory > 0.0)
-      step_speeds_[i] = memory;
+      step_speeds_.set(i, memory);
     else if (at_end && !std::isnan(end_rate_[i]))
-      step_speeds_[i] = std::max(end_rate_[i], model.contact.min_impact_speed);
+      step_speeds_.set(i, std::max(end_rate_[i], model.contact.min_impact_speed));
     else
     {
       const ContactPairState st = evaluateContact(model, i, s.q, s.qd, 0.0, ContactMode::kDynamic, nullptr);
-      step_speeds_[i] = std::max(st.penetration_rate, model.contact.min_impact_speed);
+      step_speeds_.set(i, std::max(st.penetration_rate, model.contact.min_impact_speed));
     }
   }
 }
@@ -205,32 +205,32 @@ void DynamicsSolver::updateContactMemory(State& s, const Eigen::VectorXd& q_star
 {
   const ScopeTimer timer(timings_.contact);
   const Model& model = system_.model();
-  const size_t slots = static_cast<size_t>(model.contactSlots());
+  const int slots = model.contactSlots();
   // the start's memory at the near slots (whether each was touching), then the memory cleared: when the step
   // began where the last one ended, its nonzero entries are that end's touching slots, all among end_slots_
   // (every other slot was apart there), and only they are cleared (a lattice of 2000 struts has 2 million
   // slots: clearing them all was a 16 MB memset per step); else the whole memory
   near_previous_.clear();
   for (int i : near_)
-    near_previous_.push_back(i < static_cast<int>(s.contact_speed.size()) ? s.contact_speed[i] : 0.0);
+    near_previous_.push_back(i < s.contact_speed.size() ? s.contact_speed[i] : 0.0);
   if (start_at_end_ && s.contact_speed.size() == slots)
     for (int i : end_slots_)
-      s.contact_speed[i] = 0.0;
+      s.contact_speed.set(i, 0.0);
   else
-    s.contact_speed.assign(slots, 0.0);
+    s.contact_speed.reset(slots, 0.0);
   estimate_.onset_depth = 0.0;
   estimate_.onset_gap = 0.0;
   estimate_.onset_pair = -1;
   // the end's evaluation (contactsAt, and the next step's approach rates): the earlier one's slots forgotten
   if (end_rate_.size() != slots)
   {
-    end_rate_.assign(slots, std::numeric_limits<double>::quiet_NaN());
-    end_gap_.assign(slots, std::numeric_limits<double>::quiet_NaN());
+    end_rate_.reset(slots, std::numeric_limits<double>::quiet_NaN());
+    end_gap_.reset(slots, std::numeric_limits<double>::quiet_NaN());
   }
   for (int i : end_slots_)
   {
-    end_rate_[i] = std::numeric_limits<double>::quiet_NaN();
-    end_gap_[i] = std::numeric_limits<double>::quiet_NaN();
+    end_rate_.set(i, std::numeric_limits<double>::quiet_NaN());
+    end_gap_.set(i, std::numeric_limits<double>::quiet_NaN());
   }
   end_slots_.clear();
   end_memory_.clear();
@@ -254,15 +254,15 @@ void DynamicsSolver::updateContactMemory(State& s, const Eigen::VectorXd& q_star
                                contactMotion(model, i, s.q, s.qd);
     if (contacts_every_step_ && st.active)
       end_contacts_.push_back(st);
-    end_rate_[i] = st.penetration_rate;
-    end_gap_[i] = st.gap;
+    end_rate_.set(i, st.penetration_rate);
+    end_gap_.set(i, st.gap);
     end_slots_.push_back(i);
     const double gap = st.gap;
     end_memory_.push_back(gap < 0.0 ? step_speeds_[i] : 0.0);
     if (gap >= 0.0)
       continue;
     ++touching;
-    s.contact_speed[i] = step_speeds_[i];
+    s.contact_speed.set(i, step_speeds_[i]);
     const bool was_touching = near_previous_[k] > 0.0;
     if (was_touching || -gap <= estimate_.onset_depth)
       continue;
@@ -425,7 +425,7 @@ Summary DynamicsSolver::attempt(State& s, double h, const ActuationLaw& law, boo
   // the pairs touching at the start (remembered impact speed > 0): all of them are near
   touching_.clear();
   for (int i : near_)
-    if (i < static_cast<int>(s.contact_speed.size()) && s.contact_speed[i] > 0.0)
+    if (i < s.contact_speed.size() && s.contact_speed[i] > 0.0)
       touching_.push_back(i);
   std::sort(touching_.begin(), touching_.end());
   // modified Newton keeps the factorization while it stays a good one (see the option)
@@ -779,8 +779,8 @@ Summary DynamicsSolver::initialize(State& s, const ActuationLaw& law)
   Eigen::VectorXd zero = Eigen::VectorXd::Zero(nq);
   system_.inertialForce(s.q, s.qd, zero, inertial_, nullptr, 0.0, 0.0, 0.0);
   system_.appliedForce(s.q, s.qd, s.u, applied_, nullptr, 0.0, 0.0);
-  if (s.contact_speed.size() != static_cast<size_t>(system_.model().contactSlots()))
-    s.contact_speed.assign(system_.model().contactSlots(), 0.0);
+  if (s.contact_speed.size() != system_.model().contactSlots())
+    s.contact_speed.reset(system_.model().contactSlots(), 0.0);
   system_.contactForce(s.q, s.qd, s.contact_speed, ContactMode::kDynamic, applied_, nullptr, 0.0, 0.0);
   rhs.head(nq) = applied_ - inertial_;
   system_.accelerationRhs(s.q, s.qd, s.u, tmp);

@@ -112,7 +112,7 @@ void System::appliedForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, c
   }
 }
 
-void System::contactForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const std::vector<double>& impact_speeds,
+void System::contactForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const SlotValues& impact_speeds,
                           ContactMode mode, Eigen::VectorXd& F, BlockSparseMatrix* jac, double k_weight,
                           double c_weight) const
 {
@@ -123,8 +123,8 @@ void System::contactForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, c
 }
 
 void System::contactForce(const std::vector<int>& slots, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
-                          const std::vector<double>& impact_speeds, ContactMode mode, Eigen::VectorXd& F,
-                          BlockSparseMatrix* jac, double k_weight, double c_weight) const
+                          const SlotValues& impact_speeds, ContactMode mode, Eigen::VectorXd& F, BlockSparseMatrix* jac,
+                          double k_weight, double c_weight) const
 {
   contribution_.tangents = jac != nullptr;
   for (int i : slots)
@@ -144,15 +144,15 @@ void System::contactForce(const std::vector<int>& slots, const Eigen::VectorXd& 
         jac->add(body, body, contribution_.damping.topLeftCorner(b.nq, b.nq), c_weight);
       continue;
     }
-    const StrutPair& p = model_.checked_pairs[i];
-    const Body& a = model_.bodies[p.body_a];
-    const Body& b = model_.bodies[p.body_b];
+    const auto [body_a, body_b] = model_.pairBodies(i);
+    const Body& a = model_.bodies[body_a];
+    const Body& b = model_.bodies[body_b];
     F.segment<7>(a.offset) += contribution_.force.head<7>();
     F.segment<7>(b.offset) += contribution_.force.tail<7>();
     if (!jac)
       continue;
-    jac->reserve(p.body_a, p.body_b);
-    const int g[2] = { p.body_a, p.body_b };
+    jac->reserve(body_a, body_b);
+    const int g[2] = { body_a, body_b };
     for (int x = 0; x < 2; ++x)
       for (int y = 0; y < 2; ++y)
       {
@@ -175,7 +175,7 @@ void contactCandidates(const Model& model, const BroadPhase& broad, const Eigen:
 
 namespace
 {
-double gapAt(const Model& model, int slot, const Eigen::VectorXd& q, const std::vector<double>* known_gap)
+double gapAt(const Model& model, int slot, const Eigen::VectorXd& q, const SlotValues* known_gap)
 {
   if (known_gap && !std::isnan((*known_gap)[slot]))
     return (*known_gap)[slot];
@@ -184,7 +184,7 @@ double gapAt(const Model& model, int slot, const Eigen::VectorXd& q, const std::
 }  // namespace
 
 void nearContactSlots(const Model& model, const BroadPhase& broad, const Eigen::VectorXd& q, double reach,
-                      std::vector<int>& candidates, std::vector<int>& out, const std::vector<double>* known_gap,
+                      std::vector<int>& candidates, std::vector<int>& out, const SlotValues* known_gap,
                       std::vector<double>* gaps)
 {
   contactCandidates(model, broad, q, reach, candidates);
@@ -203,7 +203,7 @@ void nearContactSlots(const Model& model, const BroadPhase& broad, const Eigen::
 }
 
 void NearSlotCache::find(const Model& model, const BroadPhase& broad, const Eigen::VectorXd& q, double reach,
-                         std::vector<int>& out, const std::vector<double>* known_gap)
+                         std::vector<int>& out, const SlotValues* known_gap)
 {
   double moved = -1.0;  // the largest motion of a body since the reference (negative: no kept list)
   if (kept_reach_ >= 0.0 && reference_q_.size() == q.size())
@@ -225,7 +225,7 @@ void NearSlotCache::find(const Model& model, const BroadPhase& broad, const Eige
       if (model.isGroundSlot(i))
         kept_bodies_.emplace_back(model.groundContactOf(i).body, -1);
       else
-        kept_bodies_.emplace_back(model.checked_pairs[i].body_a, model.checked_pairs[i].body_b);
+        kept_bodies_.push_back(model.pairBodies(i));
     }
     reference_q_ = q;
     motion_.assign(model.bodies.size(), 0.0);
@@ -272,7 +272,7 @@ void System::contactCandidates(const Eigen::VectorXd& q, double margin, std::vec
 }
 
 void System::nearContacts(const Eigen::VectorXd& q, double reach, std::vector<int>& out,
-                          const std::vector<double>* known_gap) const
+                          const SlotValues* known_gap) const
 {
   near_slots_.find(model_, broad_phase_, q, reach, out, known_gap);
 }
@@ -293,8 +293,8 @@ int System::firstPassedThrough(const std::vector<int>& slots, const Eigen::Vecto
 
 std::string System::passedThroughMessage(int pair) const
 {
-  const StrutPair& p = model_.checked_pairs[pair];
-  return "struts '" + model_.bodies[p.body_a].name + "' and '" + model_.bodies[p.body_b].name +
+  const auto [body_a, body_b] = model_.pairBodies(pair);
+  return "struts '" + model_.bodies[body_a].name + "' and '" + model_.bodies[body_b].name +
          "' passed through each other";
 }
 
@@ -434,13 +434,15 @@ double System::potentialEnergy(const Eigen::VectorXd& q, const ActuationValues& 
   for (const PointLoad& load : model_.loads)
     e -= load_factor_ * load.force.dot(pointPosition(model_, load.point, q));
   if (model_.anyContact())
-    for (int i = 0; i < model_.contactSlots(); ++i)
+  {
+    // only touching slots store energy, and the broad phase at margin 0 finds every one of them
+    contactCandidates(q, 0.0, candidates_);
+    for (int i : candidates_)
     {
-      if (!model_.isGroundSlot(i) && !model_.contact.enabled)
-        continue;
       const ContactPairState st = evaluateContact(model_, i, q, zero, 0.0, ContactMode::kStatic, nullptr);
       e += contactElasticEnergy(model_, st);
     }
+  }
   for (const Cable& c : model_.cables)
     e += cablePotentialEnergy(c, evaluateCable(model_, c, q, zero, u, false, nullptr, nullptr, 0.0, 0.0));
   return e;

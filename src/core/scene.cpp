@@ -946,25 +946,101 @@ private:
     bool pairs_given = false;
     section(root_, "contact", [&](Reader& c) { pairs_given = readContactSettings(c, pairs); });
     if (!pairs_given)
-      pairs = autoPairs();
+    {
+      readAllStrutPairs();
+      return;
+    }
     std::sort(pairs.begin(), pairs.end());
     pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
     for (const auto& [a, b] : pairs)
     {
       const StrutPair p = makeStrutPair(model_, a, b);
-      if (!std::isfinite(p.stiffness90))
-        root_.fail("materials", "the contact stiffness of struts " + quoted(model_.bodies[a].name) + " and " +
-                                    quoted(model_.bodies[b].name) + " overflows: " + shortestNumber(p.stiffness90));
-      if (model_.contact.law == ContactLaw::kLinear && p.core_stiffness90 > 0.0)
-        root_.fail("contact.law", "'linear' has one spring for every pair, but struts " +
-                                      quoted(model_.bodies[a].name) + " and " + quoted(model_.bodies[b].name) +
-                                      " have layers (a core): use law 'hertz' for layered struts");
-      if (!std::isfinite(p.core_stiffness90))
-        root_.fail("materials", "the contact stiffness of the cores of struts " + quoted(model_.bodies[a].name) +
-                                    " and " + quoted(model_.bodies[b].name) +
-                                    " overflows: " + shortestNumber(p.core_stiffness90));
-      model_.checked_pairs.push_back(p);
+      checkPairConstants(p);
+      model_.listed_pairs.push_back(p);
     }
+  }
+
+  /// Refuses a pair whose contact constants overflow, or (`linear_law_too`) that has layers under the linear law.
+  void checkPairConstants(const StrutPair& p, bool linear_law_too = true) const
+  {
+    const std::string& a = model_.bodies[p.body_a].name;
+    const std::string& b = model_.bodies[p.body_b].name;
+    if (!std::isfinite(p.stiffness90))
+      root_.fail("materials", "the contact stiffness of struts " + quoted(a) + " and " + quoted(b) +
+                                  " overflows: " + shortestNumber(p.stiffness90));
+    if (linear_law_too && model_.contact.law == ContactLaw::kLinear && p.core_stiffness90 > 0.0)
+      root_.fail("contact.law", "'linear' has one spring for every pair, but struts " + quoted(a) + " and " +
+                                    quoted(b) + " have layers (a core): use law 'hertz' for layered struts");
+    if (!std::isfinite(p.core_stiffness90))
+      root_.fail("materials", "the contact stiffness of the cores of struts " + quoted(a) + " and " + quoted(b) +
+                                  " overflows: " + shortestNumber(p.core_stiffness90));
+  }
+
+  /// `pairs: auto`: every two struts that share no node, numbered by the model and found near contact by the
+  /// broad phase (none stored). Their constants are checked once per two kinds of strut (materials and radii).
+  void readAllStrutPairs()
+  {
+    std::vector<int> struts;
+    for (size_t i = 0; i < model_.bodies.size(); ++i)
+      if (model_.bodies[i].kind == BodyKind::kStrut)
+        struts.push_back(static_cast<int>(i));
+    try
+    {
+      model_.checkAllStrutPairs(struts, joinedStruts());
+    }
+    catch (const std::invalid_argument& e)
+    {
+      root_.fail("contact.pairs", e.what());
+    }
+    // one strut of each kind, with a second one when the kind has two (a pair within the kind)
+    std::map<std::vector<double>, std::vector<int>> kinds;
+    for (int b : struts)
+    {
+      std::vector<double> key;
+      for (const StrutLayer& l : model_.bodies[b].layers)
+        key.insert(key.end(), { l.outer_radius, l.youngs_modulus, l.poisson_ratio });
+      std::vector<int>& members = kinds[key];
+      if (members.size() < 2)
+        members.push_back(b);
+    }
+    std::vector<const std::vector<int>*> kind_list;
+    for (const auto& kind : kinds)
+      kind_list.push_back(&kind.second);
+    for (size_t x = 0; x < kind_list.size(); ++x)
+    {
+      const std::vector<int>& kx = *kind_list[x];
+      if (kx.size() == 2)
+        checkPairConstants(makeStrutPair(model_, kx[0], kx[1]), false);
+      for (size_t y = x + 1; y < kind_list.size(); ++y)
+        checkPairConstants(makeStrutPair(model_, kx[0], kind_list[y]->front()), false);
+    }
+    // the linear law and layers: the first checked pair with a layered strut (a strut shares nodes with few others)
+    if (model_.contact.law == ContactLaw::kLinear)
+      for (int a : struts)
+        if (model_.bodies[a].layers.size() > 1)
+          for (int b : struts)
+            if (model_.allPairsSlot(a, b) >= 0)
+            {
+              checkPairConstants(makeStrutPair(model_, std::min(a, b), std::max(a, b)));
+              break;
+            }
+  }
+
+  /// The pairs of struts that end at a common node: every two of them, not only those the loader joined directly
+  /// (at a node where k struts meet it joins the first to each other one; joints are made at nodes only, so this
+  /// covers every jointed pair).
+  std::vector<std::pair<int, int>> joinedStruts() const
+  {
+    std::vector<std::pair<int, int>> joined;
+    for (const NodeInfo& n : nodes_)
+    {
+      const std::vector<PointRef>& at = n.attachments;
+      for (size_t x = 0; x < at.size(); ++x)
+        for (size_t y = x + 1; y < at.size(); ++y)
+          if (at[x].body >= 0 && at[y].body >= 0 && at[x].body != at[y].body)
+            joined.emplace_back(std::min(at[x].body, at[y].body), std::max(at[x].body, at[y].body));
+    }
+    return joined;
   }
 
   /// A contact law: `law` (hertz, the default, or linear), the hertz law's restitution ([0, 1]) or the linear law's
@@ -1126,30 +1202,6 @@ private:
       pairs.emplace_back(std::min(a, b), std::max(a, b));
     }
     return true;
-  }
-
-  /// Every pair of struts that share no node.
-  std::vector<std::pair<int, int>> autoPairs() const
-  {
-    // struts that end at a common node: every two of them, not only those the loader joined directly
-    // (at a node where k struts meet it joins the first to each other one; joints are made at nodes
-    // only, so this covers every jointed pair)
-    std::set<std::pair<int, int>> jointed;
-    for (const NodeInfo& n : nodes_)
-    {
-      const std::vector<PointRef>& at = n.attachments;
-      for (size_t x = 0; x < at.size(); ++x)
-        for (size_t y = x + 1; y < at.size(); ++y)
-          if (at[x].body >= 0 && at[y].body >= 0 && at[x].body != at[y].body)
-            jointed.insert({ std::min(at[x].body, at[y].body), std::max(at[x].body, at[y].body) });
-    }
-    std::vector<std::pair<int, int>> pairs;
-    for (size_t i = 0; i < model_.bodies.size(); ++i)
-      for (size_t j = i + 1; j < model_.bodies.size(); ++j)
-        if (model_.bodies[i].kind == BodyKind::kStrut && model_.bodies[j].kind == BodyKind::kStrut &&
-            !jointed.count({ static_cast<int>(i), static_cast<int>(j) }))
-          pairs.emplace_back(static_cast<int>(i), static_cast<int>(j));
-    return pairs;
   }
 
   void readSolver()

@@ -11,7 +11,7 @@ State initialState(const Model& model)
   s.acc.setZero(model.nq);
   s.lambda.setZero(model.n_lambda);
   s.u.assign(model.actuators.size(), ActuationValue{});
-  s.contact_speed.assign(model.contactSlots(), 0.0);
+  s.contact_speed.reset(model.contactSlots(), 0.0);
   return s;
 }
 

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <iterator>
 #include <utility>
 
 #include "active_tensegrity/core/analysis.h"
@@ -88,7 +89,7 @@ std::string bodyFrame(const core::Model& model, int body)
 }
 
 MessageBuilder::MessageBuilder(const core::Model& model, std::string frame_id, MarkerOptions options)
-  : model_(model), frame_id_(std::move(frame_id)), options_(options), arrow_shown_(model.contactSlots(), false)
+  : model_(model), frame_id_(std::move(frame_id)), options_(options)
 {
   core::Vec3 centre = core::Vec3::Zero();
   for (const core::Body& b : model.bodies)
@@ -98,7 +99,7 @@ MessageBuilder::MessageBuilder(const core::Model& model, std::string frame_id, M
 
 void MessageBuilder::clearMarkers()
 {
-  std::fill(arrow_shown_.begin(), arrow_shown_.end(), false);
+  arrow_shown_.clear();
   clear_all_ = true;
 }
 
@@ -266,10 +267,10 @@ void MessageBuilder::addMarkers(const core::State& state, const std::vector<core
 
   // contact forces: per pair in contact, the normal force on strut a (from its contact point along n)
   // and on strut b (opposite), and the friction force on strut a; ids 4 * pair + 0..3
-  std::vector<bool> shown(model_.contactSlots(), false);
+  std::vector<int> shown;
   for (const core::ContactPairState& c : contacts)
   {
-    shown[c.pair] = true;
+    shown.push_back(c.pair);
     const auto arrow = [&](int k, const core::Vec3& from, const core::Vec3& force, const std_msgs::ColorRGBA& colour)
     {
       Marker m = marker(frame_id_, stamp, "contact_forces", 4 * c.pair + k, Marker::ARROW);
@@ -288,14 +289,16 @@ void MessageBuilder::addMarkers(const core::State& state, const std::vector<core
     arrow(2, c.point_a, c.friction_on_a, rgba(0.0f, 0.9f, 1.0f));
     arrow(3, c.point_b, -c.friction_on_a, rgba(0.0f, 0.9f, 1.0f));
   }
-  for (size_t p = 0; p < shown.size(); ++p)
-    if (arrow_shown_[p] && !shown[p])
-      for (int k = 0; k < 4; ++k)
-      {
-        Marker m = marker(frame_id_, stamp, "contact_forces", 4 * static_cast<int>(p) + k, Marker::ARROW);
-        m.action = Marker::DELETE;
-        out.markers.push_back(m);
-      }
+  std::sort(shown.begin(), shown.end());
+  std::vector<int> gone;
+  std::set_difference(arrow_shown_.begin(), arrow_shown_.end(), shown.begin(), shown.end(), std::back_inserter(gone));
+  for (int p : gone)
+    for (int k = 0; k < 4; ++k)
+    {
+      Marker m = marker(frame_id_, stamp, "contact_forces", 4 * p + k, Marker::ARROW);
+      m.action = Marker::DELETE;
+      out.markers.push_back(m);
+    }
   arrow_shown_ = std::move(shown);
 }
 

@@ -767,7 +767,7 @@ int runSimNode()
         params.default_speed / (model.analysis.schedule.blend_time > 0.0 ? model.analysis.schedule.blend_time : 0.1);
   ROS_INFO_STREAM("tensegrity_sim: scene '" << model.name << "': " << model.bodies.size() << " bodies, "
                                             << model.cables.size() << " cables, " << model.actuators.size()
-                                            << " actuators, " << model.checked_pairs.size()
+                                            << " actuators, " << model.checkedPairCount()
                                             << " checked strut pairs, dt = " << model.solver.dt << " s\n"
                                             << params.describe());
   try

@@ -262,7 +262,8 @@ struct MujocoPeer::Impl
 
   const core::Model& model;
   MujocoOptions options;
-  std::vector<int> body_id;  // ours -> MuJoCo body (-1: driven mass)
+  std::vector<core::StrutPair> checked;  // the model's checked strut pairs (a MuJoCo <pair> each with contact)
+  std::vector<int> body_id;              // ours -> MuJoCo body (-1: driven mass)
   std::vector<int> driven_of_body;
   std::vector<DrivenMass> driven;
   std::vector<Carrier> carriers;
@@ -275,7 +276,19 @@ struct MujocoPeer::Impl
   std::vector<std::string> cable_tendon_names, cable_actuator_names;
   core::ActuationValues u;  // at the last force evaluation
 
-  Impl(const core::Model& m, const MujocoOptions& o) : model(m), options(o) {}
+  Impl(const core::Model& m, const MujocoOptions& o) : model(m), options(o), checked(checkedPairs(m)) {}
+
+  /// The model's checked pairs, refused past a million (a <pair> element each: a file of hundreds of MB that
+  /// MuJoCo checks every step).
+  static std::vector<core::StrutPair> checkedPairs(const core::Model& m)
+  {
+    constexpr long kMostPairs = 1000000;
+    if (m.contact.enabled && m.checkedPairCount() > kMostPairs)
+      throw std::invalid_argument("MuJoCo peer: contact.pairs: " + std::to_string(m.checkedPairCount()) +
+                                  " checked strut pairs, more than the " + std::to_string(kMostPairs) +
+                                  " this translation writes (a <pair> each): list the pairs that can touch");
+    return m.contact.enabled ? m.checkedPairList() : std::vector<core::StrutPair>{};
+  }
 
   const std::string& siteFor(const core::PointRef& p)
   {
@@ -304,7 +317,7 @@ struct MujocoPeer::Impl
   }
   bool hasContact() const
   {
-    return model.contact.enabled && !model.checked_pairs.empty();
+    return model.contact.enabled && !checked.empty();
   }
   bool hasFriction() const
   {
@@ -332,7 +345,7 @@ struct MujocoPeer::Impl
   }
   int pairCount() const
   {
-    return (hasContact() ? static_cast<int>(model.checked_pairs.size()) : 0) + static_cast<int>(groundBodies().size());
+    return (hasContact() ? static_cast<int>(checked.size()) : 0) + static_cast<int>(groundBodies().size());
   }
 
   std::vector<bool> mapDrivenNodes();
@@ -649,7 +662,7 @@ void MujocoPeer::Impl::writeContactPairs(std::ostream& x) const
   };
   x << "  <contact>\n";
   if (hasContact())
-    for (const core::StrutPair& p : model.checked_pairs)
+    for (const core::StrutPair& p : checked)
       pair("geom" + std::to_string(p.body_a), p.body_b, model.contact.friction);
   for (int body : groundBodies())
     pair("ground", body, model.ground.friction);
@@ -720,9 +733,9 @@ void MujocoPeer::Impl::setUpCarriers(mjModel* m)
 // friction rows' impratio.
 void MujocoPeer::Impl::setContactParameters(mjModel* m)
 {
-  pair_of_checked.assign(model.checked_pairs.size(), -1);
-  pair_stiffness.assign(model.checked_pairs.size(), 0.0);
-  pair_damping.assign(model.checked_pairs.size(), 0.0);
+  pair_of_checked.assign(checked.size(), -1);
+  pair_stiffness.assign(checked.size(), 0.0);
+  pair_damping.assign(checked.size(), 0.0);
   // a linear oscillator rebounds with e = exp(-zeta pi / sqrt(1 - zeta^2))
   const auto dampingRatio = [](double restitution)
   {
@@ -788,9 +801,9 @@ void MujocoPeer::Impl::setContactParameters(mjModel* m)
                    " N/m^1.5 (the materials' youngs_modulus) at the force scale F* = " + core::shortestNumber(f) + " N";
   };
   if (hasContact())
-    for (int i = 0; i < static_cast<int>(model.checked_pairs.size()); ++i)
+    for (int i = 0; i < static_cast<int>(checked.size()); ++i)
     {
-      const core::StrutPair& p = model.checked_pairs[i];
+      const core::StrutPair& p = checked[i];
       const int j = compiled("geom" + std::to_string(p.body_a), p.body_b);
       const double inv_mass = m->body_invweight0[2 * body_id[p.body_a]] + m->body_invweight0[2 * body_id[p.body_b]];
       const core::ContactSettings& c = model.contact;

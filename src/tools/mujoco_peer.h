@@ -18,7 +18,7 @@
 ///   points between driven point masses, carrying a motor actuator whose control is set to -T at every
 ///   force evaluation (mjcb_control) with T = k (l - l0) + c l_dot when positive, else 0 (tension only;
 ///   MuJoCo's tendon springs are two-sided); pulled-in cables use l0 - s(t) and k = EA / (l0 - s);
-/// - contact: explicit capsule-capsule pairs for model.checked_pairs only (contype/conaffinity 0),
+/// - contact: explicit capsule-capsule pairs for the model's checked pairs only (contype/conaffinity 0),
 ///   a linear spring-dashpot set through solref in MuJoCo's direct format with a tiny impedance
 ///   (see MujocoOptions::contact_force and docs/benchmarks.md); friction mu with an elliptic cone
 ///   (condim 3), frictionless with condim 1;
@@ -147,7 +147,7 @@ public:
   /// Mass of the carriers alone (kg).
   double carrierMass() const;
   /// Linear contact stiffness (N/m) and damping (N s/m) used for checked pair i.
-  double contactStiffness(int pair) const;
+  double contactStiffness(int pair) const;  // (pair: index into Model::checkedPairList())
   double contactDamping(int pair) const;
   /// MuJoCo ids (for tests): the body of our body i (-1 for a driven point mass), the tendons of cable i.
   int bodyId(int body) const;

@@ -32,7 +32,7 @@ const char* kUsage =
     "      expanded octahedron of six struts of L (1 m), its 24 cables at T N (100); --pinned fixes three\n"
     "      nodes of its lowest cable triangle\n"
     "  quadruplex-lattice --cells AxB [--pitch P] [--height H] [--top-radius R] [--strut-radius r]\n"
-    "      A x B quadruplex cells (4 struts each; at most 900 cells) on the ground, P (1 m) apart, top nodes\n"
+    "      A x B quadruplex cells (4 struts each; at most 8000 cells) on the ground, P (1 m) apart, top nodes\n"
     "      on circles of R (0.3 m, below P/2) at H (0.5 m); bracing cables pulled in by 0.4 m, or by 0.8 of\n"
     "      their rest length when that is less (a dynamic fold with contact)\n"
     "  tower --stages K [--width W]\n"
@@ -66,9 +66,9 @@ double prestress(tools::Args& args, const std::string& option)
   return bounded(args, option, at::kMinGeneratedPrestress, at::kMaxGeneratedPrestress, "N");
 }
 
-// at most this many lattice cells: the loader pairs every two struts that share no node (auto pairs), and
-// 900 cells (3600 struts, 6.5 million pairs) take 0.4 GB and a second to load
-constexpr int kMaxLatticeCells = 900;
+// at most this many lattice cells (4 struts each): the most struts whose pairs the loader numbers (auto pairs,
+// Model::kMostAutoPairStruts)
+constexpr int kMaxLatticeCells = at::Model::kMostAutoPairStruts / 4;
 
 std::string generate(const std::string& structure, tools::Args& args, std::string& out_path)
 {
@@ -171,7 +171,7 @@ std::string generate(const std::string& structure, tools::Args& args, std::strin
         o.ny = tools::parsePositive<int>(arg, v.substr(x + 1));
         if (static_cast<long>(o.nx) * o.ny > kMaxLatticeCells)
           throw tools::BadArgument("--cells: at most " + std::to_string(kMaxLatticeCells) +
-                                   " cells (e.g. 30x30), got '" + v + "'");
+                                   " cells (e.g. 80x100), got '" + v + "'");
         cells = true;
       }
       else if (arg == "--pitch")

@@ -3,18 +3,21 @@
 // exactly the pairs whose capsule boxes (computed here independently) overlap; every pair closer than
 // the margin is among them (no contact missed) and sparse scenes are pruned. Then the choice between
 // sweep and direct comparison, and configurations placed by hand (far apart, moved into contact, margin).
-// Last, the kept list of near slots (NearSlotCache) against nearContactSlots along random walks.
+// Every two struts numbered without a list (`pairs: auto`), up to the most struts it numbers. Last, the kept
+// list of near slots (NearSlotCache) against nearContactSlots along random walks.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <limits>
 #include <random>
 #include <set>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
 #include <gtest/gtest.h>
 
+#include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/broad_phase.h"
 #include "active_tensegrity/core/contact.h"
 #include "active_tensegrity/core/mechanics.h"
@@ -62,7 +65,7 @@ Model randomScene(const SceneSpec& spec, std::mt19937& rng)
   for (int i = 1; i <= spec.struts; ++i)
     for (int j = i + 1; j <= spec.struts; ++j)
       if (spec.pair_fraction >= 1.0 || u01(rng) < spec.pair_fraction)
-        m.checked_pairs.push_back(makeStrutPair(m, i, j));
+        m.listed_pairs.push_back(makeStrutPair(m, i, j));
   return m;
 }
 
@@ -106,11 +109,16 @@ SceneCounts checkScene(const Model& m, double margin, const std::string& what)
   EXPECT_EQ(std::adjacent_find(cand.begin(), cand.end()), cand.end());  // no pair twice
   const std::set<int> in(cand.begin(), cand.end());
   SceneCounts n;
-  n.pairs = static_cast<int>(m.checked_pairs.size());
+  n.pairs = static_cast<int>(m.checkedPairCount());
   n.candidates = static_cast<int>(cand.size());
-  for (int i = 0; i < n.pairs; ++i)
+  for (int i = 0; i < m.pairSlots(); ++i)
   {
     const bool listed = in.count(i) > 0;
+    if (!m.isCheckedPair(i))
+    {
+      EXPECT_FALSE(listed) << "slot " << i << " of two struts sharing a node";
+      continue;
+    }
     const ContactPairState st = contactGeometry(m, i, m.q0);
     if (st.gap < margin)
     {
@@ -120,7 +128,7 @@ SceneCounts checkScene(const Model& m, double margin, const std::string& what)
     if (st.gap < 0.0)
       ++n.touching;
     // exactly the pairs whose boxes overlap (ties within rounding either way)
-    const double sep = boxSeparation(m, m.checked_pairs[i], m.q0, margin);
+    const double sep = boxSeparation(m, m.strutPair(i), m.q0, margin);
     if (sep < -1e-12)
     {
       EXPECT_TRUE(listed) << "pair " << i << ": boxes overlap by " << -sep;
@@ -140,7 +148,7 @@ Model parallelPair(double dx)
   m.bodies.push_back(makeStrut("A", 1.0, 0.02, 2000.0));
   m.bodies.push_back(makeStrut("B", 1.0, 0.02, 2000.0));
   finalizeModel(m);
-  m.checked_pairs.push_back(makeStrutPair(m, 0, 1));
+  m.listed_pairs.push_back(makeStrutPair(m, 0, 1));
   m.q0.setZero(m.nq);
   m.q0.segment<4>(3) = thetaFromZAxis(Vec3::UnitZ());
   m.q0.segment<3>(7) = Vec3(dx, 0.0, 0.0);
@@ -186,7 +194,7 @@ TEST(BroadPhase, RandomScenesWithASubsetOfPairsAndThetaOffTheSphere)
     for (int rep = 0; rep < 10; ++rep)
     {
       const Model m = randomScene(spec, rng);
-      ASSERT_LT(static_cast<int>(m.checked_pairs.size()), spec.struts * (spec.struts - 1) / 2);
+      ASSERT_LT(static_cast<int>(m.checkedPairList().size()), spec.struts * (spec.struts - 1) / 2);
       const std::string what = std::to_string(spec.struts) + " struts, subset, scene " + std::to_string(rep);
       for (double margin : { 0.0, 0.05 })
       {
@@ -205,13 +213,145 @@ TEST(BroadPhase, SweepForManyPairsPerStrutDirectForFew)
   EXPECT_TRUE(BroadPhase(all).usesSweep());
   // a chain: each strut checked against its successor only (one pair per strut)
   Model chain = randomScene({ 200, 3.5, 0.0 }, rng);
-  ASSERT_TRUE(chain.checked_pairs.empty());
+  ASSERT_TRUE(chain.checkedPairList().empty());
   for (int i = 1; i < 200; ++i)
-    chain.checked_pairs.push_back(makeStrutPair(chain, i, i + 1));
+    chain.listed_pairs.push_back(makeStrutPair(chain, i, i + 1));
   EXPECT_FALSE(BroadPhase(chain).usesSweep());
   // both answers still agree for the chain (candidates() goes the direct way here)
   for (double margin : { 0.0, 0.05 })
     checkScene(chain, margin, "chain");
+}
+
+// Every two struts that share no node (`pairs: auto`): numbered, not stored. Each slot's bodies, its constants
+// and its slot back agree; the struts sharing a node are gaps; the broad phase finds what it finds for the same
+// pairs listed, in both its ways; the minimum gap through the broad phase equals every pair's.
+TEST(AllStrutPairs, NumberEveryPairOnceAndTheBroadPhaseFindsThemAsForAList)
+{
+  std::mt19937 rng(31);
+  for (int rep = 0; rep < 4; ++rep)
+  {
+    Model m = randomScene({ 60, 2.0, 0.0 }, rng);  // a point mass (body 0), then 60 struts; nothing listed
+    m.contact.enabled = true;
+    std::vector<int> struts;
+    for (int b = 1; b <= 60; ++b)
+      struts.push_back(b);
+    std::shuffle(struts.begin(), struts.end(), rng);  // any order given: numbered ascending
+    std::uniform_int_distribution<int> strut(1, 60);
+    std::vector<std::pair<int, int>> joined = { { 0, 5 } };  // a point mass and a strut: no strut pair
+    std::set<std::pair<int, int>> joined_struts;
+    for (int k = 0; k < 40; ++k)
+    {
+      const int a = strut(rng), b = strut(rng);
+      joined.emplace_back(a, b);
+      if (a != b)
+        joined_struts.insert({ std::min(a, b), std::max(a, b) });
+    }
+    m.checkAllStrutPairs(struts, joined);
+    ASSERT_EQ(m.pairSlots(), 60 * 59 / 2);
+    ASSERT_EQ(m.checkedPairCount(), 60 * 59 / 2 - static_cast<long>(joined_struts.size()));
+    std::pair<int, int> previous = { -1, -1 };
+    for (int slot = 0; slot < m.pairSlots(); ++slot)
+    {
+      const auto [a, b] = m.pairBodies(slot);
+      ASSERT_TRUE(a >= 1 && a < b && b <= 60) << "slot " << slot;
+      ASSERT_LT(previous, std::make_pair(a, b)) << "slot " << slot;  // in the order of the struts' pairs
+      previous = { a, b };
+      const bool shares = joined_struts.count({ a, b }) > 0;
+      ASSERT_EQ(m.isCheckedPair(slot), !shares) << "slot " << slot;
+      ASSERT_EQ(m.allPairsSlot(a, b), shares ? -1 : slot);
+      ASSERT_EQ(m.allPairsSlot(b, a), shares ? -1 : slot);
+      const StrutPair p = m.strutPair(slot), made = makeStrutPair(m, a, b);
+      ASSERT_EQ(p.body_a, a);
+      ASSERT_EQ(p.body_b, b);
+      ASSERT_EQ(p.stiffness90, made.stiffness90);
+    }
+    EXPECT_EQ(previous, std::make_pair(59, 60));
+    EXPECT_EQ(m.allPairsSlot(0, 5), -1);  // not a strut
+    EXPECT_EQ(m.allPairsSlot(7, 7), -1);
+    for (double margin : { 0.0, 0.05 })
+      checkScene(m, margin, "all strut pairs, scene " + std::to_string(rep));
+    // the same pairs listed: the same pairs found
+    Model listed = m;
+    std::vector<int> slots;
+    listed.listed_pairs = m.checkedPairList(&slots);
+    listed.all_strut_pairs = false;
+    ASSERT_EQ(static_cast<long>(slots.size()), m.checkedPairCount());
+    std::vector<int> numbered, found;
+    BroadPhase(m).candidates(m.q0, 0.05, numbered);
+    BroadPhase(listed).candidates(m.q0, 0.05, found);
+    ASSERT_EQ(numbered.size(), found.size());
+    for (size_t k = 0; k < found.size(); ++k)
+      EXPECT_EQ(numbered[k], slots[static_cast<size_t>(found[k])]);
+    // the minimum gap: every pair's, and through the broad phase
+    double every = std::numeric_limits<double>::infinity();
+    for (int slot = 0; slot < m.pairSlots(); ++slot)
+      if (m.isCheckedPair(slot))
+        every = std::min(every, contactGeometry(m, slot, m.q0).gap);
+    EXPECT_EQ(minimumGap(m, m.q0), every);
+    EXPECT_EQ(minimumGapNear(m, BroadPhase(m), m.q0), every);
+    EXPECT_EQ(minimumGapNear(listed, BroadPhase(listed), m.q0), every);
+    // spread out (the first margins find nothing near)
+    Eigen::VectorXd far = m.q0;
+    for (int b = 1; b <= 60; ++b)
+      far.segment<3>(m.bodies[b].offset) *= 40.0;
+    double every_far = std::numeric_limits<double>::infinity();
+    for (int slot = 0; slot < m.pairSlots(); ++slot)
+      if (m.isCheckedPair(slot))
+        every_far = std::min(every_far, contactGeometry(m, slot, far).gap);
+    EXPECT_GT(every_far, 1.0);
+    EXPECT_EQ(minimumGapNear(m, BroadPhase(m), far), every_far);
+  }
+}
+
+TEST(AllStrutPairs, NumberTheMostStrutsAndRefuseOneMore)
+{
+  Model m;
+  const int n = Model::kMostAutoPairStruts;
+  std::vector<int> struts;
+  for (int i = 0; i < n; ++i)
+  {
+    m.bodies.push_back(makeStrut("S" + std::to_string(i), 1.0, 0.01, 1000.0));
+    struts.push_back(i);
+  }
+  m.checkAllStrutPairs(struts, { { 0, 1 } });
+  const long long slots = static_cast<long long>(n) * (n - 1) / 2;
+  ASSERT_EQ(m.pairSlots(), slots);
+  // 4 (slots + 2 ground spheres a strut) fits an int: rviz marker ids
+  EXPECT_LE(4 * (slots + 2LL * n), static_cast<long long>(std::numeric_limits<int>::max()));
+  // every row's first and last slot, and random ones: the bodies and back
+  const auto check = [&m](long long slot)
+  {
+    const auto [a, b] = m.pairBodies(static_cast<int>(slot));
+    ASSERT_TRUE(a >= 0 && a < b && b < Model::kMostAutoPairStruts) << "slot " << slot;
+    if (a == 0 && b == 1)
+      ASSERT_EQ(m.allPairsSlot(a, b), -1);
+    else
+      ASSERT_EQ(m.allPairsSlot(a, b), slot);
+  };
+  long long first = 0;
+  for (long long k = 0; k + 1 < n; ++k)
+  {
+    check(first);
+    check(first + (n - k - 1) - 1);
+    ASSERT_EQ(m.pairBodies(static_cast<int>(first)), std::make_pair(static_cast<int>(k), static_cast<int>(k + 1)));
+    first += n - k - 1;
+  }
+  ASSERT_EQ(first, slots);
+  std::mt19937 rng(32);
+  std::uniform_int_distribution<long long> any(0, slots - 1);
+  for (int k = 0; k < 100000; ++k)
+    check(any(rng));
+  m.bodies.push_back(makeStrut("one more", 1.0, 0.01, 1000.0));
+  struts.push_back(n);
+  try
+  {
+    m.checkAllStrutPairs(struts, {});
+    FAIL() << "numbered the pairs of " << n + 1 << " struts";
+  }
+  catch (const std::invalid_argument& e)
+  {
+    EXPECT_NE(std::string(e.what()).find("at most 32000 struts, the scene has 32001"), std::string::npos) << e.what();
+  }
 }
 
 TEST(BroadPhase, NoPairsNoCandidates)
@@ -314,7 +454,7 @@ TEST(BroadPhase, ParallelLatticeWithTiesOnTheSweepAxis)
   }
   for (int i = 0; i < 36; ++i)
     for (int j = i + 1; j < 36; ++j)
-      m.checked_pairs.push_back(makeStrutPair(m, i, j));
+      m.listed_pairs.push_back(makeStrutPair(m, i, j));
   ASSERT_TRUE(BroadPhase(m).usesSweep());
   const SceneCounts n = checkScene(m, 0.0, "lattice");
   EXPECT_EQ(n.touching, 6 * 5);    // neighbours in y
@@ -343,7 +483,7 @@ TEST(BroadPhase, AxisAlignedStrutsTouchingBy1nmAreCandidates)
         m.q0.head(q_ab.size()) = q_ab;
         m.q0.segment<3>(14) = (-0.5 - 0.04 + overlap) * e;
         m.q0.segment<4>(17) = thetaFromZAxis(side);
-        m.checked_pairs.push_back(makeStrutPair(m, 0, 2));
+        m.listed_pairs.push_back(makeStrutPair(m, 0, 2));
         const std::string what = "axis " + std::to_string(axis) + (sign > 0.0 ? " +" : " -") +
                                  (overlap > 0.0 ? ", overlapping by 1 nm" : ", 1 nm apart");
         for (int p = 0; p < 2; ++p)
@@ -362,7 +502,7 @@ TEST(BroadPhase, APairListedTwiceIsRefused)
 {
   // the sweep finds a pair once: a duplicate would make it disagree with the direct comparison
   Model m = parallelPair(0.03);
-  m.checked_pairs.push_back(makeStrutPair(m, 1, 0));
+  m.listed_pairs.push_back(makeStrutPair(m, 1, 0));
   EXPECT_THROW(BroadPhase{ m }, std::invalid_argument);
 }
 
@@ -423,7 +563,7 @@ TEST(NearSlotCache, TakesTheGapsItIsGivenForTheSlotsThatHaveThem)
   NearSlotCache cache, told;
   std::vector<int> fresh, kept, scratch, candidates;
   const int slots = m.contactSlots();
-  std::vector<double> known(slots, std::numeric_limits<double>::quiet_NaN());
+  SlotValues known(slots, std::numeric_limits<double>::quiet_NaN());
   std::bernoulli_distribution half(0.5);
   Eigen::VectorXd q = m.q0;
   const double reach = 1e-3;
@@ -432,11 +572,11 @@ TEST(NearSlotCache, TakesTheGapsItIsGivenForTheSlotsThatHaveThem)
   {
     for (const Body& b : m.bodies)
       q.segment<3>(b.offset) += 0.3 * reach * randomUnit(rng);
-    std::fill(known.begin(), known.end(), std::numeric_limits<double>::quiet_NaN());
+    known.reset(slots, std::numeric_limits<double>::quiet_NaN());
     for (int i = 0; i < slots; ++i)
       if (half(rng))
       {
-        known[i] = contactGeometry(m, i, q).gap;
+        known.set(i, contactGeometry(m, i, q).gap);
         ++given;
       }
     nearContactSlots(m, broad, q, reach, scratch, fresh);
@@ -453,8 +593,8 @@ TEST(NearSlotCache, TakesTheGapsItIsGivenForTheSlotsThatHaveThem)
     if (contactGeometry(m, i, q).gap > 2.0 * reach)
       far = i;
   ASSERT_GE(far, 0);
-  std::fill(known.begin(), known.end(), std::numeric_limits<double>::quiet_NaN());
-  known[far] = -1e-3;
+  known.reset(slots, std::numeric_limits<double>::quiet_NaN());
+  known.set(far, -1e-3);
   told.find(m, broad, q, reach, kept, &known);
   EXPECT_NE(std::find(kept.begin(), kept.end(), far), kept.end());
   EXPECT_EQ(kept.size(), fresh.size() + 1);

@@ -36,7 +36,7 @@ Model twoStruts(double mu, double restitution, double ra = 0.04, double rb = 0.0
   m.contact.restitution = restitution;
   m.contact.stick_velocity = 0.01;
   m.contact.slip_velocity = 0.1;
-  m.checked_pairs.push_back(makeStrutPair(m, 0, 1));
+  m.listed_pairs.push_back(makeStrutPair(m, 0, 1));
   m.q0.setZero(m.nq);
   return m;
 }
@@ -123,7 +123,7 @@ TEST(ContactStiffness, RightCrossingIsJohnsonsAndGrowsAsTheStrutsAlign)
   const Model m = twoStruts(0.0, 1.0);
   const double estar = 1.0 / (2.0 * (1.0 - 0.45 * 0.45) / 2.0e7);
   const double k90 = 4.0 / 3.0 * estar * std::sqrt(std::sqrt(0.04 * 0.05));
-  EXPECT_NEAR(m.checked_pairs[0].stiffness90, k90, 1e-9 * k90);
+  EXPECT_NEAR(m.checkedPairList()[0].stiffness90, k90, 1e-9 * k90);
   // Re = sqrt(r1 r2) / |sin theta| (Eq. 31-32 with R' = inf): K = k90 / sqrt(sin theta)
   for (double deg : { 90.0, 60.0, 30.0, 15.0 })
   {
@@ -258,7 +258,7 @@ TEST(ContactTangent, CombinedIntoTheSystemTangent)
   const System sys(m);
   const Eigen::VectorXd q = crossing(m, 2e-3, rng);
   const Eigen::VectorXd qd = velocitiesWithSlip(m, q, 0.4, 0.5, rng);
-  const std::vector<double> v0 = { 0.5 };
+  const SlotValues v0(1, 0.5);
   BlockSparseMatrix jac = sys.makeMatrix();
   Eigen::VectorXd F = Eigen::VectorXd::Zero(m.nq);
   sys.contactForce(q, qd, v0, ContactMode::kDynamic, F, &jac, 2.0, 3.0);
@@ -368,7 +368,7 @@ TEST(ContactSpecialCases, ParallelStrutsPressedTogetherPushApart)
     EXPECT_GT(c.force(7), 0.0) << tilt;
     // the capped stiffness: never above K at the floor angle
     EXPECT_LE(st.stiffness,
-              m.checked_pairs[0].stiffness90 / std::sqrt(std::sin(m.contact.min_crossing_angle)) * (1 + 1e-12));
+              m.checkedPairList()[0].stiffness90 / std::sqrt(std::sin(m.contact.min_crossing_angle)) * (1 + 1e-12));
   }
 }
 
@@ -445,7 +445,7 @@ Model layeredStruts(double mu, double restitution, bool both = true)
   Model m = twoStruts(mu, restitution);
   for (size_t i = 0; i < (both ? 2u : 1u); ++i)
     addSteelCore(m.bodies[i], 0.015);
-  m.checked_pairs[0] = makeStrutPair(m, 0, 1);
+  m.listed_pairs[0] = makeStrutPair(m, 0, 1);
   return m;
 }
 
@@ -461,20 +461,20 @@ TEST(LayeredContact, CoresMeetAtTheSleevesThicknessWithTheirOwnHertzStiffness)
 {
   const Model plain = twoStruts(0.0, 1.0);
   const Model both = layeredStruts(0.0, 1.0), one = layeredStruts(0.0, 1.0, false);
-  EXPECT_EQ(plain.checked_pairs[0].core_stiffness90, 0.0);
+  EXPECT_EQ(plain.checkedPairList()[0].core_stiffness90, 0.0);
   const double steel = 1.0 / (2.0 * (1.0 - 0.09) / 210e9);
-  EXPECT_NEAR(both.checked_pairs[0].core_gap, (0.04 - 0.015) + (0.05 - 0.015), 1e-15);
-  EXPECT_NEAR(both.checked_pairs[0].core_stiffness90, 4.0 / 3.0 * steel * std::sqrt(0.015), 1e-6);
+  EXPECT_NEAR(both.checkedPairList()[0].core_gap, (0.04 - 0.015) + (0.05 - 0.015), 1e-15);
+  EXPECT_NEAR(both.checkedPairList()[0].core_stiffness90, 4.0 / 3.0 * steel * std::sqrt(0.015), 1e-6);
   // a strut without a core meets the other's core with its one layer
   const double mixed = 1.0 / ((1.0 - 0.09) / 210e9 + (1.0 - 0.45 * 0.45) / 2.0e7);
-  EXPECT_NEAR(one.checked_pairs[0].core_gap, 0.04 - 0.015, 1e-15);
-  EXPECT_NEAR(one.checked_pairs[0].core_stiffness90, 4.0 / 3.0 * mixed * std::pow(0.015 * 0.05, 0.25), 1e-6);
+  EXPECT_NEAR(one.checkedPairList()[0].core_gap, 0.04 - 0.015, 1e-15);
+  EXPECT_NEAR(one.checkedPairList()[0].core_stiffness90, 4.0 / 3.0 * mixed * std::pow(0.015 * 0.05, 0.25), 1e-6);
   // the sleeves' stiffness is the plain struts'
-  EXPECT_EQ(both.checked_pairs[0].stiffness90, plain.checked_pairs[0].stiffness90);
+  EXPECT_EQ(both.checkedPairList()[0].stiffness90, plain.checkedPairList()[0].stiffness90);
   const Eigen::VectorXd zero = Eigen::VectorXd::Zero(plain.nq);
   for (const Model* m : { &both, &one })
   {
-    const double t = m->checked_pairs[0].core_gap;
+    const double t = m->checkedPairList()[0].core_gap;
     for (double overlap : { 0.5 * t, t - 1e-6, t + 1e-6, t + 2e-3 })
     {
       const Eigen::VectorXd q = crossingAt(*m, overlap, 21);
@@ -494,7 +494,8 @@ TEST(LayeredContact, CoresMeetAtTheSleevesThicknessWithTheirOwnHertzStiffness)
         EXPECT_NEAR(s.core_penetration, zc, 1e-12);
         // K_c follows the crossing angle as K does: K_c / K = core_stiffness90 / stiffness90
         EXPECT_NEAR(s.core_stiffness / s.stiffness,
-                    m->checked_pairs[0].core_stiffness90 / m->checked_pairs[0].stiffness90, 1e-12 * s.core_stiffness);
+                    m->checkedPairList()[0].core_stiffness90 / m->checkedPairList()[0].stiffness90,
+                    1e-12 * s.core_stiffness);
         EXPECT_NEAR(s.normal_force, p.normal_force + s.core_stiffness * zc * std::sqrt(zc), 1e-9 * s.normal_force)
             << overlap;
       }
@@ -508,7 +509,7 @@ TEST(LayeredContact, TangentsAreExactOnBothSidesOfTheSwitch)
   for (bool both : { true, false })
   {
     const Model m = layeredStruts(0.3, 0.5, both);
-    const double t = m.checked_pairs[0].core_gap;
+    const double t = m.checkedPairList()[0].core_gap;
     for (int k = 0; k < 8; ++k)
     {
       const double overlap = t + (k % 4 == 0 ? -1e-3 : k % 4 == 1 ? -1e-4 : k % 4 == 2 ? 1e-4 : 1e-3);
@@ -527,7 +528,7 @@ TEST(LayeredContact, ForceAndTangentAreContinuousAtTheSwitch)
   // F = K zeta^1.5 + K_c (zeta - t)^1.5: the core's term and its derivative 1.5 K_c (zeta - t)^0.5 start at zero,
   // so force and tangent just below and just above the switch differ by O(delta) and O(K_c sqrt(delta))
   const Model m = layeredStruts(0.0, 1.0);
-  const double t = m.checked_pairs[0].core_gap;
+  const double t = m.checkedPairList()[0].core_gap;
   const Eigen::VectorXd zero = Eigen::VectorXd::Zero(m.nq);
   double previous = INFINITY;
   for (double delta : { 1e-6, 1e-8, 1e-10 })
@@ -537,7 +538,7 @@ TEST(LayeredContact, ForceAndTangentAreContinuousAtTheSwitch)
     evaluateContact(m, 0, crossingAt(m, t + delta, 23), zero, 0.0, ContactMode::kStatic, &above);
     const double scale = below.stiffness.cwiseAbs().maxCoeff();
     const double jump = (above.stiffness - below.stiffness).cwiseAbs().maxCoeff() / scale;
-    const double kc = m.checked_pairs[0].core_stiffness90;
+    const double kc = m.checkedPairList()[0].core_stiffness90;
     // the core's tangent at delta is about 1.5 K_c sqrt(delta) (times the crossing angle's factor, <= 1.4)
     EXPECT_LT(jump, 3.0 * kc * std::sqrt(delta) / scale + 1e-9) << delta;
     // no step: a hundredth of delta, a tenth of the difference (sqrt), not a floor

@@ -56,7 +56,7 @@ Model crossedCylinders(double restitution, double mu, double angle_deg = 90.0, d
   m.contact.enabled = true;
   m.contact.restitution = restitution;
   m.contact.friction = mu;
-  m.checked_pairs.push_back(makeStrutPair(m, 0, 1));
+  m.listed_pairs.push_back(makeStrutPair(m, 0, 1));
   const double gap = 5e-4;
   const double a = angle_deg * M_PI / 180.0;
   m.q0.setZero(m.nq);
@@ -132,7 +132,7 @@ TEST(HertzImpact, CrossedCylindersMatchTheClosedFormSolution)
   // Hertz: m* d'' = -K d^1.5 from d' = v: d_max = (5 m* v^2 / (4 K))^(2/5), F_max = K d_max^1.5,
   // duration 2 d_max / v * int_0^1 dx / sqrt(1 - x^2.5) = 2.9432 d_max / v
   const double mstar = m.bodies[0].mass * m.bodies[1].mass / (m.bodies[0].mass + m.bodies[1].mass);
-  const double k = m.checked_pairs[0].stiffness90;
+  const double k = m.checkedPairList()[0].stiffness90;
   const double dmax = std::pow(5.0 * mstar * kSpeed * kSpeed / (4.0 * k), 0.4);
   const double fmax = k * std::pow(dmax, 1.5);
   const double tc = 2.9432 * dmax / kSpeed;
@@ -160,7 +160,7 @@ TEST_P(LankaraniNikravesh, ReboundMatchesTheOneDegreeOfFreedomModelAndRestitutio
   const ImpactRecord r = simulateImpact(m, 1e-5, 0.012, Vec3(0.0, 0.0, -kSpeed));
   ASSERT_TRUE(r.ok);
   const double mstar = 0.5 * m.bodies[0].mass;
-  const double exact = reboundOfOneDegreeOfFreedom(mstar, m.checked_pairs[0].stiffness90, kSpeed, ce);
+  const double exact = reboundOfOneDegreeOfFreedom(mstar, m.checkedPairList()[0].stiffness90, kSpeed, ce);
   std::printf("[ measured ] c_e %.2f: rebound %.5f, 1-D model %.5f\n", ce, r.rebound_ratio, exact);
   // the multibody run reproduces the 1-D model of its own force law
   EXPECT_NEAR(r.rebound_ratio, exact, 5e-3);
@@ -279,8 +279,8 @@ TEST(LayeredImpact, CoresStopTheStrutsBeyondTheSleevesAtTheEnergyBalancesOverlap
   Model m = crossedCylinders(1.0, 0.0);
   for (Body& b : m.bodies)
     addSteelCore(b, 0.008);
-  m.checked_pairs[0] = makeStrutPair(m, 0, 1);
-  const StrutPair& p = m.checked_pairs[0];
+  m.listed_pairs[0] = makeStrutPair(m, 0, 1);
+  const StrutPair p = m.checkedPairList()[0];
   ASSERT_NEAR(p.core_gap, 0.024, 1e-15);
   const double mu = 0.5 * m.bodies[0].mass;
   const auto work = [&](double z)
@@ -386,7 +386,7 @@ TEST(AdaptiveSteps, HertzImpactOnsetLocatedClosedFormKeptAndStepGrowsAfter)
   const Summary r = stepper.advanceTo(s, 0.03, noActuation(), record);
   ASSERT_TRUE(r.ok()) << r.message;
   const double mstar = 0.5 * m.bodies[0].mass;
-  const double k = m.checked_pairs[0].stiffness90;
+  const double k = m.checkedPairList()[0].stiffness90;
   const double dmax = std::pow(5.0 * mstar * kSpeed * kSpeed / (4.0 * k), 0.4);
   const double fmax = k * std::pow(dmax, 1.5);
   const double tc = 2.9432 * dmax / kSpeed;

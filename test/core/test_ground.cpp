@@ -313,7 +313,7 @@ TEST(GroundSupport, TheSixBarRobotAtRestCarriesItsWeightOnThreeEnds)
     ASSERT_EQ(c.body_b, -1);
     sum += c.normal_force;
     EXPECT_DOUBLE_EQ(c.point_b.z(), 0.0);
-    touching.push_back(m.ground_contacts[c.pair - m.checked_pairs.size()].node);
+    touching.push_back(m.ground_contacts[c.pair - m.pairSlots()].node);
   }
   std::printf("[ measured ] ground contacts at %s carry %.9f N of a weight of %.9f N\n",
               (touching.size() == 3 ? touching[0] + ", " + touching[1] + ", " + touching[2] : std::string("?")).c_str(),
@@ -343,7 +343,7 @@ TEST(GroundSupport, TheContactsARunHandsItsStepCallbackAreThoseOfAFullSearch)
         expectSameContacts(*contacts, full, s.t);
         for (const ContactPairState& c : full)
         {
-          touched[c.pair - m.checked_pairs.size()] = true;
+          touched[c.pair - m.pairSlots()] = true;
           sliding += c.friction_force > 0.0 ? 1 : 0;
         }
       });

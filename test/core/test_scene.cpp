@@ -174,7 +174,7 @@ TEST(QuadruplexScene, LoadsWithTheCountsOfTable1)
   EXPECT_EQ(m.actuators[0].name, "top");
   EXPECT_EQ(m.actuators[0].constraints.size(), 4u);
   EXPECT_DOUBLE_EQ(m.actuators[0].max_value, 1.8);
-  EXPECT_EQ(m.checked_pairs.size(), 6u);
+  EXPECT_EQ(m.checkedPairList().size(), 6u);
   EXPECT_EQ(m.analysis.type, AnalysisType::kStatic);
   EXPECT_DOUBLE_EQ(m.analysis.max_actuation, 1.72);
   EXPECT_EQ(m.analysis.steps, 172);
@@ -250,7 +250,7 @@ TEST(QuadruplexScene, ChecksEveryPairOfStrutsOnce)
 {
   const Model m = loadScene(kQuadruplex);
   std::set<std::pair<int, int>> seen;
-  for (const StrutPair& p : m.checked_pairs)
+  for (const StrutPair& p : m.checkedPairList())
   {
     EXPECT_LT(p.body_a, p.body_b);
     EXPECT_TRUE(seen.insert({ p.body_a, p.body_b }).second);
@@ -361,9 +361,9 @@ TEST(MiniScene, Loads)
   // two pins, two joints (C: S2-S3, D: S1-S3), one actuated row, three norms
   EXPECT_EQ(m.n_lambda, 3 + 3 + 3 + 3 + 1 + 3);
   // S3 shares a node with each of the others: only S1-S2 is checked
-  ASSERT_EQ(m.checked_pairs.size(), 1u);
-  EXPECT_EQ(m.bodies[m.checked_pairs[0].body_a].name, "S1");
-  EXPECT_EQ(m.bodies[m.checked_pairs[0].body_b].name, "S2");
+  ASSERT_EQ(m.checkedPairList().size(), 1u);
+  EXPECT_EQ(m.bodies[m.checkedPairList()[0].body_a].name, "S1");
+  EXPECT_EQ(m.bodies[m.checkedPairList()[0].body_b].name, "S2");
 }
 
 TEST(MiniScene, AutoPairsLeaveOutEveryPairAtACommonNode)
@@ -390,7 +390,7 @@ analysis: {type: dynamic, duration: 0.01}
 )";
   const Model m = loadSceneFromString(yaml, "star.yaml");
   std::set<std::pair<std::string, std::string>> pairs;
-  for (const StrutPair& p : m.checked_pairs)
+  for (const StrutPair& p : m.checkedPairList())
     pairs.insert({ m.bodies[p.body_a].name, m.bodies[p.body_b].name });
   const std::set<std::pair<std::string, std::string>> expected = { { "S1", "S4" }, { "S2", "S4" }, { "S3", "S4" } };
   EXPECT_EQ(pairs, expected);
@@ -677,8 +677,8 @@ TEST(ContactSettings, KeysReachTheModelAndPairsGetTheirStiffness)
   EXPECT_EQ(m.contact.min_impact_speed, 0.01);
   // steel on steel (E 210 GPa, nu 0.31), r = 0.05 m: K90 = 4/3 E* sqrt(r)
   const double estar = 210e9 / (2.0 * (1.0 - 0.31 * 0.31));
-  ASSERT_EQ(m.checked_pairs.size(), 6u);
-  for (const StrutPair& p : m.checked_pairs)
+  ASSERT_EQ(m.checkedPairList().size(), 6u);
+  for (const StrutPair& p : m.checkedPairList())
     EXPECT_NEAR(p.stiffness90, 4.0 / 3.0 * estar * std::sqrt(0.05), 1e-6 * p.stiffness90);
 }
 

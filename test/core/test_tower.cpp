@@ -96,7 +96,7 @@ TEST(Tower, LayoutIsThatOfThePapersFourStageTower)
   EXPECT_EQ(springs, 8);
   EXPECT_EQ(joints, 12);
   EXPECT_EQ(pins, 4);
-  EXPECT_EQ(m.checked_pairs.size(), 16u);
+  EXPECT_EQ(m.checkedPairList().size(), 16u);
   EXPECT_EQ(m.actuators.size(), 4u);
   EXPECT_EQ(m.layers.size(), 4u);
   EXPECT_DOUBLE_EQ(structureHeight(m, m.q0), 2.0);
@@ -326,7 +326,7 @@ TEST(Tower, TheSolverGivesContactsOnlyForTheStateItsLastStepEndedIn)
   moved.q[1] -= 1e-12;
   EXPECT_EQ(solver.contactsAt(moved), nullptr) << "a position changed";
   moved = s;
-  moved.contact_speed[touching] *= 2.0;
+  moved.contact_speed.set(touching, 2.0 * moved.contact_speed[touching]);
   EXPECT_EQ(solver.contactsAt(moved), nullptr) << "a touching pair's impact speed changed";
   moved = s;
   moved.t += 1e-9;  // callers round the time to their step grid

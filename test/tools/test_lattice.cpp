@@ -2,8 +2,12 @@
 // expected counts, check the intended strut pairs, start with every constraint satisfied and in equilibrium,
 // and a small one runs dynamically; the command refuses bad arguments by name.
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
+#include <limits>
+#include <map>
 #include <set>
+#include <tuple>
 #include <string>
 #include <utility>
 #include <vector>
@@ -75,7 +79,7 @@ std::set<std::pair<int, int>> pairsSharingNoNode(const at::Model& m)
 std::set<std::pair<int, int>> checked(const at::Model& m)
 {
   std::set<std::pair<int, int>> out;
-  for (const at::StrutPair& p : m.checked_pairs)
+  for (const at::StrutPair& p : m.checkedPairList())
     out.insert({ std::min(p.body_a, p.body_b), std::max(p.body_a, p.body_b) });
   return out;
 }
@@ -129,9 +133,9 @@ TEST(Lattice, AllListsEveryPairOfStrutsThatShareNoNodeOnce)
     const at::Model m = lattice(nx, ny, tl::LatticePairs::kAll);
     const auto expected = pairsSharingNoNode(m);
     EXPECT_EQ(checked(m), expected) << nx << "x" << ny;
-    EXPECT_EQ(m.checked_pairs.size(), expected.size()) << "a pair listed twice";
+    EXPECT_EQ(m.checkedPairList().size(), expected.size()) << "a pair listed twice";
   }
-  EXPECT_EQ(lattice(1, 1, tl::LatticePairs::kAll).checked_pairs.size(), 6u);  // one quadruplex: all six pairs
+  EXPECT_EQ(lattice(1, 1, tl::LatticePairs::kAll).checkedPairList().size(), 6u);  // one quadruplex: all six pairs
 }
 
 TEST(Lattice, AutoChecksEveryPairOfStrutsThatShareNoNode)
@@ -159,10 +163,10 @@ TEST(Lattice, NearListsOnlyPairsOfTheSameOrAdjacentCells)
       expected.insert({ a, b });
   }
   EXPECT_EQ(checked(m), expected);
-  EXPECT_EQ(m.checked_pairs.size(), expected.size()) << "a pair listed twice";
+  EXPECT_EQ(m.checkedPairList().size(), expected.size()) << "a pair listed twice";
   EXPECT_LT(expected.size(), all.size());  // on 3 x 3 some cells are not adjacent
   // a single cell: the same six pairs as auto
-  EXPECT_EQ(lattice(1, 1, tl::LatticePairs::kNear).checked_pairs.size(), 6u);
+  EXPECT_EQ(lattice(1, 1, tl::LatticePairs::kNear).checkedPairList().size(), 6u);
 }
 
 TEST(Lattice, StartsWithEveryConstraintSatisfiedAndInEquilibrium)
@@ -389,6 +393,72 @@ TEST(Lattice, ModifiedNewtonOnBodyBlocksFollowsFullNewtonThroughContact)
   EXPECT_LT(distance[2], 1e-6);
   EXPECT_LT(distance[2], 1e-3 * distance[0]);
   EXPECT_LT(floor, 1e-6);
+}
+
+// A scene's per-slot contact memory is an array up to SlotValues::denseMostSlots() slots and a hash map of the
+// touching slots above it (a lattice of 10 000 struts has 50 million slots): the fold through contact gives the
+// same bits both ways.
+TEST(Lattice, ContactMemoryInAHashMapFoldsAsInAnArray)
+{
+  const at::Model m = folding(1, 2, 0.4);
+  const auto run = [&m](bool adaptive, int dense_most, int& touched)
+  {
+    int& most = at::SlotValues::denseMostSlots();
+    const int kept = most;
+    most = dense_most;
+    at::Model copy = m;
+    copy.solver.adaptive = adaptive;
+    touched = 0;
+    const at::RunResult r = at::runAnalysis(
+        copy, [](const at::State&) {}, {},
+        [&](const at::State& s)
+        {
+          EXPECT_EQ(s.contact_speed.isSparse(), dense_most == 0);
+          touched = std::max(touched, static_cast<int>(at::activeContacts(m, s).size()));
+        });
+    most = kept;
+    return r;
+  };
+  for (bool adaptive : { false, true })
+  {
+    int touched_array = 0, touched_map = 0;
+    const at::RunResult array = run(adaptive, at::SlotValues::denseMostSlots(), touched_array);
+    const at::RunResult map = run(adaptive, 0, touched_map);
+    ASSERT_TRUE(array.summary.ok()) << array.summary.message;
+    ASSERT_TRUE(map.summary.ok()) << map.summary.message;
+    EXPECT_GT(touched_array, 0) << "adaptive " << adaptive;
+    EXPECT_EQ(touched_map, touched_array);
+    EXPECT_EQ(map.solver_steps, array.solver_steps);
+    EXPECT_TRUE(map.final_state.q == array.final_state.q) << "adaptive " << adaptive;
+    EXPECT_TRUE(map.final_state.qd == array.final_state.qd) << "adaptive " << adaptive;
+    EXPECT_TRUE(map.final_state.contact_speed == array.final_state.contact_speed) << "adaptive " << adaptive;
+  }
+}
+
+// 2500 cells, 10 000 struts: every two that share no node checked, none of the 50 million pairs stored; the
+// minimum gap through the broad phase is the one between neighbouring cells' struts
+TEST(Lattice, TenThousandStrutsLoadWithoutAPairList)
+{
+  const at::Model m = lattice(50, 50);
+  ASSERT_EQ(m.bodies.size(), 10000u);
+  EXPECT_TRUE(m.all_strut_pairs);
+  EXPECT_TRUE(m.listed_pairs.empty());
+  EXPECT_EQ(m.pairSlots(), 10000 * 9999 / 2);
+  // struts sharing a node: a cell's four meet pairwise at the top, the ground corners join up to four cells
+  long sharing = 0;
+  std::map<std::tuple<long, long, long>, int> at_node;
+  for (const auto& [foot, top] : strutEnds(m))
+    for (const at::Vec3& p : { foot, top })
+      ++at_node[{ std::lround(p.x() * 1e6), std::lround(p.y() * 1e6), std::lround(p.z() * 1e6) }];
+  for (const auto& [node, count] : at_node)
+    sharing += static_cast<long>(count) * (count - 1) / 2;
+  EXPECT_EQ(m.checkedPairCount(), 10000L * 9999 / 2 - sharing);
+  double near = std::numeric_limits<double>::infinity();
+  const at::Model one = lattice(2, 2);  // the same gaps between cells as any two neighbours
+  for (int slot = 0; slot < one.pairSlots(); ++slot)
+    if (one.isCheckedPair(slot))
+      near = std::min(near, at::contactGeometry(one, slot, one.q0).gap);
+  EXPECT_NEAR(at::minimumGap(m, m.q0), near, 1e-12);
 }
 
 TEST(Lattice, ModifiedNewtonGoesOnInFullNewtonWhereItsOwnMatrixDoesNotContract)

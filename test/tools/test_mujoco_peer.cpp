@@ -204,7 +204,7 @@ TEST(MujocoPeer, ContactIsTheDocumentedLinearLawWhereverTheStrutsTouch)
   model.contact.enabled = true;
   model.contact.friction = 0.0;
   model.contact.restitution = 0.5;
-  model.checked_pairs.push_back(at::makeStrutPair(model, 0, 1));
+  model.listed_pairs.push_back(at::makeStrutPair(model, 0, 1));
   model.analysis.type = at::AnalysisType::kDynamic;
   const double overlap = 0.004;
   model.q0.setZero(model.nq);
@@ -218,7 +218,8 @@ TEST(MujocoPeer, ContactIsTheDocumentedLinearLawWhereverTheStrutsTouch)
   // the secant of our Hertz law through F*: K90 zeta*^1.5 = F* at zeta* = F* / K_lin
   const double k_lin = peer.contactStiffness(0);
   const double zeta_star = o.contact_force / k_lin;
-  EXPECT_NEAR(model.checked_pairs[0].stiffness90 * std::pow(zeta_star, 1.5), o.contact_force, 1e-9 * o.contact_force);
+  EXPECT_NEAR(model.checkedPairList()[0].stiffness90 * std::pow(zeta_star, 1.5), o.contact_force,
+              1e-9 * o.contact_force);
   // at rest: F = K_lin r to O(impedance), though the effective mass at x = 0 on A is not A's mass
   EXPECT_NEAR(peer.maxContactForce(), k_lin * overlap, 2e-3 * k_lin * overlap);
   // a linear oscillator with our restitution: zeta = -ln e / sqrt(pi^2 + ln^2 e)
@@ -528,6 +529,39 @@ TEST(MujocoPeer, ANonFiniteTranslationIsRefusedByName)
   EXPECT_EQ(r.code, 1) << r.output;
   EXPECT_NE(r.output.find("materials.steel.youngs_modulus: must lie in (0, 1e+14] Pa"), std::string::npos) << r.output;
   EXPECT_FALSE(std::ifstream(out).good()) << "a refused export wrote its file";
+}
+
+// a scene whose automatic pairs number more than a million: refused by name and count, not translated into a
+// <pair> element each
+TEST(MujocoPeer, MoreThanAMillionCheckedPairsAreRefused)
+{
+  at::Model model;
+  std::vector<int> struts;
+  for (int i = 0; i < 1500; ++i)
+  {
+    at::Body b;
+    b.name = "S" + std::to_string(i);
+    b.kind = at::BodyKind::kStrut;
+    b.length = 1.0;
+    b.layers = { at::StrutLayer{ "steel", 0.0, 0.01, 7850.0, 2.1e11, 0.3 } };
+    b.mass = 1.0;
+    model.bodies.push_back(b);
+    struts.push_back(i);
+  }
+  at::finalizeModel(model);
+  model.contact.enabled = true;
+  model.checkAllStrutPairs(struts, {});
+  try
+  {
+    tools::MujocoPeer peer(model, tools::MujocoOptions{});
+    FAIL() << "accepted";
+  }
+  catch (const std::invalid_argument& e)
+  {
+    EXPECT_NE(std::string(e.what()).find("contact.pairs: 1124250 checked strut pairs, more than the 1000000"),
+              std::string::npos)
+        << e.what();
+  }
 }
 
 // tensegrity_bench work-precision puts it in the status column: the prism of ARunThatBlowsUpSaysDiverged, whose

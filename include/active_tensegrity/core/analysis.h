@@ -36,8 +36,12 @@ std::vector<double> actuationBreakpoints(const Model& model);
 double structureHeight(const Model& model, const Eigen::VectorXd& q);
 
 /// Smallest surface gap between the checked strut pairs (m, negative when they overlap); +inf when
-/// the scene checks no pair.
+/// the scene checks no pair, NaN when q is not finite. Every pair of a small scene; a large one's through
+/// minimumGapNear.
 double minimumGap(const Model& model, const Eigen::VectorXd& q);
+/// The same through the broad phase at a growing margin m (a pair whose boxes grown by m do not overlap is more
+/// than 2 m apart): O(n log n) for n struts, not O(n^2).
+double minimumGapNear(const Model& model, const BroadPhase& broad, const Eigen::VectorXd& q);
 /// Smallest gap (m) between the ground and the spheres that can touch it (negative when one presses into it;
 /// +inf without a ground).
 double minimumGroundGap(const Model& model, const Eigen::VectorXd& q);

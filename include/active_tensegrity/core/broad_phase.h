@@ -18,17 +18,17 @@ namespace active_tensegrity::core
 class BroadPhase
 {
 public:
-  /// Throws std::invalid_argument when a pair of bodies is listed twice in model.checked_pairs.
+  /// Throws std::invalid_argument when a pair of bodies is listed twice in model.listed_pairs.
   explicit BroadPhase(const Model& model);
 
-  /// Indices (into Model::checked_pairs, ascending) of the pairs whose boxes, grown by `margin` (m),
+  /// The checked strut pairs' slots (Model::strutPair, ascending) whose boxes, grown by `margin` (m),
   /// overlap at q. Few pairs per strut: every listed pair's boxes are compared; many pairs (e.g. `auto`
   /// on a large scene): sort and sweep along the axis of largest spread, O(n log n + overlaps).
   void candidates(const Eigen::VectorXd& q, double margin, std::vector<int>& out) const;
 
   /// The sweep alone (tests compare it with the direct comparison).
   void sweep(const Eigen::VectorXd& q, double margin, std::vector<int>& out) const;
-  /// The direct comparison of every listed pair.
+  /// The direct comparison of every checked pair.
   void direct(const Eigen::VectorXd& q, double margin, std::vector<int>& out) const;
 
   bool usesSweep() const

@@ -53,13 +53,7 @@ enum class ContactMode
   kStatic
 };
 
-/// E* = [(1 - nu1^2)/E1 + (1 - nu2^2)/E2]^-1 (Pa) of the outer layers of two struts.
-double effectiveModulus(const Body& a, const Body& b);
-/// The same for two layers.
-double effectiveModulus(const StrutLayer& a, const StrutLayer& b);
-
-/// A checked pair with its constants: K at a right crossing, (4/3) E* (r1 r2)^(1/4) (N/m^1.5).
-StrutPair makeStrutPair(const Model& model, int body_a, int body_b);
+/// (effectiveModulus and makeStrutPair: model.h)
 
 /// Contact stiffness K (N/m^1.5) for a squared cosine c2 of the crossing angle, and dK/dc2.
 struct StiffnessValue
@@ -72,7 +66,7 @@ StiffnessValue contactStiffness(double k90, double cos2, double min_crossing_ang
 /// Everything known about one checked pair after evaluation (world frame, SI units).
 struct ContactPairState
 {
-  int pair = -1;                      // contact slot: index into Model::checked_pairs, then the ground contacts
+  int pair = -1;                      // contact slot: a strut pair (Model::strutPair), then the ground contacts
   int body_a = -1;                    // strut a (or the body touching the ground)
   int body_b = -1;                    // strut b, -1 for the ground
   bool active = false;                // zeta > 0

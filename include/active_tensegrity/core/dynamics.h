@@ -205,10 +205,10 @@ private:
     return reduced_current_ || linear_.exact();
   }
   Eigen::VectorXd q_, qd_, acc_, inertial_, applied_, cforce_, phi_, r_, dx_, qdd_iter_, lambda_iter_;
-  ActuationValues u_iter_;           // the law's values at the attempted step's end
-  std::vector<double> step_speeds_;  // v_0 per checked pair for the step being solved
-  std::vector<int> near_;            // the step's contact slots within reach (findNearContacts)
-  double near_motion_ = 0.0;         // the motion near_ allows for (m)
+  ActuationValues u_iter_;    // the law's values at the attempted step's end
+  SlotValues step_speeds_;    // v_0 per contact slot for the step being solved (the near slots set)
+  std::vector<int> near_;     // the step's contact slots within reach (findNearContacts)
+  double near_motion_ = 0.0;  // the motion near_ allows for (m)
   /// The least motion near_ allows for (m): a body at rest still moves a little in its first step.
   static constexpr double kNearFloor = 1e-4;
   bool start_at_end_ = false;          // the step being solved starts where the last accepted one ended (atEnd)
@@ -222,8 +222,8 @@ private:
   Eigen::VectorXd end_q_, end_qd_;
   std::vector<int> end_slots_;
   std::vector<double> end_memory_;
-  std::vector<double> end_rate_;
-  std::vector<double> end_gap_;
+  SlotValues end_rate_;
+  SlotValues end_gap_;
   mutable std::vector<ContactPairState> end_contacts_;
   mutable bool end_contacts_ready_ = false;
   /// Whether `s` is the state the last accepted step ended in (end_*).

@@ -20,6 +20,7 @@
 #include "active_tensegrity/core/contact.h"
 #include "active_tensegrity/core/kinematics.h"
 #include "active_tensegrity/core/model.h"
+#include "active_tensegrity/core/slot_values.h"
 
 namespace active_tensegrity::core
 {
@@ -41,8 +42,8 @@ void contactCandidates(const Model& model, const BroadPhase& broad, const Eigen:
 /// (optional, per slot): gaps already evaluated at this q (NaN: not evaluated), taken instead of the narrow phase.
 /// `gaps` (optional): the listed slots' gaps, in their order.
 void nearContactSlots(const Model& model, const BroadPhase& broad, const Eigen::VectorXd& q, double reach,
-                      std::vector<int>& candidates, std::vector<int>& out,
-                      const std::vector<double>* known_gap = nullptr, std::vector<double>* gaps = nullptr);
+                      std::vector<int>& candidates, std::vector<int>& out, const SlotValues* known_gap = nullptr,
+                      std::vector<double>* gaps = nullptr);
 
 /// nearContactSlots with a kept list (a Verlet list): the list is nearContactSlots at a reference q for kSkin
 /// times the reach of the call that made it, R = kSkin reach_0. It serves every later call whose reach plus
@@ -58,7 +59,7 @@ public:
   static constexpr double kSkin = 16.0;
   static constexpr double kBoundMargin = 1e-9;  // m: a slot is skipped by its bound only beyond 2 reach + this
   void find(const Model& model, const BroadPhase& broad, const Eigen::VectorXd& q, double reach, std::vector<int>& out,
-            const std::vector<double>* known_gap = nullptr);
+            const SlotValues* known_gap = nullptr);
   /// Lists built so far (one per call that found the kept list too far from q).
   long rebuilds() const
   {
@@ -133,13 +134,13 @@ public:
   /// contact forces into F (not cleared) and k_weight K + c_weight C into jac (when not null). Only the
   /// broad phase's candidates reach the narrow phase. impact_speeds: v_0 per contact slot (dynamics;
   /// may be empty in statics). The pairs' states for output come from activeContacts() (analysis.h).
-  void contactForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const std::vector<double>& impact_speeds,
+  void contactForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const SlotValues& impact_speeds,
                     ContactMode mode, Eigen::VectorXd& F, BlockSparseMatrix* jac, double k_weight,
                     double c_weight) const;
   /// The same for the listed contact slots alone (the caller knows no other slot can touch at q).
   void contactForce(const std::vector<int>& slots, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
-                    const std::vector<double>& impact_speeds, ContactMode mode, Eigen::VectorXd& F,
-                    BlockSparseMatrix* jac, double k_weight, double c_weight) const;
+                    const SlotValues& impact_speeds, ContactMode mode, Eigen::VectorXd& F, BlockSparseMatrix* jac,
+                    double k_weight, double c_weight) const;
   /// The first checked pair whose struts passed through each other between q0 and q1 (contact.h,
   /// passedThrough), or -1. Only pairs within reach of each other at q1 (the broad phase with boxes grown
   /// by the largest motion of a strut point between q0 and q1) are judged: a pair that crossed was in
@@ -155,7 +156,7 @@ public:
   void contactCandidates(const Eigen::VectorXd& q, double margin, std::vector<int>& out) const;
   /// The contact slots within 2 reach (m) of touching at q (nearContactSlots above; `known_gap` as there).
   void nearContacts(const Eigen::VectorXd& q, double reach, std::vector<int>& out,
-                    const std::vector<double>* known_gap = nullptr) const;
+                    const SlotValues* known_gap = nullptr) const;
   /// M(q) qdd + Qv(q, qd). Adds m_weight M + k_weight d(M qdd + Qv)/dq + c_weight dQv/dqd into jac.
   void inertialForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd,
                      Eigen::VectorXd& out, BlockSparseMatrix* jac, double m_weight, double k_weight,

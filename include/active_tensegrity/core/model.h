@@ -3,7 +3,9 @@
 /// validated there; algorithms take it by const reference.
 #pragma once
 
+#include <cstdint>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
@@ -143,7 +145,7 @@ struct Actuator
 };
 
 /// A pair of struts whose surface gap is measured and, when contact is on, whose contact is computed.
-/// Built by makeStrutPair() (contact.h), which fills the constants.
+/// Built by makeStrutPair(), which fills the constants.
 struct StrutPair
 {
   int body_a = -1;
@@ -304,9 +306,20 @@ struct Model
   std::vector<PointLoad> loads;
   std::vector<Constraint> constraints;
   std::vector<Actuator> actuators;
-  std::vector<StrutPair> checked_pairs;
+  /// The strut pairs whose contact is checked, each a contact slot, in one of two forms:
+  /// - listed (`contact.pairs` given, or a model built in code): listed_pairs, slot i the i-th;
+  /// - every two struts that share no node (`pairs: auto`, all_strut_pairs): numbered, not stored. With n
+  ///   struts (pair_struts, ascending), the k-th and l-th (k < l) are slot k (2n - k - 1)/2 + l - k - 1; the pairs
+  ///   of struts that share a node (joined_struts) are slots no one checks (isCheckedPair false). The broad phase
+  ///   finds the slots near contact; nothing of size n^2 is built.
+  /// Read them through strutPair(slot), isCheckedPair(slot) and pairSlots(), which serve both forms.
+  std::vector<StrutPair> listed_pairs;
+  bool all_strut_pairs = false;
+  std::vector<int> pair_struts;              // all_strut_pairs: the struts' body indices, ascending
+  std::vector<int> strut_rank;               // all_strut_pairs: body -> index in pair_struts (-1: not a strut)
+  std::vector<std::uint64_t> joined_struts;  // all_strut_pairs: pairKey of two struts sharing a node, ascending
   GroundSettings ground;
-  /// the spheres that can touch the ground (empty when it is off); contact slot checked_pairs.size() + i
+  /// the spheres that can touch the ground (empty when it is off); contact slot pairSlots() + i
   std::vector<GroundContact> ground_contacts;
   std::vector<int> height_nodes;  // node indices whose highest z gives the height
   std::vector<OutputLayer> layers;
@@ -321,21 +334,45 @@ struct Model
   int nq = 0;          // total coordinates
   int n_lambda = 0;    // total constraint rows (model constraints only)
 
-  /// Contact slots: the checked strut pairs, then the ground contacts (per-slot arrays such as
+  /// Contact slots: the strut pairs' (pairSlots()), then the ground contacts (per-slot values such as
   /// State::contact_speed are laid out so).
   int contactSlots() const
   {
-    return static_cast<int>(checked_pairs.size() + ground_contacts.size());
+    return pairSlots() + static_cast<int>(ground_contacts.size());
+  }
+  /// The strut pairs' slots: listed_pairs.size(), or n (n - 1)/2 for n struts with all_strut_pairs.
+  int pairSlots() const
+  {
+    return all_strut_pairs ? all_pair_slots_ : static_cast<int>(listed_pairs.size());
   }
   bool isGroundSlot(int slot) const
   {
-    return slot >= static_cast<int>(checked_pairs.size());
+    return slot >= pairSlots();
   }
   /// The ground contact of a ground slot (isGroundSlot).
   const GroundContact& groundContactOf(int slot) const
   {
-    return ground_contacts[slot - static_cast<int>(checked_pairs.size())];
+    return ground_contacts[slot - pairSlots()];
   }
+  /// The pair of a strut pair's slot (0 <= slot < pairSlots()), with its constants.
+  StrutPair strutPair(int slot) const;
+  /// The bodies of a strut pair's slot (body_a < body_b for all_strut_pairs; as listed otherwise).
+  std::pair<int, int> pairBodies(int slot) const;
+  /// Whether a strut pair's slot is checked (false only for two struts sharing a node with all_strut_pairs).
+  bool isCheckedPair(int slot) const;
+  /// all_strut_pairs: the slot of two struts (bodies, either order), -1 when they share a node or are one.
+  int allPairsSlot(int body_a, int body_b) const;
+  /// How many strut pairs are checked (pairSlots() less the unchecked slots).
+  long checkedPairCount() const;
+  /// Every checked pair, in slot order, with its slot into `slots` when given: O(pairs), for small scenes and
+  /// tests (a large scene's solvers reach pairs through the broad phase, broad_phase.h).
+  std::vector<StrutPair> checkedPairList(std::vector<int>* slots = nullptr) const;
+  /// Makes the pairs every two of the given struts that do not share a node (all_strut_pairs; `joined`: pairs
+  /// of body indices sharing one, either order). Throws std::invalid_argument past kMostAutoPairStruts struts.
+  void checkAllStrutPairs(const std::vector<int>& struts, const std::vector<std::pair<int, int>>& joined);
+  /// The most struts all_strut_pairs numbers (four times their pairs and ground slots fit an int: rviz
+  /// marker ids).
+  static constexpr int kMostAutoPairStruts = 32000;
   /// Whether any contact (strut pairs or the ground) is computed.
   bool anyContact() const
   {
@@ -345,7 +382,25 @@ struct Model
   int findNode(const std::string& name) const;
   int findBody(const std::string& name) const;
   int findActuator(const std::string& name) const;
+
+private:
+  int all_pair_slots_ = 0;
 };
+
+/// The key of two body indices, either order (smaller << 32 | larger).
+inline std::uint64_t pairKey(int a, int b)
+{
+  if (a > b)
+    std::swap(a, b);
+  return (static_cast<std::uint64_t>(a) << 32) | static_cast<std::uint32_t>(b);
+}
+
+/// E* = [(1 - nu1^2)/E1 + (1 - nu2^2)/E2]^-1 (Pa) of the outer layers of two struts.
+double effectiveModulus(const Body& a, const Body& b);
+/// The same for two layers.
+double effectiveModulus(const StrutLayer& a, const StrutLayer& b);
+/// A checked pair with its constants: K at a right crossing, (4/3) E* (r1 r2)^(1/4) (N/m^1.5).
+StrutPair makeStrutPair(const Model& model, int body_a, int body_b);
 
 /// Sizes, offsets and the initial configuration; call after bodies are filled.
 void finalizeModel(Model& model);

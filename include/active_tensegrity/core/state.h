@@ -23,7 +23,7 @@ struct State
   ActuationValues u;       // actuation values at t
   /// Contact memory per contact slot (strut pairs, then ground contacts): the impact speed v_0 (m/s) of a
   /// live contact, 0 when apart. Set at contact onset, forgotten at separation (dynamics).
-  std::vector<double> contact_speed;
+  SlotValues contact_speed;
 };
 
 /// A state at rest in the model's initial configuration.

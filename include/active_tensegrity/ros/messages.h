@@ -69,8 +69,8 @@ private:
   const core::Model& model_;
   std::string frame_id_;
   MarkerOptions options_;
-  std::vector<bool> arrow_shown_;  // per contact slot: normal and friction arrows drawn last time
-  core::Vec3 ground_centre_;       // the ground slab's centre: under the bodies' mean start position
+  std::vector<int> arrow_shown_;  // the contact slots whose normal and friction arrows were drawn last time (ascending)
+  core::Vec3 ground_centre_;      // the ground slab's centre: under the bodies' mean start position
   bool clear_all_ = true;
 };
 

@@ -38,10 +38,10 @@ at::Model randomStruts(int n, double density, std::mt19937& rng)
     m.q0.segment<3>(b.offset) = at::Vec3(u(rng), u(rng), u(rng));
     m.q0.segment<4>(b.offset + 3) = at::thetaFromZAxis(at::Vec3(g(rng), g(rng), g(rng)));
   }
-  m.checked_pairs.reserve(static_cast<size_t>(n) * (n - 1) / 2);
+  m.listed_pairs.reserve(static_cast<size_t>(n) * (n - 1) / 2);
   for (int i = 0; i < n; ++i)
     for (int j = i + 1; j < n; ++j)
-      m.checked_pairs.push_back(at::makeStrutPair(m, i, j));
+      m.listed_pairs.push_back(at::makeStrutPair(m, i, j));
   return m;
 }
 }  // namespace
@@ -71,7 +71,7 @@ int broadPhase(int repeat)
       return 3;
     }
     int contacts = 0;
-    for (size_t i = 0; i < m.checked_pairs.size(); ++i)
+    for (size_t i = 0; i < m.listed_pairs.size(); ++i)
       contacts += at::contactGeometry(m, static_cast<int>(i), m.q0).gap < 0.0 ? 1 : 0;
 
     const auto f_cand = [&]
@@ -94,7 +94,7 @@ int broadPhase(int repeat)
     const auto f_all = [&]
     {
       double s = 0.0;
-      for (size_t i = 0; i < m.checked_pairs.size(); ++i)
+      for (size_t i = 0; i < m.listed_pairs.size(); ++i)
         s += at::contactGeometry(m, static_cast<int>(i), m.q0).gap;
       g_sink = g_sink + s;
     };
@@ -102,7 +102,7 @@ int broadPhase(int repeat)
     const double t_direct = medianPerCall(f_direct, callsFor(f_direct, kTarget), repeat);
     const double t_narrow = medianPerCall(f_narrow, callsFor(f_narrow, kTarget), repeat);
     const double t_all = medianPerCall(f_all, callsFor(f_all, kTarget), repeat);
-    std::printf("%6d %8zu %6zu %7d %8.2f %6s %9.2f %9.2f us %9.2f us %9.2f us %9.2f us\n", n, m.checked_pairs.size(),
+    std::printf("%6d %8zu %6zu %7d %8.2f %6s %9.2f %9.2f us %9.2f us %9.2f us %9.2f us\n", n, m.listed_pairs.size(),
                 cand.size(), contacts, static_cast<double>(cand.size()) / n, broad.usesSweep() ? "yes" : "no",
                 1e3 * setup, 1e6 * t_cand, 1e6 * t_direct, 1e6 * t_narrow, 1e6 * t_all);
   }

@@ -38,7 +38,7 @@ int contactPair(int repeat)
   m.contact.restitution = 0.5;
   m.contact.stick_velocity = 0.01;
   m.contact.slip_velocity = 0.1;
-  m.checked_pairs.push_back(at::makeStrutPair(m, 0, 1));
+  m.listed_pairs.push_back(at::makeStrutPair(m, 0, 1));
   const at::Vec3 ax = at::Vec3(1.0, 0.2, -0.1).normalized(), bx = at::Vec3(0.1, 1.0, 0.3).normalized();
   const at::Vec3 n = ax.cross(bx).normalized();
   const double s1 = 0.2, s2 = -0.15, overlap = 2e-3;

@@ -55,7 +55,7 @@ Row measure(const LatticeCells& cells, const LatticeOptions& base, const std::ve
   row.bodies = static_cast<int>(model.bodies.size());
   row.coordinates = model.nq;
   row.constraint_rows = model.n_lambda;
-  row.checked_pairs = model.checked_pairs.size();
+  row.checked_pairs = static_cast<size_t>(model.checkedPairCount());
   {
     const at::System system(model);
     row.nonzeros = system.makeMatrix().matrix().nonZeros();
