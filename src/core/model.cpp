@@ -49,9 +49,8 @@ StrutPair makeStrutPair(const Model& model, int body_a, int body_b)
 void Model::checkAllStrutPairs(const std::vector<int>& struts, const std::vector<std::pair<int, int>>& joined)
 {
   if (struts.size() > static_cast<size_t>(kMostAutoPairStruts))
-    throw std::invalid_argument("contact.pairs: 'auto' numbers the pairs of at most " +
-                                std::to_string(kMostAutoPairStruts) + " struts, the scene has " +
-                                std::to_string(struts.size()) + " (list the pairs instead)");
+    throw std::invalid_argument("'auto' numbers the pairs of at most " + std::to_string(kMostAutoPairStruts) +
+                                " struts, the scene has " + std::to_string(struts.size()) + " (list the pairs instead)");
   all_strut_pairs = true;
   listed_pairs.clear();
   pair_struts = struts;

@@ -435,6 +435,52 @@ TEST(Lattice, ContactMemoryInAHashMapFoldsAsInAnArray)
   }
 }
 
+// The numbered pairs of `pairs: auto` are the listed pairs of every two struts sharing no node, in the same slots:
+// the fold through contact gives the same bits either way
+TEST(Lattice, NumberedPairsFoldAsTheSamePairsListed)
+{
+  tl::LatticeOptions o;
+  o.nx = 1;
+  o.ny = 2;
+  o.duration = 0.4;
+  const at::Model numbered = at::loadSceneFromString(tl::quadruplexLatticeYaml(o), "numbered");
+  o.pairs = tl::LatticePairs::kAll;
+  const at::Model listed = at::loadSceneFromString(tl::quadruplexLatticeYaml(o), "listed");
+  ASSERT_TRUE(numbered.all_strut_pairs);
+  ASSERT_FALSE(listed.all_strut_pairs);
+  std::vector<int> slots;
+  const std::vector<at::StrutPair> pairs = numbered.checkedPairList(&slots);
+  ASSERT_EQ(pairs.size(), listed.listed_pairs.size());
+  for (bool adaptive : { false, true })
+  {
+    int touched = 0;
+    const auto run = [&](const at::Model& m)
+    {
+      at::Model copy = m;
+      copy.solver.adaptive = adaptive;
+      std::vector<std::pair<int, int>> seen;  // bodies of every active contact of every step
+      const at::RunResult r = at::runAnalysis(
+          copy, [](const at::State&) {}, {},
+          [&](const at::State& s)
+          {
+            for (const at::ContactPairState& c : at::activeContacts(copy, s))
+              seen.emplace_back(c.body_a, c.body_b);
+          });
+      touched = std::max(touched, static_cast<int>(seen.size()));
+      return std::make_pair(r, seen);
+    };
+    const auto [a, seen_a] = run(numbered);
+    const auto [b, seen_b] = run(listed);
+    ASSERT_TRUE(a.summary.ok()) << a.summary.message;
+    ASSERT_TRUE(b.summary.ok()) << b.summary.message;
+    EXPECT_GT(touched, 0);
+    EXPECT_EQ(seen_a, seen_b) << "adaptive " << adaptive;
+    EXPECT_EQ(a.solver_steps, b.solver_steps);
+    EXPECT_TRUE(a.final_state.q == b.final_state.q) << "adaptive " << adaptive;
+    EXPECT_TRUE(a.final_state.qd == b.final_state.qd) << "adaptive " << adaptive;
+  }
+}
+
 // 2500 cells, 10 000 struts: every two that share no node checked, none of the 50 million pairs stored; the
 // minimum gap through the broad phase is the one between neighbouring cells' struts
 TEST(Lattice, TenThousandStrutsLoadWithoutAPairList)
