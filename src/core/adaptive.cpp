@@ -36,7 +36,8 @@ AdaptiveStepper::~AdaptiveStepper() = default;
 const EnergyPoint& AdaptiveStepper::startEnergy(const State& s)
 {
   // (kept only for the very state it was formed at: a caller may put another state in, as the node's reset does)
-  if (!start_energy_valid_ || start_energy_t_ != s.t || start_energy_q_ != s.q)
+  if (!start_energy_valid_ || start_energy_t_ != s.t || start_energy_q_ != s.q ||
+      start_energy_loads_ != solver_.system().externalLoadsEpoch())
   {
     const std::vector<ContactPairState>* contacts = solver_.contactsAt(s);
     if (!contacts)
@@ -45,6 +46,7 @@ const EnergyPoint& AdaptiveStepper::startEnergy(const State& s)
     in_contact_ = !contacts->empty();
     start_energy_t_ = s.t;
     start_energy_q_ = s.q;
+    start_energy_loads_ = solver_.system().externalLoadsEpoch();
     start_energy_valid_ = true;
   }
   return start_energy_;
@@ -136,6 +138,7 @@ Summary AdaptiveStepper::advanceTo(State& s, double t_end, const ActuationLaw& l
     start_energy_ = end_energy;
     start_energy_t_ = s.t;
     start_energy_q_ = s.q;
+    start_energy_loads_ = solver_.system().externalLoadsEpoch();
     start_energy_valid_ = true;
     last_check_ = energy;
     in_contact_ = !contacts->empty();

@@ -7,6 +7,8 @@
 #include <limits>
 #include <sstream>
 
+#include "active_tensegrity/core/text.h"
+
 namespace active_tensegrity::core
 {
 namespace
@@ -774,7 +776,40 @@ Summary DynamicsSolver::initialize(State& s, const ActuationLaw& law)
   rhs.tail(nl) = tmp;
   exact.solve(rhs, x);
   s.qd = x.head(nq);
+  const Summary acc = consistentAccelerations(s, exact);
+  if (!acc.ok())
+  {
+    sum.status = acc.status;
+    sum.message = acc.message;
+  }
+  return sum;
+}
 
+Summary DynamicsSolver::restartAccelerations(State& s)
+{
+  Summary sum;
+  history_count_ = 0;
+  factor_valid_ = false;  // jac_ now holds another matrix
+  SparseLinearSolver exact;
+  exact.allowDense(true);
+  jac_.setZero();
+  system_.addMass(s.q, jac_, 1.0);
+  system_.addConstraintJacobian(s.q, jac_);
+  if (!exact.factorize(jac_.matrix()))
+  {
+    sum.status = SolveStatus::kSingular;
+    sum.message = "singular mass/constraint matrix at t = " + shortestNumber(s.t) + " s";
+    return sum;
+  }
+  return consistentAccelerations(s, exact);
+}
+
+Summary DynamicsSolver::consistentAccelerations(State& s, SparseLinearSolver& exact)
+{
+  Summary sum;
+  const int nq = system_.nq();
+  const int nl = system_.nLambda();
+  Eigen::VectorXd rhs(system_.size()), x, tmp;
   // accelerations and multipliers: M qdd + Phi_q^T lambda = F - Qv,  Phi_q qdd = gamma
   Eigen::VectorXd zero = Eigen::VectorXd::Zero(nq);
   system_.inertialForce(s.q, s.qd, zero, inertial_, nullptr, 0.0, 0.0, 0.0);
@@ -792,7 +827,7 @@ Summary DynamicsSolver::initialize(State& s, const ActuationLaw& law)
   if (!x.allFinite())
   {
     sum.status = SolveStatus::kNonFinite;
-    sum.message = "non-finite initial accelerations";
+    sum.message = "non-finite accelerations at t = " + shortestNumber(s.t) + " s";
   }
   return sum;
 }

@@ -61,6 +61,8 @@ EnergyPoint EnergyMeter::at(const State& state, const std::vector<ContactPairSta
   for (const PointLoad& load : model.loads)
     e.gravity -= system_.loadFactor() *
                  load.force.dot(pointPosition(model, load.point, q) - pointPosition(model, load.point, model.q0));
+  for (const PointLoad& load : system_.externalLoads())
+    e.gravity -= load.force.dot(pointPosition(model, load.point, q) - pointPosition(model, load.point, model.q0));
   if (!model.cables.empty())
     frames_.update(model, q, state.qd);
   for (size_t k = 0; k < model.cables.size(); ++k)

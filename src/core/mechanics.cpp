@@ -95,20 +95,25 @@ void System::appliedForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, c
     point_sum_.flush(model_, q, F);
   }
   for (const PointLoad& load : model_.loads)
+    addPointForce(load.point, load_factor_ * load.force, q, qd, F, jac, k_weight);
+  for (const PointLoad& load : external_loads_)
+    addPointForce(load.point, load.force, q, qd, F, jac, k_weight);
+}
+
+void System::addPointForce(const PointRef& point, const Vec3& force, const Eigen::VectorXd& q,
+                           const Eigen::VectorXd& qd, Eigen::VectorXd& F, BlockSparseMatrix* jac, double k_weight) const
+{
+  if (point.body < 0)
+    return;
+  const PointKinematics k = pointKinematics(model_, point, q, qd);
+  const Body& b = model_.bodies[k.body];
+  F.segment(b.offset, b.nq) += k.jac.leftCols(b.nq).transpose() * force;
+  if (jac && b.kind == BodyKind::kStrut)
   {
-    if (load.point.body < 0)
-      continue;
-    const PointKinematics k = pointKinematics(model_, load.point, q, qd);
-    const Body& b = model_.bodies[k.body];
-    const Vec3 force = load_factor_ * load.force;
-    F.segment(b.offset, b.nq) += k.jac.leftCols(b.nq).transpose() * force;
-    if (jac && b.kind == BodyKind::kStrut)
-    {
-      // K = -d(B^T f)/dq: only the orientation block, -G(u, f)
-      Eigen::Matrix<double, 7, 7> kb = Eigen::Matrix<double, 7, 7>::Zero();
-      kb.bottomRightCorner<4, 4>() = -pointHessianTheta(load.point.local, force);
-      jac->add(k.body, k.body, kb, k_weight);
-    }
+    // K = -d(B^T f)/dq: only the orientation block, -G(u, f)
+    Eigen::Matrix<double, 7, 7> kb = Eigen::Matrix<double, 7, 7>::Zero();
+    kb.bottomRightCorner<4, 4>() = -pointHessianTheta(point.local, force);
+    jac->add(k.body, k.body, kb, k_weight);
   }
 }
 
@@ -433,6 +438,8 @@ double System::potentialEnergy(const Eigen::VectorXd& q, const ActuationValues& 
       e -= b.mass * model_.gravity.dot(q.segment<3>(b.offset));
   for (const PointLoad& load : model_.loads)
     e -= load_factor_ * load.force.dot(pointPosition(model_, load.point, q));
+  for (const PointLoad& load : external_loads_)
+    e -= load.force.dot(pointPosition(model_, load.point, q));
   if (model_.anyContact())
   {
     // only touching slots store energy, and the broad phase at margin 0 finds every one of them

@@ -162,8 +162,14 @@ Snapshot MessageBuilder::build(const core::State& state, const ros::Time& stamp,
   for (size_t b = 0; b < model_.bodies.size(); ++b)
     if (model_.bodies[b].kind == core::BodyKind::kStrut)
     {
-      out.struts.names.push_back(model_.bodies[b].name);
+      const core::Body& body = model_.bodies[b];
+      out.struts.names.push_back(body.name);
       out.struts.axial_forces.push_back(axial[b]);
+      const int index = static_cast<int>(b);
+      out.struts.start.push_back(
+          point(core::pointPosition(model_, core::PointRef{ index, core::Vec3(0.0, 0.0, -0.5 * body.length) }, q)));
+      out.struts.end.push_back(
+          point(core::pointPosition(model_, core::PointRef{ index, core::Vec3(0.0, 0.0, 0.5 * body.length) }, q)));
     }
 
   out.actuators.header.stamp = stamp;

@@ -1,12 +1,15 @@
 #include "active_tensegrity/ros/sim_node.h"
 
+#include <algorithm>
 #include <cmath>
+#include <limits>
 #include <sstream>
 #include <thread>
 #include <utility>
 
 #include <rosgraph_msgs/Clock.h>
 
+#include "active_tensegrity/core/kinematics.h"
 #include "active_tensegrity/core/scene.h"
 #include "active_tensegrity/core/text.h"
 #include "active_tensegrity/planning/folding_planner.h"
@@ -145,6 +148,9 @@ SimNode::SimNode(ros::NodeHandle& nh, ros::NodeHandle& pnh, SimParams params, co
   reset_srv_ = pnh.advertiseService("reset", &SimNode::onReset, this);
   pause_srv_ = pnh.advertiseService("pause", &SimNode::onPause, this);
   plan_srv_ = pnh.advertiseService("plan_folding", &SimNode::onPlan, this);
+  apply_wrench_srv_ = pnh.advertiseService("apply_wrench", &SimNode::onApplyWrench, this);
+  clear_wrenches_srv_ = pnh.advertiseService("clear_wrenches", &SimNode::onClearWrenches, this);
+  wrench_sub_ = pnh.subscribe("wrench", 10, &SimNode::onWrench, this);
   plan_action_ = std::make_unique<actionlib::SimpleActionServer<active_tensegrity::PlanFoldingAction>>(
       pnh, "plan_folding", [this](const active_tensegrity::PlanFoldingGoalConstPtr& g) { onPlanGoal(g); }, false);
   follow_action_ = std::make_unique<actionlib::SimpleActionServer<active_tensegrity::FollowTrajectoryAction>>(
@@ -235,6 +241,8 @@ bool SimNode::onReset(std_srvs::Trigger::Request& /*req*/, std_srvs::Trigger::Re
   }
   state_ = std::move(fresh);
   ++actuation_epoch_;
+  pushes_.clear();
+  applyPushes();
   failed_ = false;
   solver_status_ = runState();
   message_ = "reset";
@@ -260,6 +268,183 @@ bool SimNode::onPause(std_srvs::SetBool::Request& req, std_srvs::SetBool::Respon
   solver_status_ = runState();
   res.success = true;
   res.message = req.data ? "paused" : "running";
+  ROS_INFO_STREAM("tensegrity_sim: " << res.message << " at t = " << state_.t << " s");
+  publishStatus();
+  return true;
+}
+
+namespace
+{
+/// The largest force (N) or torque (N m) a push may have.
+constexpr double kMostPush = 1e9;
+
+core::Vec3 vec3(const geometry_msgs::Vector3& v)
+{
+  return core::Vec3(v.x, v.y, v.z);
+}
+
+/// Whether a push's vector is usable, else the reason (naming `what`).
+std::string checkPushVector(const core::Vec3& v, const std::string& what, const std::string& unit)
+{
+  if (!v.allFinite())
+    return what + " must be finite, got (" + core::shortestNumber(v.x()) + ", " + core::shortestNumber(v.y()) + ", " +
+           core::shortestNumber(v.z()) + ")";
+  if (v.norm() > kMostPush)
+    return what + " must be at most " + core::shortestNumber(kMostPush) + " " + unit + " in magnitude, got " +
+           core::shortestNumber(v.norm());
+  return "";
+}
+}  // namespace
+
+std::string SimNode::wrenchLoads(const std::string& target, const geometry_msgs::Wrench& wrench,
+                                 std::vector<core::PointLoad>& loads, std::string& note) const
+{
+  loads.clear();
+  note.clear();
+  const core::Vec3 force = vec3(wrench.force), torque = vec3(wrench.torque);
+  if (std::string e = checkPushVector(force, "wrench.force", "N"); !e.empty())
+    return e;
+  if (std::string e = checkPushVector(torque, "wrench.torque", "N m"); !e.empty())
+    return e;
+  if (target.empty())
+    return "target is empty (give a strut, point mass or node of the scene)";
+  const int body = model_.findBody(target);
+  const int node = body < 0 ? model_.findNode(target) : -1;
+  if (body < 0 && node < 0)
+    return "target " + core::quoted(target) + " is no strut, point mass or node of the scene";
+  const std::string name = "push on " + target;
+  if (body >= 0 && model_.bodies[body].kind == core::BodyKind::kStrut)
+  {
+    const core::Body& b = model_.bodies[body];
+    loads.push_back({ name, core::PointRef{ body, core::Vec3::Zero() }, force });
+    if (torque.squaredNorm() > 0.0)
+    {
+      // two opposite forces at the ends, f = (tau x u) / |u|^2 at the end u points to: their moment u x f is the
+      // torque's part across the strut
+      const core::PointRef end_a{ body, core::Vec3(0.0, 0.0, -0.5 * b.length) };
+      const core::PointRef end_b{ body, core::Vec3(0.0, 0.0, 0.5 * b.length) };
+      const core::Vec3 u = core::pointPosition(model_, end_b, state_.q) - core::pointPosition(model_, end_a, state_.q);
+      const core::Vec3 f = torque.cross(u) / u.squaredNorm();
+      loads.push_back({ name, end_b, f });
+      loads.push_back({ name, end_a, -f });
+      const double along = torque.dot(u.normalized());
+      if (std::abs(along) > 1e-12 * torque.norm())
+        note = "; the torque's part along the strut (" + core::shortestNumber(along) +
+               " N m) is dropped: a strut has no stiffness about its own axis";
+    }
+    return "";
+  }
+  if (torque.squaredNorm() > 0.0)
+    return "wrench.torque must be zero on " + std::string(body >= 0 ? "point mass " : "node ") + core::quoted(target) +
+           " (a point takes a force only), got a torque of " + core::shortestNumber(torque.norm()) + " N m";
+  const core::PointRef point = body >= 0 ? core::PointRef{ body, core::Vec3::Zero() } : model_.nodes[node].point;
+  if (point.body < 0)
+    return "node " + core::quoted(target) + " is fixed: nothing moves it";
+  loads.push_back({ name, point, force });
+  return "";
+}
+
+double SimNode::applyPushes()
+{
+  const double t = state_.t;
+  pushes_.erase(std::remove_if(pushes_.begin(), pushes_.end(),
+                               [t](const Push& p) { return p.end - t <= 1e-10 * std::max(1.0, std::abs(p.end)); }),
+                pushes_.end());
+  std::vector<uint64_t> acting;
+  double next_end = std::numeric_limits<double>::infinity();
+  for (const Push& p : pushes_)
+  {
+    acting.push_back(p.id);
+    next_end = std::min(next_end, p.end);
+  }
+  if (acting != acting_pushes_)
+  {
+    std::vector<core::PointLoad> loads;
+    for (const Push& p : pushes_)
+      loads.insert(loads.end(), p.loads.begin(), p.loads.end());
+    // the forces jump here: the integration restarts from the live state (consistent accelerations)
+    const core::Summary restart = solver_.setExternalLoads(std::move(loads), state_);
+    acting_pushes_ = std::move(acting);
+    if (!restart.ok() && !failed_)
+    {
+      failed_ = true;
+      solver_status_ = core::toString(restart.status);
+      message_ = "the pushes changed at t = " + core::shortestNumber(t) + " s: " + restart.message;
+      ROS_ERROR_STREAM("tensegrity_sim: " << message_ << "; paused, call ~reset to start again");
+    }
+  }
+  return next_end;
+}
+
+bool SimNode::onApplyWrench(active_tensegrity::ApplyWrench::Request& req, active_tensegrity::ApplyWrench::Response& res)
+{
+  const std::lock_guard<std::mutex> lock(mutex_);
+  Push push;
+  std::string note;
+  std::string err = wrenchLoads(req.target, req.wrench, push.loads, note);
+  if (err.empty() && !(req.duration > 0.0 || req.duration == -1.0))
+    err = "duration must be > 0 s of simulated time, or -1 (until ~clear_wrenches), got " +
+          core::shortestNumber(req.duration);
+  if (err.empty() && req.duration > 0.0 && !std::isfinite(state_.t + req.duration))
+    err = "duration must be finite, got " + core::shortestNumber(req.duration);
+  res.success = err.empty();
+  if (!err.empty())
+  {
+    res.message = "refused: " + err + " (nothing applied)";
+    reject("~apply_wrench", err);
+    return true;
+  }
+  push.id = next_push_id_++;
+  push.target = req.target;
+  push.end = req.duration > 0.0 ? state_.t + req.duration : std::numeric_limits<double>::infinity();
+  pushes_.push_back(std::move(push));
+  applyPushes();
+  ++accepted_;
+  std::ostringstream m;
+  m << "pushing " << core::quoted(req.target) << " from t = " << state_.t << " s "
+    << (req.duration > 0.0 ? "for " + core::shortestNumber(req.duration) + " s" : std::string("until cleared")) << note;
+  res.message = m.str();
+  ROS_INFO_STREAM("tensegrity_sim: " << res.message);
+  publishStatus();
+  return true;
+}
+
+void SimNode::onWrench(const active_tensegrity::TargetWrench::ConstPtr& msg)
+{
+  const std::lock_guard<std::mutex> lock(mutex_);
+  Push push;
+  std::string note;
+  const std::string err = wrenchLoads(msg->target, msg->wrench, push.loads, note);
+  if (!err.empty())
+  {
+    reject("~wrench", err);
+    return;
+  }
+  pushes_.erase(std::remove_if(pushes_.begin(), pushes_.end(),
+                               [&](const Push& p) { return p.standing && p.target == msg->target; }),
+                pushes_.end());
+  const bool zero = vec3(msg->wrench.force).squaredNorm() == 0.0 && vec3(msg->wrench.torque).squaredNorm() == 0.0;
+  if (!zero)
+  {
+    push.id = next_push_id_++;
+    push.target = msg->target;
+    push.end = std::numeric_limits<double>::infinity();
+    push.standing = true;
+    pushes_.push_back(std::move(push));
+  }
+  applyPushes();
+  ++accepted_;
+  publishStatus();
+}
+
+bool SimNode::onClearWrenches(std_srvs::Trigger::Request& /*req*/, std_srvs::Trigger::Response& res)
+{
+  const std::lock_guard<std::mutex> lock(mutex_);
+  const size_t n = pushes_.size();
+  pushes_.clear();
+  applyPushes();
+  res.success = true;
+  res.message = "cleared " + std::to_string(n) + (n == 1 ? " push" : " pushes");
   ROS_INFO_STREAM("tensegrity_sim: " << res.message << " at t = " << state_.t << " s");
   publishStatus();
   return true;
@@ -554,6 +739,7 @@ void SimNode::publishStatus()
   s.commands_accepted = accepted_;
   s.commands_rejected = rejected_;
   s.last_rejection = last_rejection_;
+  s.wrenches = static_cast<uint32_t>(acting_pushes_.size());
   status_pub_.publish(s);
 }
 
@@ -671,12 +857,13 @@ void SimNode::run()
       else
       {
         const core::State before = state_;
+        const double push_end = applyPushes();
         core::Summary s;
         if (stepper_)
         {
-          // to the next publish time, in the steps the error control allows
+          // to the next publish time (or the end of a push), in the steps the error control allows
           const long accepted = stepper_->stats().accepted;
-          s = stepper_->advanceTo(state_, next_publish, law);
+          s = stepper_->advanceTo(state_, std::min(next_publish, push_end), law);
           steps_ += static_cast<uint64_t>(stepper_->stats().accepted - accepted);
         }
         else

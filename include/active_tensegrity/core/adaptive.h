@@ -75,7 +75,8 @@ private:
   AdaptiveStats stats_;
   EnergyPoint start_energy_;
   double start_energy_t_ = 0.0;
-  Eigen::VectorXd start_energy_q_;  // the state start_energy_ was formed at (its time and positions)
+  Eigen::VectorXd start_energy_q_;        // the state start_energy_ was formed at (its time and positions)
+  unsigned long start_energy_loads_ = 0;  // and the external loads in force (System::externalLoadsEpoch)
   bool start_energy_valid_ = false;
   StepEnergyCheck last_check_;
   bool in_contact_ = false;  // contacts active at the last accepted step's end

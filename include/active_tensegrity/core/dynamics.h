@@ -111,6 +111,18 @@ public:
   {
     return system_;
   }
+  /// Forces from outside the scene (System::setExternalLoads) from `s` on: constant over each step (a caller
+  /// that switches them at a time steps onto it). The forces jump there, so the integration restarts from s as
+  /// from an initial state: its accelerations and multipliers are made consistent with them
+  /// (restartAccelerations; a trapezoidal step then gives a constant force's impulse exactly).
+  Summary setExternalLoads(std::vector<PointLoad> loads, State& s)
+  {
+    system_.setExternalLoads(std::move(loads));
+    return restartAccelerations(s);
+  }
+  /// The accelerations and multipliers consistent with the forces at s.q, s.qd (as initialize() makes them),
+  /// after a jump of the applied forces; positions and velocities are kept.
+  Summary restartAccelerations(State& s);
 
   /// The active contacts of `state` (as activeContacts(model, state) gives them, ordered by contact slot)
   /// when it is the state the last accepted step ended in, evaluated with that step's contact memory; else
@@ -152,6 +164,9 @@ public:
                            const Eigen::VectorXd& lambda_new, Eigen::VectorXd& r, BlockSparseMatrix* jac);
 
 private:
+  /// M qdd + Phi_q^T lambda = F - Qv, Phi_q qdd = gamma at s.q, s.qd into s.qdd, s.acc, s.lambda, with `exact`
+  /// holding the factorization of [M Phi_q^T; Phi_q 0] there.
+  Summary consistentAccelerations(State& s, SparseLinearSolver& exact);
   /// Impact speeds v_0 the next step from `start` uses per checked pair (into step_speeds_): the
   /// remembered one of a live contact, else the approach rate at `start` (floored at min_impact_speed)
   /// for pairs close enough to touch within h.

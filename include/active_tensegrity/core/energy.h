@@ -15,7 +15,7 @@ struct EnergyPoint
 {
   double kinetic = 0.0;  // translation and rotation of every body
   double elastic = 0.0;  // cables and springs (after pull-in), contacts (Hertz or linear, sleeves and cores)
-  double gravity = 0.0;  // gravity and the constant point loads, 0 at the scene's positions
+  double gravity = 0.0;  // gravity, the constant point loads and the external ones, 0 at the scene's positions
   /// Put in by the actuators: cables pulled in (T s_dot plus the change of k = EA / l0 with l0) and driven
   /// constraint rows (lambda^T Phi_t).
   double actuator_power = 0.0;

@@ -126,7 +126,25 @@ public:
     return load_factor_;
   }
 
-  /// F(q, qd, u): cables (pulled in by u), springs, gravity, loads (times the load factor). Adds k_weight K + c_weight
+  /// Forces applied from outside the scene (a push, a disturbance): constant world-frame point forces, like
+  /// Model::loads but not scaled by the load factor, in force until replaced. Each call counts in
+  /// externalLoadsEpoch() (caches of the energy key on it).
+  void setExternalLoads(std::vector<PointLoad> loads)
+  {
+    external_loads_ = std::move(loads);
+    ++external_loads_epoch_;
+  }
+  const std::vector<PointLoad>& externalLoads() const
+  {
+    return external_loads_;
+  }
+  unsigned long externalLoadsEpoch() const
+  {
+    return external_loads_epoch_;
+  }
+
+  /// F(q, qd, u): cables (pulled in by u), springs, gravity, loads (times the load factor), external loads. Adds
+  /// k_weight K + c_weight
   /// C into jac when not null.
   void appliedForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const ActuationValues& u, Eigen::VectorXd& F,
                     BlockSparseMatrix* jac, double k_weight, double c_weight) const;
@@ -195,6 +213,9 @@ public:
   }
 
 private:
+  /// Adds a world-frame force at a point of a body into F, and its stiffness (a strut's orientation) into jac.
+  void addPointForce(const PointRef& point, const Vec3& force, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                     Eigen::VectorXd& F, BlockSparseMatrix* jac, double k_weight) const;
   int bodyGroup(int body) const
   {
     return body;
@@ -218,6 +239,8 @@ private:
   std::vector<PointSlot> cable_points_;  // every cable's points in one table, cable by cable
   std::vector<int> cable_first_;         // each cable's first entry in it
   double load_factor_ = 1.0;
+  std::vector<PointLoad> external_loads_;
+  unsigned long external_loads_epoch_ = 0;
   mutable std::vector<int> candidates_;  // scratch of contactForce
   mutable NearSlotCache near_slots_;     // of nearContacts
   mutable ContactContribution contribution_;

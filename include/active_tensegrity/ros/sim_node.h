@@ -19,10 +19,12 @@
 #include <trajectory_msgs/JointTrajectory.h>
 
 #include "active_tensegrity/ActuationCommand.h"
+#include "active_tensegrity/ApplyWrench.h"
 #include "active_tensegrity/FollowTrajectoryAction.h"
 #include "active_tensegrity/PlanFoldingAction.h"
 #include "active_tensegrity/PlanFolding.h"
 #include "active_tensegrity/SimStatus.h"
+#include "active_tensegrity/TargetWrench.h"
 #include "active_tensegrity/core/adaptive.h"
 #include "active_tensegrity/core/actuation_control.h"
 #include "active_tensegrity/core/dynamics.h"
@@ -52,6 +54,18 @@ private:
   core::Summary restart(core::State& s);
   bool onReset(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
   bool onPause(std_srvs::SetBool::Request& req, std_srvs::SetBool::Response& res);
+  /// ~apply_wrench: a push on a target for a duration of simulated time (or until ~clear_wrenches).
+  bool onApplyWrench(active_tensegrity::ApplyWrench::Request& req, active_tensegrity::ApplyWrench::Response& res);
+  /// ~wrench: a standing load on a target, replacing the one the topic put there before (zero: removed).
+  void onWrench(const active_tensegrity::TargetWrench::ConstPtr& msg);
+  bool onClearWrenches(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
+  /// The point loads of a wrench on a named target at the live state (mutex held), or the reason it cannot be
+  /// applied (then `loads` is left empty); `note` says what was dropped (a torque's part along a strut).
+  std::string wrenchLoads(const std::string& target, const geometry_msgs::Wrench& wrench,
+                          std::vector<core::PointLoad>& loads, std::string& note) const;
+  /// Drops the pushes that have ended at state_.t, gives the solver the loads of those acting (when they
+  /// changed), and returns when the next one ends (+inf: none) (mutex held).
+  double applyPushes();
   /// Plans from the live state (the path from the quasi-static equilibrium nearest to it, the verification from
   /// the state itself); with `execute` the simulation is held from the request to the answer, so that the
   /// trajectory runs from the state it was verified from.
@@ -121,11 +135,23 @@ private:
   uint32_t accepted_ = 0, rejected_ = 0;
   std::string last_rejection_;
   uint64_t steps_ = 0, step_cuts_ = 0;
+  // pushes from outside (~apply_wrench, ~wrench): each a set of world-frame point loads acting until `end`
+  struct Push
+  {
+    uint64_t id = 0;
+    std::string target;
+    std::vector<core::PointLoad> loads;
+    double end = 0.0;       // simulated s (+inf: until cleared)
+    bool standing = false;  // from ~wrench (replaced by the next message for its target)
+  };
+  std::vector<Push> pushes_;
+  uint64_t next_push_id_ = 1;
+  std::vector<uint64_t> acting_pushes_;  // the ids whose loads the solver has
   double rtf_ = 0.0, publish_share_ = 0.0;
 
   ros::Publisher contacts_pub_, cables_pub_, struts_pub_, actuators_pub_, markers_pub_, status_pub_, clock_pub_;
-  ros::Subscriber actuation_sub_, trajectory_sub_;
-  ros::ServiceServer reset_srv_, pause_srv_, plan_srv_;
+  ros::Subscriber actuation_sub_, trajectory_sub_, wrench_sub_;
+  ros::ServiceServer reset_srv_, pause_srv_, plan_srv_, apply_wrench_srv_, clear_wrenches_srv_;
   tf2_ros::TransformBroadcaster tf_;
   // the action servers last: their threads run callbacks that use everything above
   std::unique_ptr<actionlib::SimpleActionServer<active_tensegrity::PlanFoldingAction>> plan_action_;
