@@ -83,13 +83,14 @@ geometry_msgs::Quaternion orientation(const core::Body& b, const Eigen::VectorXd
 }
 }  // namespace
 
-std::string bodyFrame(const core::Model& model, int body)
+std::string bodyFrame(const core::Model& model, int body, const std::string& tf_prefix)
 {
-  return model.bodies[body].name;
+  return tf_prefix.empty() ? model.bodies[body].name : tf_prefix + "/" + model.bodies[body].name;
 }
 
-MessageBuilder::MessageBuilder(const core::Model& model, std::string frame_id, MarkerOptions options)
-  : model_(model), frame_id_(std::move(frame_id)), options_(options)
+MessageBuilder::MessageBuilder(const core::Model& model, std::string frame_id, MarkerOptions options,
+                               std::string tf_prefix)
+  : model_(model), frame_id_(std::move(frame_id)), options_(options), tf_prefix_(std::move(tf_prefix))
 {
   core::Vec3 centre = core::Vec3::Zero();
   for (const core::Body& b : model.bodies)
@@ -116,7 +117,7 @@ Snapshot MessageBuilder::build(const core::State& state, const ros::Time& stamp,
     geometry_msgs::TransformStamped t;
     t.header.stamp = stamp;
     t.header.frame_id = frame_id_;
-    t.child_frame_id = bodyFrame(model_, static_cast<int>(i));
+    t.child_frame_id = bodyFrame(model_, static_cast<int>(i), tf_prefix_);
     t.transform.translation = vector(q.segment<3>(b.offset));
     t.transform.rotation = orientation(b, q);
     out.transforms.push_back(t);

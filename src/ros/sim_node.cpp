@@ -125,7 +125,9 @@ SimNode::SimNode(ros::NodeHandle& nh, ros::NodeHandle& pnh, SimParams params, co
   , model_(std::move(model))
   , solver_(model_, model_.solver)
   , controller_(model_, core::initialState(model_).u)
-  , builder_(model_, params_.frame_id, params_.markers)
+  , builder_(model_, params_.frame_id, params_.markers, params_.tf_prefix)
+  , loop_params_(params_)
+  , diagnostics_(nh, pnh)
 {
   state_ = core::initialState(model_);
   const core::Summary init = restart(state_);
@@ -158,6 +160,134 @@ SimNode::SimNode(ros::NodeHandle& nh, ros::NodeHandle& pnh, SimParams params, co
       false);
   plan_action_->start();
   follow_action_->start();
+
+  diagnostics_.setHardwareID("tensegrity_sim: " + model_.name);
+  diagnostics_.add("simulation", this, &SimNode::diagnoseSimulation);
+  diagnostics_.add("commands", this, &SimNode::diagnoseCommands);
+  diagnostics_.add("planner", this, &SimNode::diagnosePlanner);
+  // the server starts from the parameter server, where runSimNode wrote the effective values
+  reconfigure_ = std::make_unique<dynamic_reconfigure::Server<active_tensegrity::SimConfig>>(reconfigure_mutex_, pnh);
+  reconfigure_->setCallback([this](active_tensegrity::SimConfig& c, uint32_t level) { onReconfigure(c, level); });
+}
+
+void SimNode::onReconfigure(active_tensegrity::SimConfig& config, uint32_t /*level*/)
+{
+  const std::lock_guard<std::mutex> lock(mutex_);
+  const std::vector<std::pair<std::string, double*>> fields = {
+    { "real_time_factor", &config.real_time_factor },
+    { "publish_rate", &config.publish_rate },
+    { "max_publish_wall_rate", &config.max_publish_wall_rate },
+    { "marker_rate", &config.marker_rate },
+    { "default_speed", &config.default_speed },
+    { "default_acceleration", &config.default_acceleration },
+    { "contact_force_scale", &config.contact_force_scale },
+    { "cable_tension_scale", &config.cable_tension_scale },
+    { "cable_width", &config.cable_width },
+    { "strut_alpha", &config.strut_alpha },
+  };
+  SimParams next = params_;
+  std::ostringstream changed;
+  for (const auto& [name, value] : fields)
+  {
+    const double now = liveParam(params_, name);
+    if (*value == now)
+      continue;
+    if (const std::string err = checkLiveParam(name, *value); !err.empty())
+    {
+      reject("dynamic_reconfigure", err + " (kept at " + core::shortestNumber(now) + ")");
+      *value = now;
+      continue;
+    }
+    setLiveParam(next, name, *value);
+    changed << (changed.tellp() > 0 ? ", " : "") << name << " = " << core::shortestNumber(*value);
+  }
+  resolveCommandDefaults(next, model_);
+  config.default_speed = next.default_speed;  // (the effective ones: 0 asks for the scene's)
+  config.default_acceleration = next.default_acceleration;
+  if (next.real_time_factor != params_.real_time_factor)
+    repace_ = true;
+  params_ = next;
+  ++params_epoch_;
+  if (changed.tellp() > 0)
+    ROS_INFO_STREAM("tensegrity_sim: live parameters: " << changed.str());
+}
+
+bool SimNode::logDue(const std::string& kind, int& held)
+{
+  const WallClock::time_point now = WallClock::now();
+  auto [it, first] = log_times_.try_emplace(kind, now, 0);
+  if (!first && now - it->second.first < std::chrono::seconds(2))
+  {
+    ++it->second.second;
+    return false;
+  }
+  held = first ? 0 : it->second.second;
+  it->second = { now, 0 };
+  return true;
+}
+
+void SimNode::diagnoseSimulation(diagnostic_updater::DiagnosticStatusWrapper& d)
+{
+  const std::lock_guard<std::mutex> lock(mutex_);
+  const bool slow = running() && params_.real_time_factor > 0.0 && rtf_ > 0.0 && rtf_ < 0.9 * params_.real_time_factor;
+  const bool cut = step_cuts_ > diagnosed_cuts_;
+  std::ostringstream summary;
+  if (failed_)
+    summary << "the solver failed (" << solver_status_ << "): " << message_ << "; call ~reset";
+  else if (!running())
+    summary << runState();
+  else
+    summary << "running at " << core::roundedNumber(rtf_, 3) << "x real time"
+            << (params_.real_time_factor > 0.0 ? " (asked " + core::shortestNumber(params_.real_time_factor) + "x)" :
+                                                 std::string(" (as fast as possible)"));
+  if (!failed_ && slow)
+    summary << "; slower than asked";
+  if (!failed_ && cut)
+    summary << "; " << (step_cuts_ - diagnosed_cuts_) << " step cuts since the last report";
+  using diagnostic_msgs::DiagnosticStatus;
+  d.summary(failed_       ? DiagnosticStatus::ERROR :
+            (slow || cut) ? DiagnosticStatus::WARN :
+                            DiagnosticStatus::OK,
+            summary.str());
+  d.add("scene", model_.name);
+  d.add("sim_time", state_.t);
+  d.add("steps", steps_);
+  d.add("step_cuts", step_cuts_);
+  d.add("real_time_factor", running() ? rtf_ : 0.0);
+  d.add("requested_real_time_factor", params_.real_time_factor);
+  d.add("publish_share", publish_share_);
+  d.add("solver_status", solver_status_);
+  d.add("active_contacts", contacts_);
+  d.add("pushes", acting_pushes_.size());
+  diagnosed_cuts_ = step_cuts_;
+}
+
+void SimNode::diagnoseCommands(diagnostic_updater::DiagnosticStatusWrapper& d)
+{
+  const std::lock_guard<std::mutex> lock(mutex_);
+  const uint32_t new_rejections = rejected_ - diagnosed_rejected_;
+  using diagnostic_msgs::DiagnosticStatus;
+  if (new_rejections > 0)
+    d.summaryf(DiagnosticStatus::WARN, "%u rejected since the last report; last: %s", new_rejections,
+               last_rejection_.c_str());
+  else
+    d.summaryf(DiagnosticStatus::OK, "%u accepted, %u rejected", accepted_, rejected_);
+  d.add("accepted", accepted_);
+  d.add("rejected", rejected_);
+  d.add("last_rejection", last_rejection_);
+  diagnosed_rejected_ = rejected_;
+}
+
+void SimNode::diagnosePlanner(diagnostic_updater::DiagnosticStatusWrapper& d)
+{
+  const std::lock_guard<std::mutex> lock(mutex_);
+  using diagnostic_msgs::DiagnosticStatus;
+  const std::string state =
+      plans_running_ > 0 ? (plan_holds_ > 0 ? "planning (the simulation held)" : "planning") : "idle";
+  d.summary(last_plan_ok_ ? DiagnosticStatus::OK : DiagnosticStatus::WARN, state + "; last: " + last_plan_);
+  d.add("state", state);
+  d.add("requests_answered", plans_answered_);
+  d.add("last_answer", last_plan_);
 }
 
 ros::Time SimNode::stamp(double t) const
@@ -172,8 +302,11 @@ void SimNode::reject(const std::string& what, const std::string& reason)
   ++rejected_;
   // a command's text (a name of a megabyte, say) reaches the latched status and the log only cut
   last_rejection_ = core::clipped(what + ": " + reason, 4 * core::kMaxEchoLength);
-  ROS_WARN_STREAM("tensegrity_sim: rejected " << last_rejection_ << " (nothing applied; " << rejected_
-                                              << " rejected so far)");
+  int held = 0;
+  if (logDue("rejected " + what, held))
+    ROS_WARN_STREAM("tensegrity_sim: rejected "
+                    << last_rejection_ << " (nothing applied; " << rejected_ << " rejected so far"
+                    << (held > 0 ? ", " + std::to_string(held) + " more like it not logged" : std::string()) << ")");
   publishStatus();
 }
 
@@ -193,7 +326,12 @@ void SimNode::onActuation(const active_tensegrity::ActuationCommand::ConstPtr& m
   std::ostringstream s;
   for (size_t i = 0; i < msg->names.size(); ++i)
     s << (i ? ", " : "") << core::clipped(msg->names[i]) << " -> " << msg->targets[i] << " m";
-  ROS_INFO_STREAM("tensegrity_sim: actuation at t = " << state_.t << " s: " << s.str());
+  int held = 0;
+  if (logDue("actuation", held))
+    ROS_INFO_STREAM(
+        "tensegrity_sim: actuation at t = "
+        << state_.t << " s: " << s.str()
+        << (held > 0 ? " (" + std::to_string(held) + " commands since the last one logged)" : std::string()));
   publishStatus();
 }
 
@@ -211,9 +349,12 @@ void SimNode::onTrajectory(const trajectory_msgs::JointTrajectory::ConstPtr& msg
   }
   ++accepted_;
   ++actuation_epoch_;
-  ROS_INFO_STREAM("tensegrity_sim: trajectory of " << msg->points.size() << " points for " << msg->joint_names.size()
-                                                   << " actuators from t = " << state_.t << " s, " << times.back()
-                                                   << " s long");
+  int held = 0;
+  if (logDue("trajectory", held))
+    ROS_INFO_STREAM("tensegrity_sim: trajectory of "
+                    << msg->points.size() << " points for " << msg->joint_names.size()
+                    << " actuators from t = " << state_.t << " s, " << times.back() << " s long"
+                    << (held > 0 ? " (" + std::to_string(held) + " since the last one logged)" : std::string()));
   publishStatus();
 }
 
@@ -461,15 +602,48 @@ void SimNode::plan(const Request& req, Answer& res, const planning::PlanControl&
 {
   namespace ap = active_tensegrity::planning;
   res.executed = false;
+  // /diagnostics: a request under way from here, answered on every way out
+  class Record
+  {
+  public:
+    Record(SimNode& node, const Answer& answer) : node_(node), answer_(answer)
+    {
+      const std::lock_guard<std::mutex> lock(node_.mutex_);
+      ++node_.plans_running_;
+    }
+    ~Record()
+    {
+      const std::lock_guard<std::mutex> lock(node_.mutex_);
+      --node_.plans_running_;
+      ++node_.plans_answered_;
+      const auto status = static_cast<ap::PlanStatus>(answer_.status);
+      node_.last_plan_ = std::string(ap::toString(status)) + (answer_.executed ? ", executed" : "");
+      node_.last_plan_ok_ = status == ap::PlanStatus::kExactSolution;
+    }
+    Record(const Record&) = delete;
+    Record& operator=(const Record&) = delete;
+
+  private:
+    SimNode& node_;
+    const Answer& answer_;
+  } record(*this, res);
   if (req.allow_contact && !(req.max_contact_force > 0.0))
   {
     res.status = static_cast<uint8_t>(ap::PlanStatus::kInvalidRequest);
     res.message =
         "max_contact_force must be > 0 N when allow_contact is set, got " + core::shortestNumber(req.max_contact_force);
-    ROS_WARN_STREAM("tensegrity_sim: ~plan_folding refused: " << res.message);
+    const std::lock_guard<std::mutex> lock(mutex_);
+    int held = 0;
+    if (logDue("plan refused", held))
+      ROS_WARN_STREAM("tensegrity_sim: ~plan_folding refused: " << res.message);
     return;
   }
-  ap::PlanRequest r = planRequest(req, params_);
+  SimParams params;
+  {
+    const std::lock_guard<std::mutex> lock(mutex_);
+    params = params_;
+  }
+  ap::PlanRequest r = planRequest(req, params);
   // the path from the quasi-static equilibrium nearest to the live state (folded, moving) where the actuators
   // come to rest, found within the request's deadline; the verification from the live state itself, under the
   // actuation law in force
@@ -644,7 +818,12 @@ void SimNode::onFollowGoal(const active_tensegrity::FollowTrajectoryGoalConstPtr
     else
       follow_action_->setAborted(result, why);
   };
-  ros::WallRate rate(std::min(20.0, params_.publish_rate));
+  double publish_rate = 0.0;
+  {
+    const std::lock_guard<std::mutex> lock(mutex_);
+    publish_rate = params_.publish_rate;
+  }
+  ros::WallRate rate(std::min(20.0, publish_rate));
   active_tensegrity::FollowTrajectoryFeedback f;
   f.joint_names = names;
   while (true)
@@ -746,7 +925,7 @@ void SimNode::publishStatus()
 void SimNode::publishState(core::State& state, const ros::Time& stamp,
                            const std::vector<core::ContactPairState>* contacts)
 {
-  if (params_.publish_clock)
+  if (loop_params_.publish_clock)
   {
     rosgraph_msgs::Clock c;
     c.clock = stamp;
@@ -755,8 +934,9 @@ void SimNode::publishState(core::State& state, const ros::Time& stamp,
   // markers are for rviz, which draws at screen rates: at most marker_rate per wall second (with every
   // publication they were about 40 % of the node's publishing time on the tower)
   const WallClock::time_point now = WallClock::now();
-  const bool markers = params_.marker_rate <= 0.0 || now >= next_markers_;
+  const bool markers = loop_params_.marker_rate <= 0.0 || now >= next_markers_;
   const Snapshot snap = builder_.build(state, stamp, contacts, markers);
+  published_contacts_ = snap.contacts.contacts.size();
   tf_.sendTransform(snap.transforms);
   contacts_pub_.publish(snap.contacts);
   cables_pub_.publish(snap.cables);
@@ -766,8 +946,8 @@ void SimNode::publishState(core::State& state, const ros::Time& stamp,
   if (markers)
   {
     markers_pub_.publish(snap.markers);
-    if (params_.marker_rate > 0.0)
-      next_markers_ = now + wallSpan(1.0 / params_.marker_rate);
+    if (loop_params_.marker_rate > 0.0)
+      next_markers_ = now + wallSpan(1.0 / loop_params_.marker_rate);
   }
   else
   {
@@ -791,7 +971,6 @@ void SimNode::publishMissedMarkers()
 void SimNode::run()
 {
   const double dt = model_.solver.dt;
-  const double period = 1.0 / params_.publish_rate;
   const core::ActuationLaw law =
       core::ActuationLaw::writing([this](double t, core::ActuationValues& u) { controller_.values(t, u); });
 
@@ -803,9 +982,12 @@ void SimNode::run()
   double window_sim = 0.0, window_publish = 0.0;
   double next_publish = 0.0;
   bool was_running = false;
+  // with ~max_publish_wall_rate: the wall time before which the data topics do not go again
+  WallClock::time_point next_data = WallClock::time_point::min();
 
   while (ros::ok())
   {
+    diagnostics_.update();  // (when its period is due; takes the mutex itself)
     core::State to_publish;
     ros::Time to_stamp;
     bool publish_now = false;
@@ -813,8 +995,22 @@ void SimNode::run()
     // callback may re-initialize the solver (~reset)
     std::vector<core::ContactPairState> to_contacts;
     bool have_contacts = false;
+    bool clock_only = false;
     {
       std::unique_lock<std::mutex> lock(mutex_);
+      if (loop_params_epoch_ != params_epoch_)
+      {
+        loop_params_ = params_;
+        loop_params_epoch_ = params_epoch_;
+        builder_.setOptions(loop_params_.markers);
+      }
+      if (repace_)
+      {
+        // a new real-time factor: paced from here
+        repace_ = false;
+        pace_wall = WallClock::now();
+        pace_sim = state_.t;
+      }
       if (clear_markers_)
       {
         // after a reset: fresh markers, publish at once, pace from the new start
@@ -842,17 +1038,31 @@ void SimNode::run()
         next_publish = std::min(next_publish, state_.t);
         was_running = true;
       }
+      const double period = 1.0 / loop_params_.publish_rate;
       if (state_.t >= next_publish - 1e-9 * dt)
       {
-        to_publish = state_;
-        to_stamp = stamp(state_.t);
-        publish_now = true;
-        if (const std::vector<core::ContactPairState>* c = solver_.contactsAt(state_))
-        {
-          to_contacts = *c;
-          have_contacts = true;
-        }
         next_publish = state_.t + period;
+        // (with a wall-rate cap, a publication due before the cap allows is left out)
+        const WallClock::time_point now = WallClock::now();
+        if (loop_params_.max_publish_wall_rate <= 0.0 || now >= next_data)
+        {
+          if (loop_params_.max_publish_wall_rate > 0.0)
+            next_data = now + wallSpan(1.0 / loop_params_.max_publish_wall_rate);
+          to_publish = state_;
+          to_stamp = stamp(state_.t);
+          publish_now = true;
+          if (const std::vector<core::ContactPairState>* c = solver_.contactsAt(state_))
+          {
+            to_contacts = *c;
+            have_contacts = true;
+          }
+        }
+        else if (loop_params_.publish_clock)
+        {
+          // /clock goes on at the publish rate (nodes on simulated time need it)
+          to_stamp = stamp(state_.t);
+          clock_only = true;
+        }
       }
       else
       {
@@ -894,6 +1104,12 @@ void SimNode::run()
       }
     }
 
+    if (clock_only)
+    {
+      rosgraph_msgs::Clock c;
+      c.clock = to_stamp;
+      clock_pub_.publish(c);
+    }
     if (publish_now)
     {
       const WallClock::time_point t0 = WallClock::now();
@@ -904,6 +1120,7 @@ void SimNode::run()
       {
         const std::lock_guard<std::mutex> lock(mutex_);
         rtf_ = (to_publish.t - window_sim) / wall;
+        contacts_ = published_contacts_;
         publish_share_ = window_publish / wall;
         window_wall = WallClock::now();
         window_sim = to_publish.t;
@@ -913,14 +1130,14 @@ void SimNode::run()
       continue;
     }
 
-    if (params_.real_time_factor > 0.0)
+    if (loop_params_.real_time_factor > 0.0)
     {
       double t_now = 0.0;
       {
         const std::lock_guard<std::mutex> lock(mutex_);
         t_now = state_.t;
       }
-      const WallClock::time_point due = pace_wall + wallSpan((t_now - pace_sim) / params_.real_time_factor);
+      const WallClock::time_point due = pace_wall + wallSpan((t_now - pace_sim) / loop_params_.real_time_factor);
       if (due > WallClock::now())
         std::this_thread::sleep_until(due);
     }
@@ -946,12 +1163,10 @@ int runSimNode()
     ROS_FATAL_STREAM("tensegrity_sim: " << e.what());
     return 1;
   }
-  // command defaults from the scene when not given
-  if (params.default_speed <= 0.0)
-    params.default_speed = model.analysis.schedule.speed > 0.0 ? model.analysis.schedule.speed : 0.1;
-  if (params.default_acceleration <= 0.0)
-    params.default_acceleration =
-        params.default_speed / (model.analysis.schedule.blend_time > 0.0 ? model.analysis.schedule.blend_time : 0.1);
+  // command defaults from the scene when not given; every effective value back to the parameter server (where
+  // the dynamic_reconfigure server starts from)
+  resolveCommandDefaults(params, model);
+  writeSimParams(pnh, params);
   ROS_INFO_STREAM("tensegrity_sim: scene '" << model.name << "': " << model.bodies.size() << " bodies, "
                                             << model.cables.size() << " cables, " << model.actuators.size()
                                             << " actuators, " << model.checkedPairCount()

@@ -3,8 +3,10 @@
 #include <cmath>
 #include <iomanip>
 #include <sstream>
+#include <stdexcept>
 
 #include <ros/package.h>
+#include <ros/this_node.h>
 #include <xmlrpcpp/XmlRpcValue.h>
 
 #include "active_tensegrity/core/text.h"
@@ -136,45 +138,129 @@ SimParams loadSimParams(const ros::NodeHandle& nh)
       throw ParamError("~overrides must be a map of scene keys to values (e.g. {solver.dt: 1e-4}), got " + show(v));
     flatten(v, "", p.overrides);
   }
-  p.real_time_factor = number(nh, "real_time_factor", p.real_time_factor);
-  if (p.real_time_factor < 0.0)
-    throw ParamError("~real_time_factor must be >= 0 (0 = as fast as possible), got " +
-                     core::shortestNumber(p.real_time_factor));
-  p.publish_rate = number(nh, "publish_rate", p.publish_rate);
-  if (p.publish_rate <= 0.0)
-    throw ParamError("~publish_rate must be > 0 Hz, got " + core::shortestNumber(p.publish_rate));
-  p.marker_rate = number(nh, "marker_rate", p.marker_rate);
-  if (!(p.marker_rate >= 0.0))
-    throw ParamError("~marker_rate must be >= 0 Hz of wall time (0 = with every publication), got " +
-                     core::shortestNumber(p.marker_rate));
+  for (const std::string& name : liveParamNames())
+  {
+    const double value = number(nh, name, liveParam(p, name));
+    if (const std::string err = checkLiveParam(name, value); !err.empty())
+      throw ParamError(err);
+    setLiveParam(p, name, value);
+  }
   p.publish_clock = boolean(nh, "publish_clock", p.publish_clock);
   p.frame_id = text(nh, "frame_id", p.frame_id);
   if (p.frame_id.empty())
     throw ParamError("~frame_id is empty");
-  p.default_speed = number(nh, "default_speed", p.default_speed);
-  if (p.default_speed < 0.0)
-    throw ParamError("~default_speed must be > 0 m/s (or 0: the scene's actuation.speed), got " +
-                     core::shortestNumber(p.default_speed));
-  p.default_acceleration = number(nh, "default_acceleration", p.default_acceleration);
-  if (p.default_acceleration < 0.0)
-    throw ParamError("~default_acceleration must be > 0 m/s^2 (or 0: derived), got " +
-                     core::shortestNumber(p.default_acceleration));
+  // the node's namespace, /robot_a -> robot_a (the root namespace: no prefix)
+  std::string ns = ros::this_node::getNamespace();
+  while (!ns.empty() && ns.front() == '/')
+    ns.erase(ns.begin());
+  p.tf_prefix = text(nh, "tf_prefix", ns);
+  if (!p.tf_prefix.empty() && (p.tf_prefix.front() == '/' || p.tf_prefix.back() == '/' ||
+                               p.tf_prefix.find_first_of(" \t\n") != std::string::npos))
+    throw ParamError("~tf_prefix must not start or end with '/' nor hold spaces (tf2 frames are such as "
+                     "robot_a/S1), got " +
+                     core::quoted(p.tf_prefix));
+  if (p.frame_id.find('/') == 0)
+    throw ParamError("~frame_id must not start with '/' (tf2 frames have no leading slash), got " +
+                     core::quoted(p.frame_id));
   p.start_paused = boolean(nh, "start_paused", p.start_paused);
   p.adaptive = boolean(nh, "adaptive", p.adaptive);
-  p.markers.contact_force_scale = number(nh, "contact_force_scale", p.markers.contact_force_scale);
-  if (p.markers.contact_force_scale <= 0.0)
-    throw ParamError("~contact_force_scale must be > 0 m/N, got " + core::shortestNumber(p.markers.contact_force_scale));
-  p.markers.cable_tension_scale = number(nh, "cable_tension_scale", p.markers.cable_tension_scale);
-  if (p.markers.cable_tension_scale < 0.0)
-    throw ParamError("~cable_tension_scale must be >= 0 N (0 = the largest tension of the moment), got " +
-                     core::shortestNumber(p.markers.cable_tension_scale));
-  p.markers.strut_alpha = number(nh, "strut_alpha", p.markers.strut_alpha);
-  if (p.markers.strut_alpha <= 0.0 || p.markers.strut_alpha > 1.0)
-    throw ParamError("~strut_alpha must be in (0, 1], got " + core::shortestNumber(p.markers.strut_alpha));
-  p.markers.cable_width = number(nh, "cable_width", p.markers.cable_width);
-  if (p.markers.cable_width <= 0.0)
-    throw ParamError("~cable_width must be > 0 m, got " + core::shortestNumber(p.markers.cable_width));
   return p;
+}
+
+const std::vector<std::string>& liveParamNames()
+{
+  static const std::vector<std::string> names = {
+    "real_time_factor",     "publish_rate",        "max_publish_wall_rate", "marker_rate", "default_speed",
+    "default_acceleration", "contact_force_scale", "cable_tension_scale",   "cable_width", "strut_alpha",
+  };
+  return names;
+}
+
+std::string checkLiveParam(const std::string& name, double value)
+{
+  const std::string got = ", got " + core::shortestNumber(value);
+  if (!std::isfinite(value))
+    return "~" + name + " must be finite" + got;
+  if (name == "real_time_factor" && value < 0.0)
+    return "~real_time_factor must be >= 0 (0 = as fast as possible)" + got;
+  if (name == "publish_rate" && value <= 0.0)
+    return "~publish_rate must be > 0 Hz" + got;
+  if (name == "max_publish_wall_rate" && value < 0.0)
+    return "~max_publish_wall_rate must be >= 0 Hz of wall time (0 = no cap)" + got;
+  if (name == "marker_rate" && value < 0.0)
+    return "~marker_rate must be >= 0 Hz of wall time (0 = with every publication)" + got;
+  if (name == "default_speed" && value < 0.0)
+    return "~default_speed must be > 0 m/s (or 0: the scene's actuation.speed)" + got;
+  if (name == "default_acceleration" && value < 0.0)
+    return "~default_acceleration must be > 0 m/s^2 (or 0: derived)" + got;
+  if (name == "contact_force_scale" && value <= 0.0)
+    return "~contact_force_scale must be > 0 m/N" + got;
+  if (name == "cable_tension_scale" && value < 0.0)
+    return "~cable_tension_scale must be >= 0 N (0 = the largest tension of the moment)" + got;
+  if (name == "cable_width" && value <= 0.0)
+    return "~cable_width must be > 0 m" + got;
+  if (name == "strut_alpha" && (value <= 0.0 || value > 1.0))
+    return "~strut_alpha must be in (0, 1]" + got;
+  return "";
+}
+
+namespace
+{
+double* liveField(SimParams& p, const std::string& name)
+{
+  if (name == "real_time_factor")
+    return &p.real_time_factor;
+  if (name == "publish_rate")
+    return &p.publish_rate;
+  if (name == "max_publish_wall_rate")
+    return &p.max_publish_wall_rate;
+  if (name == "marker_rate")
+    return &p.marker_rate;
+  if (name == "default_speed")
+    return &p.default_speed;
+  if (name == "default_acceleration")
+    return &p.default_acceleration;
+  if (name == "contact_force_scale")
+    return &p.markers.contact_force_scale;
+  if (name == "cable_tension_scale")
+    return &p.markers.cable_tension_scale;
+  if (name == "cable_width")
+    return &p.markers.cable_width;
+  if (name == "strut_alpha")
+    return &p.markers.strut_alpha;
+  throw std::logic_error("no live parameter '" + name + "'");
+}
+}  // namespace
+
+double liveParam(const SimParams& p, const std::string& name)
+{
+  return *liveField(const_cast<SimParams&>(p), name);
+}
+
+void setLiveParam(SimParams& p, const std::string& name, double value)
+{
+  *liveField(p, name) = value;
+}
+
+void resolveCommandDefaults(SimParams& params, const core::Model& model)
+{
+  if (params.default_speed <= 0.0)
+    params.default_speed = model.analysis.schedule.speed > 0.0 ? model.analysis.schedule.speed : 0.1;
+  if (params.default_acceleration <= 0.0)
+    params.default_acceleration =
+        params.default_speed / (model.analysis.schedule.blend_time > 0.0 ? model.analysis.schedule.blend_time : 0.1);
+}
+
+void writeSimParams(ros::NodeHandle& nh, const SimParams& p)
+{
+  nh.setParam("scene", p.scene);
+  for (const std::string& name : liveParamNames())
+    nh.setParam(name, liveParam(p, name));
+  nh.setParam("publish_clock", p.publish_clock);
+  nh.setParam("frame_id", p.frame_id);
+  nh.setParam("tf_prefix", p.tf_prefix);
+  nh.setParam("start_paused", p.start_paused);
+  nh.setParam("adaptive", p.adaptive);
 }
 
 std::string SimParams::describe() const
@@ -189,6 +275,9 @@ std::string SimParams::describe() const
     << (marker_rate == 0.0 ? " (markers with every publication)" : " Hz (wall time, at most)") << "\n"
     << "publish_clock: " << (publish_clock ? "true" : "false") << "\n"
     << "frame_id: " << frame_id << "\n"
+    << "tf_prefix: " << (tf_prefix.empty() ? "(none: frames are the bodies' names)" : tf_prefix) << "\n"
+    << "max_publish_wall_rate: " << max_publish_wall_rate
+    << (max_publish_wall_rate == 0.0 ? " (no cap)" : " Hz (wall time, at most)") << "\n"
     << "default_speed: " << default_speed << " m/s\n"
     << "default_acceleration: " << default_acceleration << " m/s^2\n"
     << "start_paused: " << (start_paused ? "true" : "false") << "\n"

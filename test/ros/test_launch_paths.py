@@ -101,6 +101,12 @@ class TestLaunchPaths(unittest.TestCase):
         self.assertTrue(started, out)
         self.assertTrue(wait_for(lambda: os.path.exists(bag), 10, 0.1), out)
         self.assertGreater(os.path.getsize(bag), 0)
+        # the node's data topics, ~struts among them (sim.launch recorded every one but that)
+        with rosbag.Bag(bag) as b:
+            topics = set(b.get_type_and_topic_info().topics)
+        for topic in ("/tf", "/rec_sim/struts", "/rec_sim/contacts", "/rec_sim/cables", "/rec_sim/actuators",
+                      "/rec_sim/status"):
+            self.assertIn(topic, topics, out)
         ros_home = os.environ.get("ROS_HOME") or os.path.expanduser("~/.ros")
         self.assertFalse(os.path.exists(os.path.join(ros_home, "rec.bag")))
 

@@ -45,7 +45,8 @@ struct Snapshot
 class MessageBuilder
 {
 public:
-  MessageBuilder(const core::Model& model, std::string frame_id, MarkerOptions options);
+  /// tf frames: frame_id the parent, each body's frame bodyFrame(model, body, tf_prefix).
+  MessageBuilder(const core::Model& model, std::string frame_id, MarkerOptions options, std::string tf_prefix = "");
 
   /// All messages for `state` stamped `stamp`. Markers of contacts that ended since the previous
   /// call with markers are deleted (the builder remembers which arrows it drew). `contacts`: the state's active
@@ -60,6 +61,11 @@ public:
   {
     return frame_id_;
   }
+  /// The drawing options from the next build on (the node's live parameters).
+  void setOptions(const MarkerOptions& options)
+  {
+    options_ = options;
+  }
 
 private:
   void addMarkers(const core::State& state, const std::vector<core::ContactPairState>& contacts,
@@ -69,12 +75,13 @@ private:
   const core::Model& model_;
   std::string frame_id_;
   MarkerOptions options_;
+  std::string tf_prefix_;
   std::vector<int> arrow_shown_;  // the contact slots whose normal and friction arrows were drawn last time (ascending)
   core::Vec3 ground_centre_;      // the ground slab's centre: under the bodies' mean start position
   bool clear_all_ = true;
 };
 
-/// The scene's frame name of a body (its name, as given in the scene).
-std::string bodyFrame(const core::Model& model, int body);
+/// The tf frame of a body: its name as given in the scene, after `tf_prefix` and a slash when there is one.
+std::string bodyFrame(const core::Model& model, int body, const std::string& tf_prefix = "");
 
 }  // namespace active_tensegrity::ros_layer

@@ -7,11 +7,16 @@
 
 #include <atomic>
 #include <chrono>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <string>
+#include <utility>
 
 #include <actionlib/server/simple_action_server.h>
+#include <boost/thread/recursive_mutex.hpp>
+#include <diagnostic_updater/diagnostic_updater.h>
+#include <dynamic_reconfigure/server.h>
 #include <ros/ros.h>
 #include <std_srvs/SetBool.h>
 #include <std_srvs/Trigger.h>
@@ -23,6 +28,7 @@
 #include "active_tensegrity/FollowTrajectoryAction.h"
 #include "active_tensegrity/PlanFoldingAction.h"
 #include "active_tensegrity/PlanFolding.h"
+#include "active_tensegrity/SimConfig.h"
 #include "active_tensegrity/SimStatus.h"
 #include "active_tensegrity/TargetWrench.h"
 #include "active_tensegrity/core/adaptive.h"
@@ -80,8 +86,20 @@ private:
   template <typename Request, typename Answer>
   void plan(const Request& req, Answer& res, const planning::PlanControl& control);
 
-  /// Logs and counts a rejected command (mutex held).
+  /// Logs and counts a rejected command (mutex held); the log line at most every two wall seconds per kind of
+  /// command (the count stays in ~status and /diagnostics).
   void reject(const std::string& what, const std::string& reason);
+  /// Whether a log line of `kind` may go now (one per kind every two wall seconds); `held` gets how many were
+  /// held back since the last one that went (mutex held).
+  bool logDue(const std::string& kind, int& held);
+  /// dynamic_reconfigure: applies each changed live parameter that checkLiveParam accepts; a refused one keeps
+  /// its value (put back into `config`, which the server answers with) and is logged and counted.
+  void onReconfigure(active_tensegrity::SimConfig& config, uint32_t level);
+  /// /diagnostics: the simulation (real-time factor against the requested one, step cuts, solver status,
+  /// contacts, pushes), the commands (accepted, rejected) and the planner.
+  void diagnoseSimulation(diagnostic_updater::DiagnosticStatusWrapper& status);
+  void diagnoseCommands(diagnostic_updater::DiagnosticStatusWrapper& status);
+  void diagnosePlanner(diagnostic_updater::DiagnosticStatusWrapper& status);
   /// Builds and publishes every topic for `state` (loop thread only); ~markers only when due (~marker_rate),
   /// else the state is kept in last_published_ for publishMissedMarkers. `contacts`: the state's active contacts
   /// as the solver formed them, copied under the mutex (the solver is not touched here: a ~reset re-initializes
@@ -109,6 +127,11 @@ private:
   std::unique_ptr<core::AdaptiveStepper> stepper_;  // with ~adaptive (a new one at every reset)
   core::ActuationController controller_;
   MessageBuilder builder_;
+  // (loop thread only) the parameters the loop and publishing read: a copy of params_ made under the mutex when
+  // a live change (params_epoch_) came
+  SimParams loop_params_;
+  uint64_t loop_params_epoch_ = 0;
+  size_t published_contacts_ = 0;  // active contacts of the last publication
   // (loop thread only) when ~markers may go next; the last publication's state when it went without them
   WallClock::time_point next_markers_ = WallClock::time_point::min();
   bool markers_missed_ = false;
@@ -117,7 +140,9 @@ private:
   bool last_have_contacts_ = false;
   ros::Time last_stamp_;
 
-  std::mutex mutex_;  // guards everything below that callbacks touch
+  std::mutex mutex_;  // guards everything below that callbacks touch (and params_, which dynamic_reconfigure sets)
+  uint64_t params_epoch_ = 0;  // counts the live changes of params_
+  bool repace_ = false;        // the real-time factor changed: pace from the live state
   core::State state_;
   bool paused_by_user_ = false;
   bool failed_ = false;
@@ -135,6 +160,17 @@ private:
   uint32_t accepted_ = 0, rejected_ = 0;
   std::string last_rejection_;
   uint64_t steps_ = 0, step_cuts_ = 0;
+  size_t contacts_ = 0;  // active contacts at the last publication
+  // log lines per kind: when the last went, how many were held back since
+  std::map<std::string, std::pair<WallClock::time_point, int>> log_times_;
+  // what the last diagnostics update saw (a rise since then is a warning)
+  uint64_t diagnosed_cuts_ = 0;
+  uint32_t diagnosed_rejected_ = 0;
+  // the planner: requests being planned, answered, the last answer
+  int plans_running_ = 0;
+  uint32_t plans_answered_ = 0;
+  std::string last_plan_ = "none yet";
+  bool last_plan_ok_ = true;
   // pushes from outside (~apply_wrench, ~wrench): each a set of world-frame point loads acting until `end`
   struct Push
   {
@@ -153,6 +189,9 @@ private:
   ros::Subscriber actuation_sub_, trajectory_sub_, wrench_sub_;
   ros::ServiceServer reset_srv_, pause_srv_, plan_srv_, apply_wrench_srv_, clear_wrenches_srv_;
   tf2_ros::TransformBroadcaster tf_;
+  diagnostic_updater::Updater diagnostics_;
+  boost::recursive_mutex reconfigure_mutex_;
+  std::unique_ptr<dynamic_reconfigure::Server<active_tensegrity::SimConfig>> reconfigure_;
   // the action servers last: their threads run callbacks that use everything above
   std::unique_ptr<actionlib::SimpleActionServer<active_tensegrity::PlanFoldingAction>> plan_action_;
   std::unique_ptr<actionlib::SimpleActionServer<active_tensegrity::FollowTrajectoryAction>> follow_action_;

@@ -27,8 +27,12 @@ struct SimParams
   double real_time_factor = 1.0;          // simulated s per wall s; 0 = as fast as possible
   double publish_rate = 50.0;             // Hz of simulated time
   double marker_rate = 30.0;              // ~markers at most this often, Hz of wall time (0: every publication)
+  double max_publish_wall_rate = 0.0;     // data topics and tf at most this often, Hz of wall time (0: no cap)
   bool publish_clock = false;             // /clock from the simulation (stamps in simulated time)
   std::string frame_id = "world";
+  /// prefixed to every body's tf frame ("robot_a" gives robot_a/S1); default: the node's namespace without
+  /// its leading slash (empty in the root namespace: frames are the bodies' names)
+  std::string tf_prefix;
   double default_speed = 0.0;         // m/s for commands without max_speeds (0: the scene's actuation.speed)
   double default_acceleration = 0.0;  // m/s^2 for commands without max_accelerations (0: derived)
   bool start_paused = false;
@@ -40,6 +44,22 @@ struct SimParams
   /// One line per parameter with its effective value.
   std::string describe() const;
 };
+
+/// The parameters that change while the node runs (dynamic_reconfigure, cfg/Sim.cfg), by name.
+const std::vector<std::string>& liveParamNames();
+/// Why `value` cannot be live parameter `name` (the message names both), or "" when it can.
+std::string checkLiveParam(const std::string& name, double value);
+/// A live parameter's value in p, and setting it (names from liveParamNames()).
+double liveParam(const SimParams& p, const std::string& name);
+void setLiveParam(SimParams& p, const std::string& name, double value);
+
+/// A default of 0 (default_speed, default_acceleration) made the scene's: its actuation.speed (else 0.1 m/s)
+/// and that over its blend_time (else 0.1 s).
+void resolveCommandDefaults(SimParams& params, const core::Model& model);
+
+/// Writes every effective value (defaults included) back to the private namespace: `rosparam list` and
+/// `rosparam get` show what the node runs with.
+void writeSimParams(ros::NodeHandle& private_nh, const SimParams& p);
 
 /// `package://pkg/rest` -> the package's path + rest (rospack); anything else is returned as is.
 /// Throws ParamError when the package is unknown.
