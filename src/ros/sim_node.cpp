@@ -489,7 +489,8 @@ double SimNode::applyPushes()
 {
   const double t = state_.t;
   pushes_.erase(std::remove_if(pushes_.begin(), pushes_.end(),
-                               [t](const Push& p) { return p.end - t <= 1e-10 * std::max(1.0, std::abs(p.end)); }),
+                               [t](const Push& p)
+                               { return std::isfinite(p.end) && p.end - t <= 1e-10 * std::max(1.0, std::abs(p.end)); }),
                 pushes_.end());
   std::vector<uint64_t> acting;
   double next_end = std::numeric_limits<double>::infinity();
