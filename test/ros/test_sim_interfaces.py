@@ -5,6 +5,7 @@ dynamic_reconfigure; /diagnostics; pushes from outside; throttled warnings; the 
 
 Waits are bounds on behaviour that is missing, far above the time it takes."""
 import math
+import random
 import threading
 import time
 import unittest
@@ -214,6 +215,30 @@ class SimInterfaces(unittest.TestCase):
             self.assertTrue(wait_for(lambda: status.get().wrenches == 2, WAIT))
             self.assertEqual(clear().message, "cleared 2 pushes")
             self.assertTrue(wait_for(lambda: status.get().wrenches == 0, WAIT))
+            # random requests, the bad and the odd: each answered, the node running on, nothing non-finite
+            rng = random.Random(7)
+            values = [0.0, -0.0, 1.0, -1.0, 1e-300, 1e9, 1e9 + 1, -1e300, float("nan"), float("inf"), 5.5]
+            targets = ["S1", "S2", "T1", "B1", "", "S1 ", "s1", "x" * 5000, "\u00e9", "T1/S1"]
+            pub_w = rospy.Publisher(B + "/wrench", TargetWrench, queue_size=100)
+            for k in range(60):
+                w = wrench(*[rng.choice(values) for _ in range(6)])
+                target = rng.choice(targets)
+                if k % 2:
+                    r = apply(target, w, rng.choice(values + [-1.0, 0.01]))
+                    self.assertIn("nothing applied" if not r.success else "pushing", r.message)
+                else:
+                    pub_w.publish(TargetWrench(target=target, wrench=w))
+            clear()
+            self.assertTrue(wait_for(lambda: status.get().wrenches == 0, WAIT))
+            # a push of 1e9 N may tear the prism apart: then the solver fails and says so (never NaN out), and a
+            # reset brings it back
+            time.sleep(0.5)
+            for v in struts.get().axial_forces:
+                self.assertTrue(math.isfinite(v))
+            if status.get().solver_status != "running":
+                self.assertNotEqual(status.get().message, "")
+                rospy.ServiceProxy(B + "/reset", Trigger)()
+            self.assertTrue(wait_for(lambda: status.get().solver_status == "running", WAIT), status.get())
             self.assertEqual(status.get().solver_status, "running")
             for v in struts.get().axial_forces:
                 self.assertTrue(math.isfinite(v))
