@@ -986,9 +986,17 @@ void SimNode::run()
   // with ~max_publish_wall_rate: the wall time before which the data topics do not go again
   WallClock::time_point next_data = WallClock::time_point::min();
 
+  // /diagnostics once a second of wall time (the updater's own period runs on ros::Time, which is simulated time
+  // with ~publish_clock: thousands of reports a wall second at real_time_factor 0)
+  WallClock::time_point next_diagnostics = WallClock::now();
+
   while (ros::ok())
   {
-    diagnostics_.update();  // (when its period is due; takes the mutex itself)
+    if (WallClock::now() >= next_diagnostics)
+    {
+      diagnostics_.force_update();  // (takes the mutex itself)
+      next_diagnostics = WallClock::now() + std::chrono::seconds(1);
+    }
     core::State to_publish;
     ros::Time to_stamp;
     bool publish_now = false;
