@@ -562,16 +562,29 @@ void SimNode::onWrench(const active_tensegrity::TargetWrench::ConstPtr& msg)
     reject("~wrench", err);
     return;
   }
+  const core::Vec3 force = vec3(msg->wrench.force), torque = vec3(msg->wrench.torque);
+  // the same load again: nothing changes (the integration restarts only where the forces jump)
+  const bool same =
+      std::any_of(pushes_.begin(), pushes_.end(),
+                  [&](const Push& p)
+                  { return p.standing && p.target == msg->target && p.force == force && p.torque == torque; });
+  if (same)
+  {
+    ++accepted_;
+    return;
+  }
   pushes_.erase(std::remove_if(pushes_.begin(), pushes_.end(),
                                [&](const Push& p) { return p.standing && p.target == msg->target; }),
                 pushes_.end());
-  const bool zero = vec3(msg->wrench.force).squaredNorm() == 0.0 && vec3(msg->wrench.torque).squaredNorm() == 0.0;
+  const bool zero = force.squaredNorm() == 0.0 && torque.squaredNorm() == 0.0;
   if (!zero)
   {
     push.id = next_push_id_++;
     push.target = msg->target;
     push.end = std::numeric_limits<double>::infinity();
     push.standing = true;
+    push.force = force;
+    push.torque = torque;
     pushes_.push_back(std::move(push));
   }
   applyPushes();

@@ -179,6 +179,7 @@ private:
     std::vector<core::PointLoad> loads;
     double end = 0.0;       // simulated s (+inf: until cleared)
     bool standing = false;  // from ~wrench (replaced by the next message for its target)
+    core::Vec3 force = core::Vec3::Zero(), torque = core::Vec3::Zero();  // as asked (N, N m)
   };
   std::vector<Push> pushes_;
   uint64_t next_push_id_ = 1;
