@@ -167,79 +167,83 @@ SimParams loadSimParams(const ros::NodeHandle& nh)
   return p;
 }
 
+namespace
+{
+/// A live parameter: its name, where it lives in SimParams, and what a value must be (the refusal's words).
+struct LiveParamSpec
+{
+  const char* name;
+  double& (*field)(SimParams&);
+  bool (*accepts)(double);
+  const char* requirement;
+};
+
+const std::vector<LiveParamSpec>& liveParamSpecs()
+{
+  static const std::vector<LiveParamSpec> specs = {
+    { "real_time_factor", [](SimParams& p) -> double& { return p.real_time_factor; }, [](double v) { return v >= 0.0; },
+      "must be >= 0 (0 = as fast as possible)" },
+    { "publish_rate", [](SimParams& p) -> double& { return p.publish_rate; }, [](double v) { return v > 0.0; },
+      "must be > 0 Hz" },
+    { "max_publish_wall_rate", [](SimParams& p) -> double& { return p.max_publish_wall_rate; },
+      [](double v) { return v >= 0.0; }, "must be >= 0 Hz of wall time (0 = no cap)" },
+    { "marker_rate", [](SimParams& p) -> double& { return p.marker_rate; }, [](double v) { return v >= 0.0; },
+      "must be >= 0 Hz of wall time (0 = with every publication)" },
+    { "default_speed", [](SimParams& p) -> double& { return p.default_speed; }, [](double v) { return v >= 0.0; },
+      "must be > 0 m/s (or 0: the scene's actuation.speed)" },
+    { "default_acceleration", [](SimParams& p) -> double& { return p.default_acceleration; },
+      [](double v) { return v >= 0.0; }, "must be > 0 m/s^2 (or 0: derived)" },
+    { "contact_force_scale", [](SimParams& p) -> double& { return p.markers.contact_force_scale; },
+      [](double v) { return v > 0.0; }, "must be > 0 m/N" },
+    { "cable_tension_scale", [](SimParams& p) -> double& { return p.markers.cable_tension_scale; },
+      [](double v) { return v >= 0.0; }, "must be >= 0 N (0 = the largest tension of the moment)" },
+    { "cable_width", [](SimParams& p) -> double& { return p.markers.cable_width; }, [](double v) { return v > 0.0; },
+      "must be > 0 m" },
+    { "strut_alpha", [](SimParams& p) -> double& { return p.markers.strut_alpha; },
+      [](double v) { return v > 0.0 && v <= 1.0; }, "must be in (0, 1]" },
+  };
+  return specs;
+}
+
+const LiveParamSpec& liveParamSpec(const std::string& name)
+{
+  for (const LiveParamSpec& spec : liveParamSpecs())
+    if (name == spec.name)
+      return spec;
+  throw std::logic_error("no live parameter '" + name + "'");
+}
+}  // namespace
+
 const std::vector<std::string>& liveParamNames()
 {
-  static const std::vector<std::string> names = {
-    "real_time_factor",     "publish_rate",        "max_publish_wall_rate", "marker_rate", "default_speed",
-    "default_acceleration", "contact_force_scale", "cable_tension_scale",   "cable_width", "strut_alpha",
-  };
+  static const std::vector<std::string> names = []
+  {
+    std::vector<std::string> out;
+    for (const LiveParamSpec& spec : liveParamSpecs())
+      out.emplace_back(spec.name);
+    return out;
+  }();
   return names;
 }
 
 std::string checkLiveParam(const std::string& name, double value)
 {
+  const LiveParamSpec& spec = liveParamSpec(name);
   const std::string got = ", got " + core::shortestNumber(value);
   if (!std::isfinite(value))
     return "~" + name + " must be finite" + got;
-  if (name == "real_time_factor" && value < 0.0)
-    return "~real_time_factor must be >= 0 (0 = as fast as possible)" + got;
-  if (name == "publish_rate" && value <= 0.0)
-    return "~publish_rate must be > 0 Hz" + got;
-  if (name == "max_publish_wall_rate" && value < 0.0)
-    return "~max_publish_wall_rate must be >= 0 Hz of wall time (0 = no cap)" + got;
-  if (name == "marker_rate" && value < 0.0)
-    return "~marker_rate must be >= 0 Hz of wall time (0 = with every publication)" + got;
-  if (name == "default_speed" && value < 0.0)
-    return "~default_speed must be > 0 m/s (or 0: the scene's actuation.speed)" + got;
-  if (name == "default_acceleration" && value < 0.0)
-    return "~default_acceleration must be > 0 m/s^2 (or 0: derived)" + got;
-  if (name == "contact_force_scale" && value <= 0.0)
-    return "~contact_force_scale must be > 0 m/N" + got;
-  if (name == "cable_tension_scale" && value < 0.0)
-    return "~cable_tension_scale must be >= 0 N (0 = the largest tension of the moment)" + got;
-  if (name == "cable_width" && value <= 0.0)
-    return "~cable_width must be > 0 m" + got;
-  if (name == "strut_alpha" && (value <= 0.0 || value > 1.0))
-    return "~strut_alpha must be in (0, 1]" + got;
-  return "";
+  return spec.accepts(value) ? "" : "~" + name + " " + spec.requirement + got;
 }
-
-namespace
-{
-double* liveField(SimParams& p, const std::string& name)
-{
-  if (name == "real_time_factor")
-    return &p.real_time_factor;
-  if (name == "publish_rate")
-    return &p.publish_rate;
-  if (name == "max_publish_wall_rate")
-    return &p.max_publish_wall_rate;
-  if (name == "marker_rate")
-    return &p.marker_rate;
-  if (name == "default_speed")
-    return &p.default_speed;
-  if (name == "default_acceleration")
-    return &p.default_acceleration;
-  if (name == "contact_force_scale")
-    return &p.markers.contact_force_scale;
-  if (name == "cable_tension_scale")
-    return &p.markers.cable_tension_scale;
-  if (name == "cable_width")
-    return &p.markers.cable_width;
-  if (name == "strut_alpha")
-    return &p.markers.strut_alpha;
-  throw std::logic_error("no live parameter '" + name + "'");
-}
-}  // namespace
 
 double liveParam(const SimParams& p, const std::string& name)
 {
-  return *liveField(const_cast<SimParams&>(p), name);
+  // (read through the accessor that sets it; nothing is written)
+  return liveParamSpec(name).field(const_cast<SimParams&>(p));
 }
 
 void setLiveParam(SimParams& p, const std::string& name, double value)
 {
-  *liveField(p, name) = value;
+  liveParamSpec(name).field(p) = value;
 }
 
 void resolveCommandDefaults(SimParams& params, const core::Model& model)

@@ -43,16 +43,7 @@ ActuationLaw constantLaw(size_t n, double value = 0.0)
 /// One free strut, no forces: only its quaternion norm constraint.
 Model freeStrut()
 {
-  Model m;
-  m.bodies.push_back(makeStrut("S", 1.2, 0.04, 7800.0));
-  Constraint c;
-  c.kind = Constraint::Kind::kQuatNorm;
-  c.body = 0;
-  m.constraints.push_back(c);
-  finalizeModel(m);
-  m.q0.setZero(7);
-  m.q0.segment<4>(3) = thetaFromZAxis(Vec3(0.2, -0.5, 1.0));
-  return m;
+  return freeStrutModel("S", 1.2, 0.04, 7800.0, Vec3(0.2, -0.5, 1.0));
 }
 
 Vec3 angularMomentum(const Model& m, const State& s)

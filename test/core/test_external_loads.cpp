@@ -27,16 +27,7 @@ ActuationLaw noActuation()
 // a free strut along x, no gravity
 Model freeStrut()
 {
-  Model m;
-  m.name = "free strut";
-  m.bodies.push_back(makeStrut("A", 1.0, 0.02, 7800.0));
-  Constraint c;
-  c.kind = Constraint::Kind::kQuatNorm;
-  c.body = 0;
-  m.constraints.push_back(c);
-  finalizeModel(m);
-  m.q0.setZero(m.nq);
-  m.q0.segment<4>(3) = thetaFromZAxis(Vec3::UnitX());
+  Model m = freeStrutModel("A", 1.0, 0.02, 7800.0, Vec3::UnitX());
   m.solver = trapezoidalOptions(1e-3, 1e-12);
   return m;
 }

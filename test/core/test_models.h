@@ -45,6 +45,21 @@ inline void addSteelCore(Body& b, double radius)
   b.layers.insert(b.layers.begin(), core);
 }
 
+/// One free strut, its quaternion norm its only constraint (no forces), its axis along `axis`, centre at 0.
+inline Model freeStrutModel(const std::string& name, double length, double radius, double density, const Vec3& axis)
+{
+  Model m;
+  m.bodies.push_back(makeStrut(name, length, radius, density));
+  Constraint c;
+  c.kind = Constraint::Kind::kQuatNorm;
+  c.body = 0;
+  m.constraints.push_back(c);
+  finalizeModel(m);
+  m.q0.setZero(m.nq);
+  m.q0.segment<4>(3) = thetaFromZAxis(axis);
+  return m;
+}
+
 inline Body makePointMass(const std::string& name, double mass)
 {
   Body b;
