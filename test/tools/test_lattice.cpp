@@ -432,6 +432,9 @@ TEST(Lattice, ContactMemoryInAHashMapFoldsAsInAnArray)
     EXPECT_TRUE(map.final_state.q == array.final_state.q) << "adaptive " << adaptive;
     EXPECT_TRUE(map.final_state.qd == array.final_state.qd) << "adaptive " << adaptive;
     EXPECT_TRUE(map.final_state.contact_speed == array.final_state.contact_speed) << "adaptive " << adaptive;
+    // the map holds the touching slots only (the array every one)
+    EXPECT_LE(map.final_state.contact_speed.stored(), static_cast<size_t>(touched_map));
+    EXPECT_EQ(array.final_state.contact_speed.stored(), static_cast<size_t>(m.contactSlots()));
   }
 }
 
