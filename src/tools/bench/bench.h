@@ -45,6 +45,13 @@ int plan(const std::string& scene, const std::vector<std::string>& args);
 /// `work-precision SCENE`: integrators and the MuJoCo peer against a fine reference (work_precision.cpp).
 int workPrecision(const std::string& scene, const std::vector<std::string>& args);
 
+/// `natural SCENE`: the body coordinates against the natural coordinates (core/natural.h) at equal error (natural.cpp).
+int natural(const std::string& scene, const std::vector<std::string>& args);
+
+/// The processor's model name and which of avx2, fma, avx512f it has (/proc/cpuinfo; "unknown" without it).
+std::string cpuModel();
+std::string cpuVectorFlags();
+
 using Clock = std::chrono::steady_clock;
 
 inline double seconds(Clock::time_point t0, Clock::time_point t1)

@@ -57,6 +57,13 @@ const Section kSections[] = {
     "  stiffness from F, default the reference's peak force; only when built with MuJoCo).\n"
     "                        [--paths FILE]\n"
     "  --paths writes each run's path: the bodies' mass centre per output step (scheme,dt,t,x,y,z).\n" },
+  { "natural",
+    "       tensegrity_bench natural SCENE.yaml [--set key=value]... [--dts a,b,..] [--tols a,b,..] [--ref-dt R]\n"
+    "                        [--repeat N] [--csv FILE]\n"
+    "  The dynamic analysis in body coordinates and in natural (nodal) coordinates, fixed steps (default\n"
+    "  4e-4,2e-4,1e-4 s) and adaptive (tolerances 1e-4,1e-5,1e-6 m), against a fine reference of each at R\n"
+    "  (default 2.5e-5 s): steps, Newton iterations, least wall time of N (default 3), errors, and the time\n"
+    "  ratio at equal error.\n" },
   { "stress", "       tensegrity_bench stress [--quick] [--case TEXT]... [--skip TEXT]...\n"
               "  The stability stress cases (docs/benchmarks.md): one row per case; --quick runs the short ones;\n"
               "  --case runs only the cases whose name contains one of the TEXTs, --skip leaves out those that do.\n" },
@@ -111,7 +118,8 @@ int main(int argc, char** argv)
     }
   if (command == "lattice")
     return bench::lattice(std::vector<std::string>(argv + 2, argv + argc));
-  const bool needs_scene = command == "steps" || command == "plan" || command == "work-precision";
+  const bool needs_scene =
+      command == "steps" || command == "plan" || command == "work-precision" || command == "natural";
   if (usage(command).empty())
   {
     std::cerr << (command.empty() ? "" : "tensegrity_bench: unknown command '" + command + "'\n") << usage();
@@ -132,6 +140,8 @@ int main(int argc, char** argv)
       return bench::plan(scene, std::vector<std::string>(argv + 3, argv + argc));
     if (command == "work-precision")
       return bench::workPrecision(scene, std::vector<std::string>(argv + 3, argv + argc));
+    if (command == "natural")
+      return bench::natural(scene, std::vector<std::string>(argv + 3, argv + argc));
     if (command == "stress")
     {
       bench::StressSelection select;

@@ -1,0 +1,175 @@
+/// Struts in natural (nodal) coordinates: the unknowns are the positions of the free nodes (strut ends and point
+/// masses), a strut is the pair of its end nodes with one row |r_b - r_a|^2 = L^2, and its kinetic energy
+///   T = 1/2 m |(v_a + v_b)/2|^2 + 1/2 (J_t / L^2) |v_b - v_a|^2
+/// (translation plus rotation about its centre, J_t the transverse moment of inertia about the centre) gives a
+/// constant mass matrix: per strut the 6x6 block [d I, o I; o I, d I] with d = m/4 + J_t/L^2, o = m/4 - J_t/L^2.
+/// Struts that share a node share its coordinates (no ball-joint rows), pinned nodes have none, driven nodes
+/// follow their actuator, and point masses are nodes with mass. A strut's spin about its own axis is not a
+/// coordinate: no force has stiffness there.
+///
+/// Strut contact acts on the axis segments between the nodes with the law of contact.h (crossing-angle Hertz
+/// stiffness, cores, Lankarani-Nikravesh damping, modified Coulomb friction). The contact points are material
+/// points of each strut moving with its angular velocity w = u x u_dot / L^2 (u = r_b - r_a), which has no spin
+/// part; friction at them loads the nodes through f and the moment r n x f. The tangents are exact: forward-mode
+/// automatic differentiation of the same kernel (natural.cpp).
+///
+/// This is a second formulation measured against the body coordinates (state.h, dynamics.h) by
+/// `tensegrity_bench natural`: dynamics of scenes without ground contact, external loads or partial pins, with the
+/// Newmark family at fixed or adaptive steps.
+#pragma once
+
+#include <array>
+#include <functional>
+#include <vector>
+
+#include <Eigen/Core>
+#include <Eigen/LU>
+
+#include "active_tensegrity/core/contact.h"
+#include "active_tensegrity/core/dynamics.h"
+#include "active_tensegrity/core/model.h"
+#include "active_tensegrity/core/summary.h"
+
+namespace active_tensegrity::core
+{
+struct NaturalNode
+{
+  enum class Kind
+  {
+    kFree,
+    kFixed,
+    kDriven
+  };
+  Kind kind = Kind::kFree;
+  Vec3 position0 = Vec3::Zero();  // m, at the scene's start
+  int actuator = -1;              // kDriven: the actuator that moves it along `direction` by its value
+  Vec3 direction = Vec3::Zero();
+  int column = -1;  // kFree: its first coordinate
+};
+
+struct NaturalStrut
+{
+  int a = -1, b = -1;  // nodes at the body's -L/2 and +L/2 ends
+  int body = -1;
+  double length = 0.0;  // m
+  double radius = 0.0;  // m (outermost layer)
+};
+
+struct NaturalModel
+{
+  const Model* model = nullptr;
+  std::vector<NaturalNode> nodes;
+  std::vector<NaturalStrut> struts;
+  std::vector<std::vector<int>> cable_nodes;  // per Model::cables entry: the node of each point
+  std::vector<int> strut_of_body;             // per body: its index in `struts`, or -1
+  std::vector<int> node_of_body;              // per point-mass body: its node, or -1
+  int coordinates = 0;                        // free coordinates (3 per free node)
+  Eigen::MatrixXd mass;                       // constant, coordinates x coordinates
+  Eigen::VectorXd gravity;                    // the weight's generalized force
+  std::vector<int> pair_slots;                // the checked strut pairs (contact slots)
+};
+
+/// The natural-coordinate description of `model` (positions at model.q0). Throws std::invalid_argument naming what
+/// the formulation does not cover (ground contact, partial pins, a cable or joint away from a strut end).
+NaturalModel buildNaturalModel(const Model& model);
+
+struct NaturalState
+{
+  double t = 0.0;
+  Eigen::VectorXd x, v, a;  // free coordinates, velocities and (algorithmic) accelerations
+  Eigen::VectorXd lambda;   // one multiplier per strut
+  std::vector<double>
+      contact_speed;  // per pair slot index (NaturalModel::pair_slots): impact speed while touching, else 0
+};
+
+/// At rest at the scene's start.
+NaturalState naturalInitialState(const NaturalModel& nm);
+
+/// The position and velocity of node i at (x, v) under actuation u.
+Vec3 naturalNodePosition(const NaturalModel& nm, int i, const Eigen::VectorXd& x, const ActuationValues& u);
+Vec3 naturalNodeVelocity(const NaturalModel& nm, int i, const Eigen::VectorXd& v, const ActuationValues& u);
+
+/// The body coordinates of the same configuration (state.h): strut centres and the rotation that takes z to the
+/// strut's axis with no spin; point masses at their nodes.
+Eigen::VectorXd naturalToBodyCoordinates(const NaturalModel& nm, const Eigen::VectorXd& x, const ActuationValues& u);
+
+/// One strut pair's contact on its four nodes (a, b of the first strut, then of the second): r and v the nodes'
+/// positions and velocities, v0 the impact speed. `force` (12) gets the generalized forces on the nodes; with
+/// `stiffness` and `damping` (12x12) also K = -dF/dr and C = -dF/dv, exact.
+ContactPairState naturalPairContact(const NaturalModel& nm, int slot, const Vec3 r[4], const Vec3 v[4],
+                                    double impact_speed, Eigen::Matrix<double, 12, 1>* force,
+                                    Eigen::Matrix<double, 12, 12>* stiffness, Eigen::Matrix<double, 12, 12>* damping);
+
+/// The touching pairs of s (forces with each pair's impact speed from its memory).
+std::vector<ContactPairState> naturalContacts(const NaturalModel& nm, const NaturalState& s, const ActuationValues& u);
+
+/// Counts of a NaturalSolver's work.
+struct NaturalStats
+{
+  long steps = 0;
+  long iterations = 0;
+  long factorizations = 0;
+  long contact_evaluations = 0;  // pair evaluations in contact (force, with or without tangents)
+  long rejected_error = 0, rejected_onset = 0, rejected_solver = 0;
+};
+
+/// Index-3 Newmark in natural coordinates with modified Newton: the dense Newton matrix
+/// [M + beta h^2 K + gamma h C, G^T; G, 0] is factorized when a step cannot converge on the last one.
+class NaturalSolver
+{
+public:
+  NaturalSolver(const NaturalModel& nm, const SolverOptions& options);
+
+  /// Consistent accelerations and multipliers at s (forces at s.t).
+  Summary initialize(NaturalState& s, const ActuationLaw& law);
+  /// One step of h; on failure s is unchanged.
+  Summary tryStep(NaturalState& s, double h, const ActuationLaw& law);
+  /// Fixed steps of options.dt to t_end (a failed step is halved up to max_step_cuts times), or adaptive steps
+  /// when options.adaptive (error and onset control as AdaptiveStepper's, no energy check). on_step after each.
+  Summary advanceTo(NaturalState& s, double t_end, const ActuationLaw& law,
+                    const std::function<void(const NaturalState&)>& on_step = {});
+
+  const NaturalStats& stats() const
+  {
+    return stats_;
+  }
+  /// The last tryStep's local error estimate (m): h^2 (|beta - 1/6| + |gamma - 1/2|) |a1 - a0|, largest per node.
+  double lastError() const
+  {
+    return error_;
+  }
+
+private:
+  void forces(const Eigen::VectorXd& x, const Eigen::VectorXd& v, bool tangents);
+  void contactForces(const Eigen::VectorXd& x, const Eigen::VectorXd& v, bool tangents);
+  Summary stepOnce(NaturalState& s, double h, const ActuationLaw& law, int depth);
+
+  const NaturalModel& nm_;
+  const Model& model_;
+  SolverOptions options_;
+  double beta_, gamma_;
+  ActuationValues u_;
+  Eigen::VectorXd f_;      // applied forces at the iterate
+  Eigen::MatrixXd k_, c_;  // their tangents -dF/dx, -dF/dv (when asked)
+  Eigen::MatrixXd jac_;
+  Eigen::VectorXd residual_, correction_, acc_, lambda_, x_, v_;
+  Eigen::PartialPivLU<Eigen::MatrixXd> lu_;
+  bool have_lu_ = false;
+  double lu_h_ = 0.0;
+  /// The pairs whose gap at s is within 2 * motion (indices into NaturalModel::pair_slots), with the impact speed
+  /// each uses in the step.
+  void findNear(const NaturalState& s, double motion);
+  /// The largest distance a node moved between x0 and x1.
+  double largestMotion(const Eigen::VectorXd& x0, const Eigen::VectorXd& x1) const;
+
+  std::vector<double> step_speeds_;  // per pair: the impact speed this step uses
+  std::vector<int> near_;
+  double near_motion_ = 0.0;
+  std::vector<Vec3> points_;
+  double error_ = 0.0;
+  double onset_depth_ = 0.0;
+  double h_next_ = 0.0;
+  NaturalStats stats_;
+};
+
+}  // namespace active_tensegrity::core
