@@ -281,14 +281,13 @@ NaturalModel buildNaturalModel(const Model& model)
     nm.strut_of_body[i] = static_cast<int>(nm.struts.size());
     nm.struts.push_back(s);
   }
-  // pins, drives and guides; joints between bodies are the shared nodes
-  std::vector<int> fixed_rows(nm.nodes.size(), 0);
+  // pins, drives and guides (rows against the ground); joints between bodies are the shared nodes
+  std::vector<std::vector<NaturalRow>> ground_rows;
   for (const Constraint& c : model.constraints)
   {
     if (c.kind != Constraint::Kind::kPoints)
       continue;
     const int na = pointNode(nm, model, c.a, tol, "constraint " + c.name);
-    fixed_rows.resize(nm.nodes.size(), 0);
     if (c.b.body >= 0)
     {
       const int nb = pointNode(nm, model, c.b, tol, "constraint " + c.name);
@@ -296,21 +295,42 @@ NaturalModel buildNaturalModel(const Model& model)
         throw std::invalid_argument("natural coordinates: constraint " + c.name + " is not a ball joint at a node");
       continue;
     }
-    NaturalNode& node = nm.nodes[na];
-    fixed_rows[na] += static_cast<int>(c.directions.size());
-    if (c.actuator >= 0)
-    {
-      node.kind = NaturalNode::Kind::kDriven;
-      node.actuator = c.actuator;
-      node.direction = c.directions[0];
-    }
-    else if (node.kind == NaturalNode::Kind::kFree)
-      node.kind = NaturalNode::Kind::kFixed;
+    ground_rows.resize(nm.nodes.size());
+    for (size_t k = 0; k < c.directions.size(); ++k)
+      ground_rows[na].push_back({ na, c.directions[k], c.offsets[k], c.actuator });
   }
+  ground_rows.resize(nm.nodes.size());
   for (size_t i = 0; i < nm.nodes.size(); ++i)
-    if (nm.nodes[i].kind != NaturalNode::Kind::kFree && fixed_rows[i] != 3)
-      throw std::invalid_argument("natural coordinates: a node held in " + std::to_string(fixed_rows[i]) +
-                                  " directions only (a partial pin or an unguided drive) is not covered");
+  {
+    const std::vector<NaturalRow>& rows = ground_rows[i];
+    if (rows.empty())
+      continue;
+    // three orthonormal rows, at most one driven, hold the node: pinned, or moved along the driven row's direction
+    int driven = -1;
+    bool holds = rows.size() == 3;
+    for (size_t k = 0; k < rows.size() && holds; ++k)
+    {
+      if (rows[k].actuator >= 0)
+      {
+        holds = driven < 0;
+        driven = static_cast<int>(k);
+      }
+      for (size_t l = 0; l < rows.size(); ++l)
+        holds = holds && std::abs(rows[k].direction.dot(rows[l].direction) - (k == l ? 1.0 : 0.0)) <= 1e-9;
+    }
+    if (!holds)
+    {
+      nm.rows.insert(nm.rows.end(), rows.begin(), rows.end());
+      continue;
+    }
+    NaturalNode& node = nm.nodes[i];
+    node.kind = driven >= 0 ? NaturalNode::Kind::kDriven : NaturalNode::Kind::kFixed;
+    if (driven >= 0)
+    {
+      node.actuator = rows[driven].actuator;
+      node.direction = rows[driven].direction;
+    }
+  }
   nm.cable_nodes.resize(model.cables.size());
   for (size_t k = 0; k < model.cables.size(); ++k)
     for (const PointRef& p : model.cables[k].points)
@@ -367,7 +387,7 @@ NaturalState naturalInitialState(const NaturalModel& nm)
       s.x.segment<3>(n.column) = n.position0;
   s.v.setZero(nm.coordinates);
   s.a.setZero(nm.coordinates);
-  s.lambda.setZero(static_cast<int>(nm.struts.size()));
+  s.lambda.setZero(static_cast<int>(nm.struts.size() + nm.rows.size()));
   s.contact_speed.assign(nm.pair_slots.size(), 0.0);
   return s;
 }
@@ -655,7 +675,7 @@ void NaturalSolver::findNear(const NaturalState& s, double motion)
 Summary NaturalSolver::initialize(NaturalState& s, const ActuationLaw& law)
 {
   Summary out;
-  const int n = nm_.coordinates, m = static_cast<int>(nm_.struts.size());
+  const int n = nm_.coordinates, m = static_cast<int>(nm_.struts.size() + nm_.rows.size());
   law(s.t, u_);
   findNear(s, kNearFloor);
   forces(s.x, s.v, false);
@@ -665,7 +685,16 @@ Summary NaturalSolver::initialize(NaturalState& s, const ActuationLaw& law)
   Eigen::VectorXd rhs = Eigen::VectorXd::Zero(n + m);
   a.topLeftCorner(n, n) = nm_.mass;
   rhs.head(n) = f_;
-  for (int k = 0; k < m; ++k)
+  const int struts = static_cast<int>(nm_.struts.size());
+  for (int k = struts; k < m; ++k)
+  {
+    const NaturalRow& row = nm_.rows[k - struts];
+    const int col = nm_.nodes[row.node].column;
+    a.block<3, 1>(col, n + k) = row.direction;
+    a.block<1, 3>(n + k, col) = row.direction.transpose();
+    rhs(n + k) = row.actuator >= 0 ? u_[row.actuator].accel : 0.0;
+  }
+  for (int k = 0; k < struts; ++k)
   {
     const NaturalStrut& st = nm_.struts[k];
     const Vec3 d = naturalNodePosition(nm_, st.b, s.x, u_) - naturalNodePosition(nm_, st.a, s.x, u_);
@@ -699,7 +728,7 @@ Summary NaturalSolver::initialize(NaturalState& s, const ActuationLaw& law)
 Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& law)
 {
   Summary out;
-  const int n = nm_.coordinates, m = static_cast<int>(nm_.struts.size());
+  const int n = nm_.coordinates, m = static_cast<int>(nm_.struts.size() + nm_.rows.size());
   const double t1 = s.t + h;
   law(t1, u_);
   // the pairs a node can reach in this step (from its speed and acceleration at the start), checked after
@@ -731,7 +760,22 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
       jac_.setZero(n + m, n + m);
       jac_.topLeftCorner(n, n) = nm_.mass + bh2 * k_ + gh * c_;
     }
-    for (int k = 0; k < m; ++k)
+    const int struts = static_cast<int>(nm_.struts.size());
+    for (int k = struts; k < m; ++k)
+    {
+      const NaturalRow& row = nm_.rows[k - struts];
+      const int col = nm_.nodes[row.node].column;
+      residual_(n + k) =
+          (row.direction.dot(x_.segment<3>(col)) - row.offset - (row.actuator >= 0 ? u_[row.actuator].value : 0.0)) /
+          bh2;
+      residual_.segment<3>(col) += lambda_(k) * row.direction;
+      if (build)
+      {
+        jac_.block<3, 1>(col, n + k) = row.direction;
+        jac_.block<1, 3>(n + k, col) = row.direction.transpose();
+      }
+    }
+    for (int k = 0; k < struts; ++k)
     {
       const NaturalStrut& st = nm_.struts[k];
       const Vec3 d = naturalNodePosition(nm_, st.b, x_, u_) - naturalNodePosition(nm_, st.a, x_, u_);

@@ -14,7 +14,7 @@
 /// automatic differentiation of the same kernel (natural.cpp).
 ///
 /// This is a second formulation measured against the body coordinates (state.h, dynamics.h) by
-/// `tensegrity_bench natural`: dynamics of scenes without ground contact, external loads or partial pins, with the
+/// `tensegrity_bench natural`: dynamics of scenes without ground contact or external loads, with the
 /// Newmark family at fixed or adaptive steps.
 #pragma once
 
@@ -55,11 +55,22 @@ struct NaturalStrut
   double radius = 0.0;  // m (outermost layer)
 };
 
+/// A row against the ground on a free node: direction . r - offset - s(t) = 0 (s the actuator's value, or 0): a
+/// partial pin or an unguided drive.
+struct NaturalRow
+{
+  int node = -1;
+  Vec3 direction = Vec3::Zero();
+  double offset = 0.0;
+  int actuator = -1;
+};
+
 struct NaturalModel
 {
   const Model* model = nullptr;
   std::vector<NaturalNode> nodes;
   std::vector<NaturalStrut> struts;
+  std::vector<NaturalRow> rows;               // after the struts' rows
   std::vector<std::vector<int>> cable_nodes;  // per Model::cables entry: the node of each point
   std::vector<int> strut_of_body;             // per body: its index in `struts`, or -1
   std::vector<int> node_of_body;              // per point-mass body: its node, or -1
@@ -70,14 +81,14 @@ struct NaturalModel
 };
 
 /// The natural-coordinate description of `model` (positions at model.q0). Throws std::invalid_argument naming what
-/// the formulation does not cover (ground contact, partial pins, a cable or joint away from a strut end).
+/// the formulation does not cover (ground contact, a cable or joint away from a strut end).
 NaturalModel buildNaturalModel(const Model& model);
 
 struct NaturalState
 {
   double t = 0.0;
   Eigen::VectorXd x, v, a;  // free coordinates, velocities and (algorithmic) accelerations
-  Eigen::VectorXd lambda;   // one multiplier per strut
+  Eigen::VectorXd lambda;   // one multiplier per strut, then per NaturalModel::rows entry
   std::vector<double>
       contact_speed;  // per pair slot index (NaturalModel::pair_slots): impact speed while touching, else 0
 };

@@ -309,8 +309,9 @@ int natural(const std::string& scene, const std::vector<std::string>& args)
     return m;
   };
   std::fprintf(stderr, "natural: references at dt %g s ...\n", ref_dt);
-  const Run ref = runBody(configured(false, ref_dt, at::Integrator::kGeneralizedAlpha, 0.5, 0.25, 1e-10));
-  const Run nat_ref = runNatural(configured(false, ref_dt, at::Integrator::kNewmark, 0.5, 0.25, 1e-10));
+  const double gamma = base.solver.newmark_gamma, beta = base.solver.newmark_beta;
+  const Run ref = runBody(configured(false, ref_dt, at::Integrator::kNewmark, gamma, beta, 1e-10));
+  const Run nat_ref = runNatural(configured(false, ref_dt, at::Integrator::kNewmark, gamma, beta, 1e-10));
   if (ref.status != "converged" || nat_ref.status != "converged")
   {
     std::cerr << "tensegrity_bench: a reference run failed: body " << ref.status << ", natural " << nat_ref.status
@@ -320,8 +321,7 @@ int natural(const std::string& scene, const std::vector<std::string>& args)
   const double model_difference = pathError(ref.path, nat_ref.path);
   const auto relative = [](double a, double b) { return b > 0.0 ? std::abs(a - b) / b : std::abs(a); };
   std::printf("# %s: %s, %s\n", scene.c_str(), cpuModel().c_str(), cpuVectorFlags().c_str());
-  std::printf("# references at dt %g s (body coordinates generalized-alpha, natural trapezoidal, Newton tolerance "
-              "1e-10): contact impulse %.6g and %.6g N s (difference %.2e), first touch at %.4f and %.4f s, largest "
+  std::printf("# references at dt %g s (the scene's Newmark, Newton tolerance 1e-10): contact impulse %.6g and %.6g N s (difference %.2e), first touch at %.4f and %.4f s, largest "
               "position difference %.3e m\n",
               ref_dt, ref.impulse, nat_ref.impulse, relative(nat_ref.impulse, ref.impulse), ref.first_contact,
               nat_ref.first_contact, model_difference);
