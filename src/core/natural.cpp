@@ -15,8 +15,8 @@ namespace active_tensegrity::core
 {
 namespace
 {
-using Vec12 = Eigen::Matrix<double, 12, 1>;
-using Mat12 = Eigen::Matrix<double, 12, 12>;
+using Vec14 = Eigen::Matrix<double, 14, 1>;
+using Mat14 = Eigen::Matrix<double, 14, 14>;
 
 // ---- the model -----------------------------------------------------------------------------------------
 
@@ -85,6 +85,7 @@ Vec3 valueOf(const V3<T>& x)
 struct PairConstants
 {
   double radius[2] = { 0.0, 0.0 };
+  double inv_length[2] = { 0.0, 0.0 };   // 1 / L
   double inv_length2[2] = { 0.0, 0.0 };  // 1 / L^2
   double stiffness90 = 0.0, core_stiffness90 = 0.0, core_gap = 0.0;
   double floor_sin = 0.0;
@@ -94,8 +95,8 @@ struct PairConstants
 // One pair's contact on its four nodes (a, b of strut 1, then of strut 2), generic in the scalar so that the
 // tangents are its forward-mode derivatives. Fills F (when `force`) and the pair's state (values).
 template <typename T>
-void pairKernel(const Model& model, const PairConstants& pc, const V3<T> r[4], const V3<T> v[4], double impact_speed,
-                bool force, Eigen::Matrix<T, 12, 1>& F, ContactPairState& st)
+void pairKernel(const Model& model, const PairConstants& pc, const V3<T> r[4], const V3<T> v[4], const T spin[2],
+                double impact_speed, bool force, Eigen::Matrix<T, 14, 1>& F, ContactPairState& st)
 {
   using std::sqrt;
   const ContactSettings& set = model.contact;
@@ -194,8 +195,10 @@ void pairKernel(const Model& model, const PairConstants& pc, const V3<T> r[4], c
   F.template segment<3>(9) = -t * fn * n;
   if (!(set.friction > 0.0))
     return;
-  // friction at the contact points as material points of struts without spin: w = u x u_dot / L^2
-  const V3<T> w1 = pc.inv_length2[0] * u1.cross(v[1] - v[0]), w2 = pc.inv_length2[1] * u2.cross(v[3] - v[2]);
+  // friction at the contact points as material points: w = u x u_dot / L^2 + w_s e (e = u / L, w_s the spin rate)
+  const V3<T> e1 = pc.inv_length[0] * u1, e2 = pc.inv_length[1] * u2;
+  const V3<T> w1 = pc.inv_length2[0] * u1.cross(v[1] - v[0]) + spin[0] * e1;
+  const V3<T> w2 = pc.inv_length2[1] * u2.cross(v[3] - v[2]) + spin[1] * e2;
   const V3<T> vtol = (vp1 - r1 * w1.cross(n)) - (vp2 + r2 * w2.cross(n));
   const V3<T> vt = vtol - n.dot(vtol) * n;
   const T slip = vt.norm();
@@ -216,6 +219,94 @@ void pairKernel(const Model& model, const PairConstants& pc, const V3<T> r[4], c
   F.template segment<3>(3) += s * fa - turn1;
   F.template segment<3>(6) += -(1.0 - t) * fa + turn2;
   F.template segment<3>(9) += -t * fa - turn2;
+  // and about the axes: -r1 e1 . m on strut 1's spin, -r2 e2 . m on strut 2's
+  F(12) = -r1 * e1.dot(m);
+  F(13) = -r2 * e2.dot(m);
+}
+
+// the constants of one ground contact: a sphere at a node, of a strut (its nodes a and b) or a point mass
+struct GroundConstants
+{
+  double radius = 0.0, stiffness = 0.0;
+  bool strut = false;
+  int sphere_end = 0;  // 0: at node a, 1: at node b
+  double inv_length = 0.0, inv_length2 = 0.0;
+};
+
+// One ground contact (contact.h: Hertz or linear normal force, Lankarani-Nikravesh damping, modified Coulomb friction
+// at the sphere's lowest point as a material point), generic in the scalar. Nodes: r[0], r[1] the strut's a and b
+// (the sphere's centre at r[sphere_end]), or r[0] the point mass; F: 3 per node (a, b), then the spin at F(12).
+template <typename T>
+void groundKernel(const Model& model, const GroundConstants& gc, const V3<T> r[4], const V3<T> v[4], const T spin[2],
+                  double impact_speed, bool force, Eigen::Matrix<T, 14, 1>& F, ContactPairState& st)
+{
+  using std::sqrt;
+  const GroundSettings& ground = model.ground;
+  F.setZero();
+  const int at = gc.strut ? gc.sphere_end : 0;
+  const V3<T>& c = r[at];
+  const T zeta = ground.height + gc.radius - c.z();
+  const T rate = -v[at].z();
+  st.normal = Vec3::UnitZ();
+  st.gap = -valueOf(zeta);
+  st.penetration = valueOf(zeta);
+  st.active = st.penetration > 0.0;
+  st.point_a = valueOf(c) - gc.radius * Vec3::UnitZ();
+  st.point_b = Vec3(valueOf(c.x()), valueOf(c.y()), ground.height);
+  st.penetration_rate = valueOf(rate);
+  st.region = ClosestRegion::kInterior;
+  if (!st.active || !force)
+    return;
+  st.stiffness = gc.stiffness;
+  T fn;
+  if (ground.law == ContactLaw::kLinear)
+    fn = gc.stiffness * zeta + ground.linear_damping * rate;
+  else
+  {
+    const double damping = 3.0 * (1.0 - ground.restitution * ground.restitution) /
+                           (4.0 * std::max(impact_speed, model.contact.min_impact_speed));
+    fn = gc.stiffness * zeta * sqrt(zeta) * (1.0 + damping * rate);
+  }
+  if (!(fn > 0.0))
+    return;
+  st.normal_force = valueOf(fn);
+  st.force_on_a = Vec3(0.0, 0.0, st.normal_force);
+  F(3 * at + 2) += fn;
+  if (!(ground.friction > 0.0))
+    return;
+  // the lowest point PA = c + rho, rho = -R z, moving with the strut's w = u x u_dot / L^2 + w_s e
+  const V3<T> rho(T(0.0), T(0.0), T(-gc.radius));
+  V3<T> vpa = v[at];
+  V3<T> u = V3<T>::Zero(), e = V3<T>::Zero();
+  if (gc.strut)
+  {
+    u = r[1] - r[0];
+    e = gc.inv_length * u;
+    const V3<T> w = gc.inv_length2 * u.cross(v[1] - v[0]) + spin[0] * e;
+    vpa += w.cross(rho);
+  }
+  const V3<T> vt(vpa.x(), vpa.y(), T(0.0));
+  const T slip = vt.norm();
+  st.slip_speed = valueOf(slip);
+  if (!(slip > ground.stick_velocity))
+    return;
+  const T cd = slip >= ground.slip_velocity ?
+                   T(1.0) :
+                   T((slip - ground.stick_velocity) / (ground.slip_velocity - ground.stick_velocity));
+  const T ft = ground.friction * cd * fn;
+  const V3<T> f = -(ft / slip) * vt;
+  st.friction_force = valueOf(ft);
+  st.friction_on_a = valueOf(f);
+  st.force_on_a += st.friction_on_a;
+  F.template segment<3>(3 * at) += f;
+  if (!gc.strut)
+    return;
+  // the moment m = rho x f: w . m = u_dot . (m x u) / L^2 + w_s e . m
+  const V3<T> m = rho.cross(f);
+  const V3<T> turn = gc.inv_length2 * m.cross(u);
+  F.template segment<3>(0) -= turn;
+  F.template segment<3>(3) += turn;
+  F(12) = e.dot(m);
 }
 
 PairConstants pairConstants(const NaturalModel& nm, int slot)
@@ -228,6 +319,7 @@ PairConstants pairConstants(const NaturalModel& nm, int slot)
   {
     const Body& b = model.bodies[bodies[k]];
     pc.radius[k] = b.radius();
+    pc.inv_length[k] = 1.0 / b.length;
     pc.inv_length2[k] = 1.0 / (b.length * b.length);
     pc.scale += 0.5 * b.length;
   }
@@ -238,22 +330,28 @@ PairConstants pairConstants(const NaturalModel& nm, int slot)
   return pc;
 }
 
-// the four nodes of a pair slot
-std::array<int, 4> pairNodes(const NaturalModel& nm, int slot)
+GroundConstants groundConstants(const NaturalModel& nm, const NaturalContactSlot& cs)
 {
-  const auto [body_a, body_b] = nm.model->pairBodies(slot);
-  const NaturalStrut& a = nm.struts[nm.strut_of_body[body_a]];
-  const NaturalStrut& b = nm.struts[nm.strut_of_body[body_b]];
-  return { a.a, a.b, b.a, b.b };
+  const GroundContact& g = nm.model->groundContactOf(cs.slot);
+  GroundConstants gc;
+  gc.radius = g.radius;
+  gc.stiffness = g.stiffness;
+  gc.strut = cs.struts[0] >= 0;
+  gc.sphere_end = cs.sphere_end;
+  if (gc.strut)
+  {
+    const double l = nm.struts[cs.struts[0]].length;
+    gc.inv_length = 1.0 / l;
+    gc.inv_length2 = 1.0 / (l * l);
+  }
+  return gc;
 }
 }  // namespace
 
-NaturalModel buildNaturalModel(const Model& model)
+NaturalModel buildNaturalModel(const Model& model, bool spin)
 {
   NaturalModel nm;
   nm.model = &model;
-  if (model.ground.enabled)
-    throw std::invalid_argument("natural coordinates: ground contact is not covered");
   double size = 0.0;
   for (const Body& b : model.bodies)
     size = std::max(size, b.length);
@@ -335,12 +433,57 @@ NaturalModel buildNaturalModel(const Model& model)
   for (size_t k = 0; k < model.cables.size(); ++k)
     for (const PointRef& p : model.cables[k].points)
       nm.cable_nodes[k].push_back(pointNode(nm, model, p, tol, "cable " + model.cables[k].name));
+  // the contacts: the checked strut pairs, then the ground's spheres (each at a node)
+  std::vector<int> pairs;
+  if (model.contact.enabled)
+    model.checkedPairList(&pairs);
+  for (const int slot : pairs)
+  {
+    const auto [body_a, body_b] = model.pairBodies(slot);
+    const NaturalStrut& a = nm.struts[nm.strut_of_body[body_a]];
+    const NaturalStrut& b = nm.struts[nm.strut_of_body[body_b]];
+    NaturalContactSlot cs;
+    cs.slot = slot;
+    cs.nodes[0] = a.a;
+    cs.nodes[1] = a.b;
+    cs.nodes[2] = b.a;
+    cs.nodes[3] = b.b;
+    cs.struts[0] = nm.strut_of_body[body_a];
+    cs.struts[1] = nm.strut_of_body[body_b];
+    nm.contacts.push_back(cs);
+  }
+  for (size_t i = 0; i < model.ground_contacts.size(); ++i)
+  {
+    const GroundContact& g = model.ground_contacts[i];
+    NaturalContactSlot cs;
+    cs.slot = model.pairSlots() + static_cast<int>(i);
+    cs.ground = true;
+    const int node = pointNode(nm, model, PointRef{ g.body, g.local }, tol, "ground contact at " + g.node);
+    const int strut = nm.strut_of_body[g.body];
+    if (strut >= 0)
+    {
+      cs.struts[0] = strut;
+      cs.nodes[0] = nm.struts[strut].a;
+      cs.nodes[1] = nm.struts[strut].b;
+      cs.sphere_end = node == nm.struts[strut].a ? 0 : 1;
+    }
+    else
+      cs.nodes[0] = node;
+    nm.contacts.push_back(cs);
+  }
   for (NaturalNode& n : nm.nodes)
     if (n.kind == NaturalNode::Kind::kFree)
     {
       n.column = nm.coordinates;
       nm.coordinates += 3;
     }
+  nm.positions = nm.coordinates;
+  // a spin rate per strut when friction can turn struts about their axes
+  const bool friction =
+      (model.contact.enabled && model.contact.friction > 0.0) || (model.ground.enabled && model.ground.friction > 0.0);
+  if (spin && friction)
+    for (NaturalStrut& st : nm.struts)
+      st.spin = nm.coordinates++;
   // the constant mass matrix and the weight
   const int n = nm.coordinates;
   nm.mass = Eigen::MatrixXd::Zero(n, n);
@@ -363,6 +506,8 @@ NaturalModel buildNaturalModel(const Model& model)
       nm.mass.block<3, 3>(ca, cb).diagonal().array() += off;
       nm.mass.block<3, 3>(cb, ca).diagonal().array() += off;
     }
+    if (s.spin >= 0)
+      nm.mass(s.spin, s.spin) = b.inertia.z();
   }
   for (size_t i = 0; i < model.bodies.size(); ++i)
   {
@@ -373,8 +518,6 @@ NaturalModel buildNaturalModel(const Model& model)
     nm.mass.block<3, 3>(col, col).diagonal().array() += model.bodies[i].mass;
     nm.gravity.segment<3>(col) += model.bodies[i].mass * g;
   }
-  if (model.contact.enabled)
-    model.checkedPairList(&nm.pair_slots);
   return nm;
 }
 
@@ -388,7 +531,7 @@ NaturalState naturalInitialState(const NaturalModel& nm)
   s.v.setZero(nm.coordinates);
   s.a.setZero(nm.coordinates);
   s.lambda.setZero(static_cast<int>(nm.struts.size() + nm.rows.size()));
-  s.contact_speed.assign(nm.pair_slots.size(), 0.0);
+  s.contact_speed.assign(nm.contacts.size(), 0.0);
   return s;
 }
 
@@ -439,43 +582,92 @@ Eigen::VectorXd naturalToBodyCoordinates(const NaturalModel& nm, const Eigen::Ve
   return q;
 }
 
-ContactPairState naturalPairContact(const NaturalModel& nm, int slot, const Vec3 r[4], const Vec3 v[4],
-                                    double impact_speed, Vec12* force, Mat12* stiffness, Mat12* damping)
+NaturalContactInput naturalContactInput(const NaturalModel& nm, int k, const Eigen::VectorXd& x,
+                                        const Eigen::VectorXd& v, const ActuationValues& u)
+{
+  const NaturalContactSlot& cs = nm.contacts[k];
+  NaturalContactInput in;
+  for (int i = 0; i < 4; ++i)
+  {
+    if (cs.nodes[i] < 0)
+      continue;
+    in.r[i] = naturalNodePosition(nm, cs.nodes[i], x, u);
+    in.v[i] = naturalNodeVelocity(nm, cs.nodes[i], v, u);
+  }
+  for (int i = 0; i < 2; ++i)
+    if (cs.struts[i] >= 0 && nm.struts[cs.struts[i]].spin >= 0)
+      in.spin[i] = v(nm.struts[cs.struts[i]].spin);
+  return in;
+}
+
+ContactPairState naturalContact(const NaturalModel& nm, int k, const NaturalContactInput& in, double impact_speed,
+                                Vec14* force, Mat14* stiffness, Mat14* damping)
 {
   const Model& model = *nm.model;
-  const PairConstants pc = pairConstants(nm, slot);
+  const NaturalContactSlot& cs = nm.contacts[k];
   ContactPairState st;
-  st.pair = slot;
-  const auto [body_a, body_b] = model.pairBodies(slot);
-  st.body_a = body_a;
-  st.body_b = body_b;
+  st.pair = cs.slot;
+  PairConstants pc;
+  GroundConstants gc;
+  if (cs.ground)
+  {
+    st.body_a = model.groundContactOf(cs.slot).body;
+    st.body_b = -1;
+    gc = groundConstants(nm, cs);
+  }
+  else
+  {
+    const auto [body_a, body_b] = model.pairBodies(cs.slot);
+    st.body_a = body_a;
+    st.body_b = body_b;
+    pc = pairConstants(nm, cs.slot);
+  }
+  const auto kernel = [&](auto r, auto v, auto spin, bool with_force, auto& f)
+  {
+    if (cs.ground)
+      groundKernel(model, gc, r, v, spin, impact_speed, with_force, f, st);
+    else
+      pairKernel(model, pc, r, v, spin, impact_speed, with_force, f, st);
+  };
   if (!stiffness && !damping)
   {
-    Vec12 f;
-    pairKernel<double>(model, pc, r, v, impact_speed, force != nullptr, f, st);
+    Vec14 f;
+    kernel(in.r, in.v, in.spin, force != nullptr, f);
     if (force)
       *force = f;
     return st;
   }
-  using Ad = Eigen::AutoDiffScalar<Eigen::Matrix<double, 24, 1>>;
+  using Ad = Eigen::AutoDiffScalar<Eigen::Matrix<double, 26, 1>>;
   V3<Ad> ra[4], va[4];
+  Ad spin[2];
   for (int i = 0; i < 4; ++i)
-    for (int k = 0; k < 3; ++k)
+    for (int c = 0; c < 3; ++c)
     {
-      ra[i](k) = Ad(r[i](k), 24, 3 * i + k);
-      va[i](k) = Ad(v[i](k), 24, 12 + 3 * i + k);
+      ra[i](c) = Ad(in.r[i](c), 26, 3 * i + c);
+      va[i](c) = Ad(in.v[i](c), 26, 12 + 3 * i + c);
     }
-  Eigen::Matrix<Ad, 12, 1> f;
-  pairKernel<Ad>(model, pc, ra, va, impact_speed, true, f, st);
-  for (int i = 0; i < 12; ++i)
+  for (int i = 0; i < 2; ++i)
+    spin[i] = Ad(in.spin[i], 26, 24 + i);
+  Eigen::Matrix<Ad, 14, 1> f;
+  kernel(static_cast<const V3<Ad>*>(ra), static_cast<const V3<Ad>*>(va), static_cast<const Ad*>(spin), true, f);
+  for (int i = 0; i < 14; ++i)
   {
     if (force)
       (*force)(i) = f(i).value();
-    const Eigen::Matrix<double, 24, 1>& dfi = f(i).derivatives();
+    // (an entry the kernel never wrote carries no derivatives)
+    Eigen::Matrix<double, 26, 1> dfi = f(i).derivatives();
+    if (dfi.size() != 26)
+      dfi.setZero();
     if (stiffness)
-      stiffness->row(i) = -dfi.head<12>().transpose();
+    {
+      stiffness->row(i).head<12>() = -dfi.head<12>().transpose();
+      stiffness->row(i).tail<2>().setZero();
+    }
     if (damping)
-      damping->row(i) = -dfi.tail<12>().transpose();
+    {
+      damping->row(i).head<12>() = -dfi.segment<12>(12).transpose();
+      damping->row(i).tail<2>() = -dfi.tail<2>().transpose();
+    }
   }
   return st;
 }
@@ -483,18 +675,12 @@ ContactPairState naturalPairContact(const NaturalModel& nm, int slot, const Vec3
 std::vector<ContactPairState> naturalContacts(const NaturalModel& nm, const NaturalState& s, const ActuationValues& u)
 {
   std::vector<ContactPairState> out;
-  for (size_t k = 0; k < nm.pair_slots.size(); ++k)
+  for (size_t k = 0; k < nm.contacts.size(); ++k)
   {
-    const std::array<int, 4> nodes = pairNodes(nm, nm.pair_slots[k]);
-    Vec3 r[4], v[4];
-    for (int i = 0; i < 4; ++i)
-    {
-      r[i] = naturalNodePosition(nm, nodes[i], s.x, u);
-      v[i] = naturalNodeVelocity(nm, nodes[i], s.v, u);
-    }
-    Vec12 f;
+    Vec14 f;
     const ContactPairState st =
-        naturalPairContact(nm, nm.pair_slots[k], r, v, s.contact_speed[k], &f, nullptr, nullptr);
+        naturalContact(nm, static_cast<int>(k), naturalContactInput(nm, static_cast<int>(k), s.x, s.v, u),
+                       s.contact_speed[k], &f, nullptr, nullptr);
     if (st.active)
       out.push_back(st);
   }
@@ -510,7 +696,7 @@ NaturalSolver::NaturalSolver(const NaturalModel& nm, const SolverOptions& option
     throw std::invalid_argument("natural coordinates: only the Newmark family is covered");
   beta_ = options.newmark_beta;
   gamma_ = options.newmark_gamma;
-  step_speeds_.assign(nm.pair_slots.size(), model_.contact.min_impact_speed);
+  step_speeds_.assign(nm.contacts.size(), model_.contact.min_impact_speed);
   h_next_ = options.dt;
 }
 
@@ -522,6 +708,46 @@ void NaturalSolver::forces(const Eigen::VectorXd& x, const Eigen::VectorXd& v, b
   {
     k_.setZero(n, n);
     c_.setZero(n, n);
+  }
+  // a spinning strut's gyroscopic moment -J_a w_s e_dot on its transverse motion, as the couple
+  // F_b = -F_a = (J_a / L^3) w_s u x u_dot at its nodes (no work)
+  for (const NaturalStrut& st : nm_.struts)
+  {
+    if (st.spin < 0 || v(st.spin) == 0.0)
+      continue;
+    const double c = model_.bodies[st.body].inertia.z() / (st.length * st.length * st.length), ws = v(st.spin);
+    const Vec3 u = naturalNodePosition(nm_, st.b, x, u_) - naturalNodePosition(nm_, st.a, x, u_);
+    const Vec3 ud = naturalNodeVelocity(nm_, st.b, v, u_) - naturalNodeVelocity(nm_, st.a, v, u_);
+    const Vec3 fb = c * ws * u.cross(ud);
+    const int ca = nm_.nodes[st.a].column, cb = nm_.nodes[st.b].column;
+    if (cb >= 0)
+      f_.segment<3>(cb) += fb;
+    if (ca >= 0)
+      f_.segment<3>(ca) -= fb;
+    if (!tangents)
+      continue;
+    // dF_b/du = -c w_s [u_dot]x, dF_b/du_dot = c w_s [u]x, dF_b/dw_s = c u x u_dot; u = r_b - r_a
+    const auto skew = [](const Vec3& w)
+    {
+      Mat3 m;
+      m << 0.0, -w.z(), w.y(), w.z(), 0.0, -w.x(), -w.y(), w.x(), 0.0;
+      return m;
+    };
+    const Mat3 du = -c * ws * skew(ud), dud = c * ws * skew(u);
+    const int cols[2] = { ca, cb };
+    const double sign[2] = { -1.0, 1.0 };
+    for (int i = 0; i < 2; ++i)
+    {
+      if (cols[i] < 0)
+        continue;
+      c_.block<3, 1>(cols[i], st.spin) -= sign[i] * (fb / ws);
+      for (int j = 0; j < 2; ++j)
+        if (cols[j] >= 0)
+        {
+          k_.block<3, 3>(cols[i], cols[j]) -= sign[i] * sign[j] * du;
+          c_.block<3, 3>(cols[i], cols[j]) -= sign[i] * sign[j] * dud;
+        }
+    }
   }
   for (size_t ci = 0; ci < model_.cables.size(); ++ci)
   {
@@ -594,37 +820,38 @@ void NaturalSolver::contactForces(const Eigen::VectorXd& x, const Eigen::VectorX
 {
   for (const int k : near_)
   {
-    const int slot = nm_.pair_slots[k];
-    const std::array<int, 4> nodes = pairNodes(nm_, slot);
-    Vec3 r[4], rv[4];
-    for (int i = 0; i < 4; ++i)
-    {
-      r[i] = naturalNodePosition(nm_, nodes[i], x, u_);
-      rv[i] = naturalNodeVelocity(nm_, nodes[i], v, u_);
-    }
-    Vec12 f;
-    Mat12 kk, cc;
-    const ContactPairState st =
-        naturalPairContact(nm_, slot, r, rv, step_speeds_[k], &f, tangents ? &kk : nullptr, tangents ? &cc : nullptr);
+    const NaturalContactSlot& cs = nm_.contacts[k];
+    Vec14 f;
+    Mat14 kk, cc;
+    const ContactPairState st = naturalContact(nm_, k, naturalContactInput(nm_, k, x, v, u_), step_speeds_[k], &f,
+                                               tangents ? &kk : nullptr, tangents ? &cc : nullptr);
     if (!(st.normal_force > 0.0))
       continue;
     ++stats_.contact_evaluations;
-    for (int i = 0; i < 4; ++i)
+    // the local entries' columns: 3 per node, then the two spins
+    int cols[14];
+    for (int i = 0; i < 14; ++i)
     {
-      const int ci = nm_.nodes[nodes[i]].column;
-      if (ci < 0)
+      if (i < 12)
+        cols[i] = cs.nodes[i / 3] >= 0 && nm_.nodes[cs.nodes[i / 3]].column >= 0 ?
+                      nm_.nodes[cs.nodes[i / 3]].column + i % 3 :
+                      -1;
+      else
+        cols[i] = cs.struts[i - 12] >= 0 ? nm_.struts[cs.struts[i - 12]].spin : -1;
+    }
+    for (int i = 0; i < 14; ++i)
+    {
+      if (cols[i] < 0)
         continue;
-      f_.segment<3>(ci) += f.segment<3>(3 * i);
+      f_(cols[i]) += f(i);
       if (!tangents)
         continue;
-      for (int j = 0; j < 4; ++j)
-      {
-        const int cj = nm_.nodes[nodes[j]].column;
-        if (cj < 0)
-          continue;
-        k_.block<3, 3>(ci, cj) += kk.block<3, 3>(3 * i, 3 * j);
-        c_.block<3, 3>(ci, cj) += cc.block<3, 3>(3 * i, 3 * j);
-      }
+      for (int j = 0; j < 14; ++j)
+        if (cols[j] >= 0)
+        {
+          k_(cols[i], cols[j]) += kk(i, j);
+          c_(cols[i], cols[j]) += cc(i, j);
+        }
     }
   }
 }
@@ -641,7 +868,7 @@ constexpr double kSafety = 0.9, kMaxGrowth = 2.0, kMinShrink = 0.1, kKeepBand = 
 double NaturalSolver::largestMotion(const Eigen::VectorXd& x0, const Eigen::VectorXd& x1) const
 {
   double most = 0.0;
-  for (int c = 0; c < nm_.coordinates; c += 3)
+  for (int c = 0; c < nm_.positions; c += 3)
     most = std::max(most, (x1.segment<3>(c) - x0.segment<3>(c)).norm());
   return most;
 }
@@ -650,23 +877,15 @@ void NaturalSolver::findNear(const NaturalState& s, double motion)
 {
   near_.clear();
   near_motion_ = motion;
-  if (nm_.pair_slots.empty())
-    return;
   ActuationValues u = u_;  // (u_ holds the step's end; the start's driven nodes move by less than `motion`)
-  for (size_t k = 0; k < nm_.pair_slots.size(); ++k)
+  for (size_t k = 0; k < nm_.contacts.size(); ++k)
   {
-    const int slot = nm_.pair_slots[k];
-    const std::array<int, 4> nodes = pairNodes(nm_, slot);
-    Vec3 r[4], v[4];
-    for (int i = 0; i < 4; ++i)
-    {
-      r[i] = naturalNodePosition(nm_, nodes[i], s.x, u);
-      v[i] = naturalNodeVelocity(nm_, nodes[i], s.v, u);
-    }
-    const ContactPairState st = naturalPairContact(nm_, slot, r, v, 0.0, nullptr, nullptr, nullptr);
+    const int ki = static_cast<int>(k);
+    const ContactPairState st =
+        naturalContact(nm_, ki, naturalContactInput(nm_, ki, s.x, s.v, u), 0.0, nullptr, nullptr, nullptr);
     if (st.gap > 2.0 * motion)
       continue;
-    near_.push_back(static_cast<int>(k));
+    near_.push_back(ki);
     const double memory = s.contact_speed[k];
     step_speeds_[k] = memory > 0.0 ? memory : std::max(st.penetration_rate, model_.contact.min_impact_speed);
   }
@@ -733,7 +952,7 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
   law(t1, u_);
   // the pairs a node can reach in this step (from its speed and acceleration at the start), checked after
   double reach = 0.0;
-  for (int c = 0; c < n; c += 3)
+  for (int c = 0; c < nm_.positions; c += 3)
     reach = std::max(reach, s.v.segment<3>(c).norm() * h + s.a.segment<3>(c).norm() * h * h);
   for (const NaturalNode& nd : nm_.nodes)
     if (nd.kind == NaturalNode::Kind::kDriven)
@@ -840,22 +1059,15 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
       // the local error and a new contact's depth
       error_ = 0.0;
       const double factor = h * h * (std::abs(beta_ - 1.0 / 6.0) + std::abs(gamma_ - 0.5));
-      for (int c = 0; c < n; c += 3)
+      for (int c = 0; c < nm_.positions; c += 3)
         error_ = std::max(error_, factor * (acc_.segment<3>(c) - s.a.segment<3>(c)).norm());
       v_ = v_pred + gh * acc_;
       onset_depth_ = 0.0;
-      std::vector<double> speeds(nm_.pair_slots.size(), 0.0);
+      std::vector<double> speeds(nm_.contacts.size(), 0.0);
       for (const int k : near_)
       {
-        const int slot = nm_.pair_slots[k];
-        const std::array<int, 4> nodes = pairNodes(nm_, slot);
-        Vec3 r[4], rv[4];
-        for (int i = 0; i < 4; ++i)
-        {
-          r[i] = naturalNodePosition(nm_, nodes[i], x_, u_);
-          rv[i] = naturalNodeVelocity(nm_, nodes[i], v_, u_);
-        }
-        const ContactPairState st = naturalPairContact(nm_, slot, r, rv, 0.0, nullptr, nullptr, nullptr);
+        const ContactPairState st =
+            naturalContact(nm_, k, naturalContactInput(nm_, k, x_, v_, u_), 0.0, nullptr, nullptr, nullptr);
         if (st.gap >= 0.0)
           continue;
         speeds[k] = step_speeds_[k];
@@ -962,17 +1174,11 @@ Summary NaturalSolver::advanceTo(NaturalState& s, double t_end, const ActuationL
       for (const int k : near_)
         if (trial.contact_speed[k] > 0.0 && !(s.contact_speed[k] > 0.0))
         {
-          const std::array<int, 4> nodes = pairNodes(nm_, nm_.pair_slots[k]);
-          Vec3 r0[4], v0[4];
           ActuationValues u0;
           law(s.t, u0);
-          for (int i = 0; i < 4; ++i)
-          {
-            r0[i] = naturalNodePosition(nm_, nodes[i], s.x, u0);
-            v0[i] = Vec3::Zero();
-          }
-          gap_start = std::max(gap_start,
-                               naturalPairContact(nm_, nm_.pair_slots[k], r0, v0, 0.0, nullptr, nullptr, nullptr).gap);
+          gap_start = std::max(
+              gap_start,
+              naturalContact(nm_, k, naturalContactInput(nm_, k, s.x, s.v, u0), 0.0, nullptr, nullptr, nullptr).gap);
         }
       ++stats_.rejected_onset;
       const double fraction = (gap_start + 0.5 * options_.onset_depth) / (gap_start + onset_depth_);

@@ -9,8 +9,11 @@
 #include "active_tensegrity/core/natural.h"
 #include "active_tensegrity/core/scene.h"
 #include "active_tensegrity/core/state.h"
+#include "test_models.h"
 
 using namespace active_tensegrity::core;
+using active_tensegrity::test::freeStrutModel;
+using active_tensegrity::test::trapezoidalOptions;
 
 namespace
 {
@@ -19,71 +22,125 @@ Model scene(const std::string& name, const std::vector<Override>& overrides = {}
   return loadScene(std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) + "/config/scenes/" + name, overrides);
 }
 
-using Vec12 = Eigen::Matrix<double, 12, 1>;
-using Mat12 = Eigen::Matrix<double, 12, 12>;
+using Vec14 = Eigen::Matrix<double, 14, 1>;
+using Mat14 = Eigen::Matrix<double, 14, 14>;
 
-// two crossing struts of the tower's first pair, the second pressed into the first by `depth` (m)
-void crossing(std::mt19937& rng, double depth, Vec3 r[4], Vec3 v[4])
+// two crossing struts, the second pressed into the first by `depth` (m; radii 0.04 each)
+NaturalContactInput crossing(std::mt19937& rng, double depth)
 {
   std::uniform_real_distribution<double> u(-1.0, 1.0);
-  const double half = 0.5 * std::sqrt(0.5 + 0.25 + 0.25);  // (any length: the kernel reads the nodes)
-  const Vec3 a = Vec3(1.0, 0.2 * u(rng), 0.1 * u(rng)).normalized(),
-             b = Vec3(0.3 * u(rng), 1.0, 0.2 * u(rng)).normalized();
+  const double half = 0.55;
+  const Vec3 a = Vec3(1.0, 0.2 * u(rng), 0.1 * u(rng)).normalized();
+  const Vec3 b = Vec3(0.3 * u(rng), 1.0, 0.2 * u(rng)).normalized();
   const Vec3 n = a.cross(b).normalized();
   const Vec3 c1(0.1 * u(rng), 0.1 * u(rng), 0.1 * u(rng));
-  const Vec3 c2 = c1 - (0.08 - depth) * n + 0.2 * u(rng) * a;  // radii 0.04 each: gap = -depth
-  r[0] = c1 - half * a;
-  r[1] = c1 + half * a;
-  r[2] = c2 - half * b;
-  r[3] = c2 + half * b;
+  const Vec3 c2 = c1 - (0.08 - depth) * n + 0.2 * u(rng) * a;
+  NaturalContactInput in;
+  in.r[0] = c1 - half * a;
+  in.r[1] = c1 + half * a;
+  in.r[2] = c2 - half * b;
+  in.r[3] = c2 + half * b;
   for (int i = 0; i < 4; ++i)
-    v[i] = Vec3(u(rng), u(rng), u(rng));
+    in.v[i] = Vec3(u(rng), u(rng), u(rng));
+  in.spin[0] = 5.0 * u(rng);
+  in.spin[1] = 5.0 * u(rng);
+  return in;
+}
+
+// K and C of contact k at `in` against central differences of its force (positions, velocities, spin rates)
+void expectTangentsMatch(const NaturalModel& nm, int k, const NaturalContactInput& in, double impact_speed,
+                         ContactPairState* state)
+{
+  Vec14 f;
+  Mat14 kk, cc;
+  *state = naturalContact(nm, k, in, impact_speed, &f, &kk, &cc);
+  Mat14 k_fd = Mat14::Zero(), c_fd = Mat14::Zero();
+  for (int j = 0; j < 26; ++j)
+  {
+    const double h = 1e-7;
+    NaturalContactInput p = in, m = in;
+    if (j < 12)
+    {
+      p.r[j / 3](j % 3) += h;
+      m.r[j / 3](j % 3) -= h;
+    }
+    else if (j < 24)
+    {
+      p.v[(j - 12) / 3]((j - 12) % 3) += h;
+      m.v[(j - 12) / 3]((j - 12) % 3) -= h;
+    }
+    else
+    {
+      p.spin[j - 24] += h;
+      m.spin[j - 24] -= h;
+    }
+    Vec14 fp, fm;
+    naturalContact(nm, k, p, impact_speed, &fp, nullptr, nullptr);
+    naturalContact(nm, k, m, impact_speed, &fm, nullptr, nullptr);
+    const Vec14 d = -(fp - fm) / (2.0 * h);
+    if (j < 12)
+      k_fd.col(j) = d;
+    else
+      c_fd.col(j - 12) = d;  // (velocities to columns 0-11, the spin rates to 12-13)
+  }
+  EXPECT_LE((kk - k_fd).cwiseAbs().maxCoeff(), 1e-5 * std::max(1.0, kk.cwiseAbs().maxCoeff()));
+  EXPECT_LE((cc - c_fd).cwiseAbs().maxCoeff(), 1e-5 * std::max(1.0, cc.cwiseAbs().maxCoeff()));
 }
 
 TEST(Natural, ContactTangentsMatchCentralDifferences)
 {
   const Model model = scene("tower.yaml", { { "analysis.type", "dynamic" } });
   const NaturalModel nm = buildNaturalModel(model);
-  ASSERT_FALSE(nm.pair_slots.empty());
-  const int slot = nm.pair_slots[0];
+  ASSERT_FALSE(nm.contacts.empty());
+  ASSERT_GE(nm.struts[0].spin, 0) << "the tower has strut friction: spin rates";
   std::mt19937 rng(7);
   int with_friction = 0, with_cores = 0;
   // sleeves only, and deep enough for the steel cores (the sleeves are 27.5 mm thick each)
   for (const double depth : { 2e-3, 1e-2, 6e-2 })
     for (int trial = 0; trial < 6; ++trial)
     {
-      Vec3 r[4], v[4];
-      crossing(rng, depth, r, v);
-      const double impact_speed = 0.3 + 0.1 * trial;
-      Vec12 f;
-      Mat12 k, c;
-      const ContactPairState st = naturalPairContact(nm, slot, r, v, impact_speed, &f, &k, &c);
+      const NaturalContactInput in = crossing(rng, depth);
+      ContactPairState st;
+      expectTangentsMatch(nm, 0, in, 0.3 + 0.1 * trial, &st);
       ASSERT_TRUE(st.active);
       ASSERT_GT(st.normal_force, 0.0);
       with_friction += st.friction_force > 0.0;
       with_cores += st.core_penetration > 0.0;
-      Mat12 k_fd, c_fd;
-      for (int j = 0; j < 24; ++j)
-      {
-        const double h = 1e-7;
-        Vec3 rp[4], rm[4], vp[4], vm[4];
-        for (int i = 0; i < 4; ++i)
-        {
-          rp[i] = rm[i] = r[i];
-          vp[i] = vm[i] = v[i];
-        }
-        (j < 12 ? rp : vp)[(j % 12) / 3](j % 3) += h;
-        (j < 12 ? rm : vm)[(j % 12) / 3](j % 3) -= h;
-        Vec12 fp, fm;
-        naturalPairContact(nm, slot, rp, vp, impact_speed, &fp, nullptr, nullptr);
-        naturalPairContact(nm, slot, rm, vm, impact_speed, &fm, nullptr, nullptr);
-        (j < 12 ? k_fd : c_fd).col(j % 12) = -(fp - fm) / (2.0 * h);
-      }
-      EXPECT_LE((k - k_fd).cwiseAbs().maxCoeff(), 1e-5 * k.cwiseAbs().maxCoeff()) << "depth " << depth;
-      EXPECT_LE((c - c_fd).cwiseAbs().maxCoeff(), 1e-5 * std::max(1.0, c.cwiseAbs().maxCoeff())) << "depth " << depth;
     }
   EXPECT_GT(with_friction, 0);
   EXPECT_GT(with_cores, 0);
+}
+
+TEST(Natural, GroundTangentsMatchCentralDifferences)
+{
+  // the six-bar's spheres at the strut ends on the ground, with friction at their lowest points
+  const Model model = scene("six_bar.yaml");
+  const NaturalModel nm = buildNaturalModel(model);
+  int k = 0;
+  while (k < static_cast<int>(nm.contacts.size()) && !nm.contacts[k].ground)
+    ++k;
+  ASSERT_LT(k, static_cast<int>(nm.contacts.size()));
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  int with_friction = 0;
+  for (int trial = 0; trial < 12; ++trial)
+  {
+    NaturalContactInput in;
+    const Vec3 axis = Vec3(u(rng), u(rng), 0.5 + 0.5 * std::abs(u(rng))).normalized();
+    const double length = nm.struts[nm.contacts[k].struts[0]].length;
+    const int end = nm.contacts[k].sphere_end;
+    const Vec3 sphere(u(rng), u(rng), model.ground_contacts[0].radius - 1e-3 * (1.0 + std::abs(u(rng))));
+    in.r[end] = sphere;
+    in.r[1 - end] = sphere + (end == 0 ? 1.0 : -1.0) * length * axis;
+    for (int i = 0; i < 2; ++i)
+      in.v[i] = Vec3(u(rng), u(rng), u(rng));
+    in.spin[0] = 5.0 * u(rng);
+    ContactPairState st;
+    expectTangentsMatch(nm, k, in, 0.5, &st);
+    ASSERT_TRUE(st.active);
+    with_friction += st.friction_force > 0.0;
+  }
+  EXPECT_GT(with_friction, 0);
 }
 
 TEST(Natural, MassMatrixGivesTheRigidStrutsKineticEnergy)
@@ -173,18 +230,47 @@ TEST(Natural, AgreesWithBodyCoordinatesThroughContact)
   }
 }
 
-TEST(Natural, RefusesWhatItDoesNotCoverByName)
+TEST(Natural, SpinningStrutKeepsItsAngularMomentum)
 {
-  const Model six_bar = scene("six_bar.yaml");
-  try
+  // a free strut tumbling and spinning with no force: its angular momentum J_t w_perp + J_a w_s e is constant (the
+  // gyroscopic couple turns the transverse rotation as the axis moves), its spin rate too, and the trapezoidal rule
+  // keeps the energy
+  Model model = freeStrutModel("S", 1.2, 0.05, 2700.0, Vec3(1.0, 0.3, 0.2).normalized());
+  model.contact.enabled = true;  // (friction: the struts get spin rates)
+  model.contact.friction = 0.3;
+  const NaturalModel nm = buildNaturalModel(model);
+  const NaturalStrut& st = nm.struts[0];
+  ASSERT_GE(st.spin, 0);
+  const double jt = model.bodies[0].inertia.x(), ja = model.bodies[0].inertia.z();
+  NaturalState s = naturalInitialState(nm);
+  const Vec3 u0 = s.x.segment<3>(nm.nodes[st.b].column) - s.x.segment<3>(nm.nodes[st.a].column);
+  const Vec3 w = Vec3(0.0, 0.0, 3.0) - Vec3(0.0, 0.0, 3.0).dot(u0) / u0.squaredNorm() * u0;  // transverse
+  s.v.segment<3>(nm.nodes[st.b].column) = w.cross(0.5 * u0);
+  s.v.segment<3>(nm.nodes[st.a].column) = w.cross(-0.5 * u0);
+  s.v(st.spin) = 40.0;
+  const auto momentum = [&](const NaturalState& z)
   {
-    buildNaturalModel(six_bar);
-    FAIL() << "ground contact accepted";
-  }
-  catch (const std::invalid_argument& e)
-  {
-    EXPECT_NE(std::string(e.what()).find("ground contact"), std::string::npos) << e.what();
-  }
+    const Vec3 u = z.x.segment<3>(nm.nodes[st.b].column) - z.x.segment<3>(nm.nodes[st.a].column);
+    const Vec3 ud = z.v.segment<3>(nm.nodes[st.b].column) - z.v.segment<3>(nm.nodes[st.a].column);
+    return Vec3(jt * u.cross(ud) / (st.length * st.length) + ja * z.v(st.spin) * u / st.length);
+  };
+  const auto energy = [&](const NaturalState& z) { return 0.5 * z.v.dot(nm.mass * z.v); };
+  const Vec3 h0 = momentum(s);
+  const double e0 = energy(s);
+  SolverOptions o = trapezoidalOptions(1e-4, 1e-12);
+  NaturalSolver solver(nm, o);
+  const ActuationLaw law = [](double) { return ActuationValues{}; };
+  ASSERT_TRUE(solver.initialize(s, law).ok());
+  ASSERT_TRUE(solver.advanceTo(s, 1.0, law).ok());
+  const Vec3 u1 = s.x.segment<3>(nm.nodes[st.b].column) - s.x.segment<3>(nm.nodes[st.a].column);
+  EXPECT_GT((u1.normalized() - u0.normalized()).norm(), 0.5) << "the axis turned";
+  EXPECT_NEAR(s.v(st.spin), 40.0, 1e-9);
+  EXPECT_LT((momentum(s) - h0).norm(), 1e-6 * h0.norm());
+  EXPECT_NEAR(energy(s), e0, 1e-6 * e0);
+}
+
+TEST(Natural, RefusesWhatItDoesNotCover)
+{
   const Model tower = scene("tower.yaml", { { "analysis.type", "dynamic" } });
   const NaturalModel nm = buildNaturalModel(tower);
   SolverOptions ga = tower.solver;

@@ -4,18 +4,21 @@
 /// (translation plus rotation about its centre, J_t the transverse moment of inertia about the centre) gives a
 /// constant mass matrix: per strut the 6x6 block [d I, o I; o I, d I] with d = m/4 + J_t/L^2, o = m/4 - J_t/L^2.
 /// Struts that share a node share its coordinates (no ball-joint rows), pinned nodes have none, driven nodes
-/// follow their actuator, and point masses are nodes with mass. A strut's spin about its own axis is not a
+/// follow their actuator, and point masses are nodes with mass. A strut's spin angle about its own axis is not a
 /// coordinate: no force has stiffness there.
 ///
 /// Strut contact acts on the axis segments between the nodes with the law of contact.h (crossing-angle Hertz
-/// stiffness, cores, Lankarani-Nikravesh damping, modified Coulomb friction). The contact points are material
-/// points of each strut moving with its angular velocity w = u x u_dot / L^2 (u = r_b - r_a), which has no spin
-/// part; friction at them loads the nodes through f and the moment r n x f. The tangents are exact: forward-mode
-/// automatic differentiation of the same kernel (natural.cpp).
+/// stiffness, cores, Lankarani-Nikravesh damping, modified Coulomb friction); the ground's spheres sit at nodes.
+/// The contact points are material points of each strut moving with its angular velocity
+/// w = u x u_dot / L^2 + w_s e (u = r_b - r_a, e = u / L): in a scene with friction each strut has a spin rate w_s
+/// about its axis, with the axial moment of inertia J_a as its (constant) mass. An axisymmetric strut's spin obeys
+/// J_a w_s_dot = (axial moment) exactly, and it acts on the transverse motion through the gyroscopic couple of
+/// -J_a w_s e_dot. No force depends on the spin angle, which is not tracked. The tangents are exact: forward-mode
+/// automatic differentiation of the same kernels (natural.cpp).
 ///
 /// This is a second formulation measured against the body coordinates (state.h, dynamics.h) by
-/// `tensegrity_bench natural`: dynamics of scenes without ground contact or external loads, with the
-/// Newmark family at fixed or adaptive steps.
+/// `tensegrity_bench natural`: dynamics without external loads, with the Newmark family at fixed or adaptive steps
+/// (no energy check).
 #pragma once
 
 #include <array>
@@ -51,6 +54,7 @@ struct NaturalStrut
 {
   int a = -1, b = -1;  // nodes at the body's -L/2 and +L/2 ends
   int body = -1;
+  int spin = -1;        // the column of its spin rate about its axis (scenes with friction), or -1
   double length = 0.0;  // m
   double radius = 0.0;  // m (outermost layer)
 };
@@ -65,6 +69,17 @@ struct NaturalRow
   int actuator = -1;
 };
 
+/// A contact of the natural coordinates: a checked strut pair (nodes a, b of each strut) or a sphere on the ground
+/// (the strut's nodes a and b with the sphere at one of them, or a point mass's node).
+struct NaturalContactSlot
+{
+  int slot = -1;  // the model's contact slot (contact.h)
+  bool ground = false;
+  int nodes[4] = { -1, -1, -1, -1 };
+  int struts[2] = { -1, -1 };  // the struts whose spins it turns
+  int sphere_end = 0;          // ground: the sphere at nodes[0] (0) or nodes[1] (1)
+};
+
 struct NaturalModel
 {
   const Model* model = nullptr;
@@ -74,23 +89,24 @@ struct NaturalModel
   std::vector<std::vector<int>> cable_nodes;  // per Model::cables entry: the node of each point
   std::vector<int> strut_of_body;             // per body: its index in `struts`, or -1
   std::vector<int> node_of_body;              // per point-mass body: its node, or -1
-  int coordinates = 0;                        // free coordinates (3 per free node)
+  int positions = 0;                          // the free nodes' coordinates (3 each), first
+  int coordinates = 0;                        // then one spin rate per strut when the scene has friction
   Eigen::MatrixXd mass;                       // constant, coordinates x coordinates
   Eigen::VectorXd gravity;                    // the weight's generalized force
-  std::vector<int> pair_slots;                // the checked strut pairs (contact slots)
+  std::vector<NaturalContactSlot> contacts;
 };
 
 /// The natural-coordinate description of `model` (positions at model.q0). Throws std::invalid_argument naming what
 /// the formulation does not cover (ground contact, a cable or joint away from a strut end).
-NaturalModel buildNaturalModel(const Model& model);
+/// With `spin` false no strut has a spin rate (friction then cannot turn a strut about its axis).
+NaturalModel buildNaturalModel(const Model& model, bool spin = true);
 
 struct NaturalState
 {
   double t = 0.0;
-  Eigen::VectorXd x, v, a;  // free coordinates, velocities and (algorithmic) accelerations
-  Eigen::VectorXd lambda;   // one multiplier per strut, then per NaturalModel::rows entry
-  std::vector<double>
-      contact_speed;  // per pair slot index (NaturalModel::pair_slots): impact speed while touching, else 0
+  Eigen::VectorXd x, v, a;            // free coordinates, velocities and (algorithmic) accelerations
+  Eigen::VectorXd lambda;             // one multiplier per strut, then per NaturalModel::rows entry
+  std::vector<double> contact_speed;  // per NaturalModel::contacts entry: impact speed while touching, else 0
 };
 
 /// At rest at the scene's start.
@@ -104,12 +120,22 @@ Vec3 naturalNodeVelocity(const NaturalModel& nm, int i, const Eigen::VectorXd& v
 /// strut's axis with no spin; point masses at their nodes.
 Eigen::VectorXd naturalToBodyCoordinates(const NaturalModel& nm, const Eigen::VectorXd& x, const ActuationValues& u);
 
-/// One strut pair's contact on its four nodes (a, b of the first strut, then of the second): r and v the nodes'
-/// positions and velocities, v0 the impact speed. `force` (12) gets the generalized forces on the nodes; with
-/// `stiffness` and `damping` (12x12) also K = -dF/dr and C = -dF/dv, exact.
-ContactPairState naturalPairContact(const NaturalModel& nm, int slot, const Vec3 r[4], const Vec3 v[4],
-                                    double impact_speed, Eigen::Matrix<double, 12, 1>* force,
-                                    Eigen::Matrix<double, 12, 12>* stiffness, Eigen::Matrix<double, 12, 12>* damping);
+/// What one contact reads: its nodes' positions and velocities (NaturalContactSlot::nodes) and the struts' spin rates.
+struct NaturalContactInput
+{
+  Vec3 r[4] = { Vec3::Zero(), Vec3::Zero(), Vec3::Zero(), Vec3::Zero() };
+  Vec3 v[4] = { Vec3::Zero(), Vec3::Zero(), Vec3::Zero(), Vec3::Zero() };
+  double spin[2] = { 0.0, 0.0 };
+};
+NaturalContactInput naturalContactInput(const NaturalModel& nm, int k, const Eigen::VectorXd& x,
+                                        const Eigen::VectorXd& v, const ActuationValues& u);
+
+/// Contact k of NaturalModel::contacts with impact speed v0: `force` (14: 3 per node, then the two spins) gets its
+/// generalized forces; with `stiffness` and `damping` (14x14) also K = -dF/dr and C = -dF/dv (over the nodes'
+/// velocities and the spin rates), exact.
+ContactPairState naturalContact(const NaturalModel& nm, int k, const NaturalContactInput& in, double impact_speed,
+                                Eigen::Matrix<double, 14, 1>* force, Eigen::Matrix<double, 14, 14>* stiffness,
+                                Eigen::Matrix<double, 14, 14>* damping);
 
 /// The touching pairs of s (forces with each pair's impact speed from its memory).
 std::vector<ContactPairState> naturalContacts(const NaturalModel& nm, const NaturalState& s, const ActuationValues& u);
@@ -167,7 +193,7 @@ private:
   Eigen::PartialPivLU<Eigen::MatrixXd> lu_;
   bool have_lu_ = false;
   double lu_h_ = 0.0;
-  /// The pairs whose gap at s is within 2 * motion (indices into NaturalModel::pair_slots), with the impact speed
+  /// The pairs whose gap at s is within 2 * motion (indices into NaturalModel::contacts), with the impact speed
   /// each uses in the step.
   void findNear(const NaturalState& s, double motion);
   /// The largest distance a node moved between x0 and x1.
