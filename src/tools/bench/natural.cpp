@@ -168,11 +168,11 @@ Run runBody(const at::Model& model)
   return run;
 }
 
-Run runNatural(const at::Model& model)
+Run runNatural(const at::Model& model, bool spin)
 {
   Run run;
   const Stops stops = stopsOf(model);
-  const at::NaturalModel nm = at::buildNaturalModel(model);
+  const at::NaturalModel nm = at::buildNaturalModel(model, spin);
   at::NaturalSolver solver(nm, model.solver);
   const at::ActuationLaw law =
       at::ActuationLaw::writing([&model](double t, at::ActuationValues& u) { at::scheduledActuation(model, t, u); });
@@ -213,6 +213,21 @@ Run runNatural(const at::Model& model)
   for (const auto& [x, t] : xs)
     run.path.push_back(centres(model, at::naturalToBodyCoordinates(nm, x, at::scheduledActuation(model, t))));
   return run;
+}
+
+/// The mass centre at the last output (m).
+at::Vec3 endCentre(const at::Model& model, const Path& path)
+{
+  at::Vec3 c = at::Vec3::Zero();
+  double mass = 0.0;
+  if (path.empty())
+    return c;
+  for (size_t i = 0; i < model.bodies.size(); ++i)
+  {
+    c += model.bodies[i].mass * path.back()[i];
+    mass += model.bodies[i].mass;
+  }
+  return c / mass;
 }
 
 double pathError(const Path& a, const Path& b)
@@ -262,6 +277,7 @@ int natural(const std::string& scene, const std::vector<std::string>& args)
   std::vector<double> tols = { 1e-4, 1e-5, 1e-6 };
   double ref_dt = 2.5e-5;
   int repeat = 3;
+  bool spin = true;
   std::string csv_path;
   Args in(args);
   while (in.more())
@@ -280,6 +296,8 @@ int natural(const std::string& scene, const std::vector<std::string>& args)
       repeat = tools::parsePositive<int>(a, next());
     else if (a == "--csv")
       csv_path = next();
+    else if (a == "--no-spin")
+      spin = false;
     else
       throw std::invalid_argument("unknown argument '" + a + "'");
   }
@@ -311,7 +329,7 @@ int natural(const std::string& scene, const std::vector<std::string>& args)
   std::fprintf(stderr, "natural: references at dt %g s ...\n", ref_dt);
   const double gamma = base.solver.newmark_gamma, beta = base.solver.newmark_beta;
   const Run ref = runBody(configured(false, ref_dt, at::Integrator::kNewmark, gamma, beta, 1e-10));
-  const Run nat_ref = runNatural(configured(false, ref_dt, at::Integrator::kNewmark, gamma, beta, 1e-10));
+  const Run nat_ref = runNatural(configured(false, ref_dt, at::Integrator::kNewmark, gamma, beta, 1e-10), spin);
   if (ref.status != "converged" || nat_ref.status != "converged")
   {
     std::cerr << "tensegrity_bench: a reference run failed: body " << ref.status << ", natural " << nat_ref.status
@@ -321,10 +339,14 @@ int natural(const std::string& scene, const std::vector<std::string>& args)
   const double model_difference = pathError(ref.path, nat_ref.path);
   const auto relative = [](double a, double b) { return b > 0.0 ? std::abs(a - b) / b : std::abs(a); };
   std::printf("# %s: %s, %s\n", scene.c_str(), cpuModel().c_str(), cpuVectorFlags().c_str());
-  std::printf("# references at dt %g s (the scene's Newmark, Newton tolerance 1e-10): contact impulse %.6g and %.6g N s (difference %.2e), first touch at %.4f and %.4f s, largest "
+  std::printf("# references at dt %g s (the scene's Newmark, Newton tolerance 1e-10): contact impulse %.6g and %.6g N "
+              "s (difference %.2e), first touch at %.4f and %.4f s, largest "
               "position difference %.3e m\n",
               ref_dt, ref.impulse, nat_ref.impulse, relative(nat_ref.impulse, ref.impulse), ref.first_contact,
               nat_ref.first_contact, model_difference);
+  const at::Vec3 ref_end = endCentre(base, ref.path), nat_end = endCentre(base, nat_ref.path);
+  std::printf("# mass centre at the end: body (%.4f, %.4f, %.4f) m, natural%s (%.4f, %.4f, %.4f) m\n", ref_end.x(),
+              ref_end.y(), ref_end.z(), spin ? "" : " without spin", nat_end.x(), nat_end.y(), nat_end.z());
 
   std::ofstream file;
   if (!csv_path.empty())
@@ -347,8 +369,8 @@ int natural(const std::string& scene, const std::vector<std::string>& args)
       {
         const at::Model m = configured(adaptive, x, base.solver.integrator, base.solver.newmark_gamma,
                                        base.solver.newmark_beta, base.solver.newton_tolerance);
-        const Run r =
-            natural ? timed([&]() { return runNatural(m); }, repeat) : timed([&]() { return runBody(m); }, repeat);
+        const Run r = natural ? timed([&]() { return runNatural(m, spin); }, repeat) :
+                                timed([&]() { return runBody(m); }, repeat);
         const Run& own_ref = natural ? nat_ref : ref;
         const double err = pathError(r.path, ref.path), own = pathError(r.path, own_ref.path);
         const double imp = relative(r.impulse, ref.impulse), imp_own = relative(r.impulse, own_ref.impulse);
