@@ -486,9 +486,14 @@ NaturalModel buildNaturalModel(const Model& model, bool spin)
       st.spin = nm.coordinates++;
   // the constant mass matrix and the weight
   const int n = nm.coordinates;
-  nm.mass = Eigen::MatrixXd::Zero(n, n);
+  std::vector<Eigen::Triplet<double>> mass;
   nm.gravity = Eigen::VectorXd::Zero(n);
   const Vec3 g = model.gravity_enabled ? model.gravity : Vec3::Zero();
+  const auto diagonal3 = [&mass](int r, int c, double value)
+  {
+    for (int k = 0; k < 3; ++k)
+      mass.emplace_back(r + k, c + k, value);
+  };
   for (const NaturalStrut& s : nm.struts)
   {
     const Body& b = model.bodies[s.body];
@@ -498,16 +503,16 @@ NaturalModel buildNaturalModel(const Model& model, bool spin)
     for (const int col : { ca, cb })
       if (col >= 0)
       {
-        nm.mass.block<3, 3>(col, col).diagonal().array() += diag;
+        diagonal3(col, col, diag);
         nm.gravity.segment<3>(col) += 0.5 * b.mass * g;
       }
     if (ca >= 0 && cb >= 0)
     {
-      nm.mass.block<3, 3>(ca, cb).diagonal().array() += off;
-      nm.mass.block<3, 3>(cb, ca).diagonal().array() += off;
+      diagonal3(ca, cb, off);
+      diagonal3(cb, ca, off);
     }
     if (s.spin >= 0)
-      nm.mass(s.spin, s.spin) = b.inertia.z();
+      mass.emplace_back(s.spin, s.spin, b.inertia.z());
   }
   for (size_t i = 0; i < model.bodies.size(); ++i)
   {
@@ -515,9 +520,11 @@ NaturalModel buildNaturalModel(const Model& model, bool spin)
     if (node < 0 || nm.nodes[node].column < 0)
       continue;
     const int col = nm.nodes[node].column;
-    nm.mass.block<3, 3>(col, col).diagonal().array() += model.bodies[i].mass;
+    diagonal3(col, col, model.bodies[i].mass);
     nm.gravity.segment<3>(col) += model.bodies[i].mass * g;
   }
+  nm.mass.resize(n, n);
+  nm.mass.setFromTriplets(mass.begin(), mass.end());
   return nm;
 }
 
@@ -690,8 +697,10 @@ std::vector<ContactPairState> naturalContacts(const NaturalModel& nm, const Natu
 // ---- the solver ----------------------------------------------------------------------------------------
 
 NaturalSolver::NaturalSolver(const NaturalModel& nm, const SolverOptions& options)
-  : nm_(nm), model_(*nm.model), options_(options)
+  : nm_(nm), model_(*nm.model), options_(options), broad_phase_(*nm.model)
 {
+  while (first_ground_ < static_cast<int>(nm.contacts.size()) && !nm.contacts[first_ground_].ground)
+    ++first_ground_;
   if (options.integrator != Integrator::kNewmark)
     throw std::invalid_argument("natural coordinates: only the Newmark family is covered");
   beta_ = options.newmark_beta;
@@ -704,11 +713,7 @@ void NaturalSolver::forces(const Eigen::VectorXd& x, const Eigen::VectorXd& v, b
 {
   const int n = nm_.coordinates;
   f_ = nm_.gravity;
-  if (tangents)
-  {
-    k_.setZero(n, n);
-    c_.setZero(n, n);
-  }
+  static_cast<void>(n);
   // a spinning strut's gyroscopic moment -J_a w_s e_dot on its transverse motion, as the couple
   // F_b = -F_a = (J_a / L^3) w_s u x u_dot at its nodes (no work)
   for (const NaturalStrut& st : nm_.struts)
@@ -740,12 +745,13 @@ void NaturalSolver::forces(const Eigen::VectorXd& x, const Eigen::VectorXd& v, b
     {
       if (cols[i] < 0)
         continue;
-      c_.block<3, 1>(cols[i], st.spin) -= sign[i] * (fb / ws);
+      for (int r = 0; r < 3; ++r)
+        entries_.add(cols[i] + r, st.spin, -entries_.c_weight * sign[i] * fb(r) / ws);
       for (int j = 0; j < 2; ++j)
         if (cols[j] >= 0)
         {
-          k_.block<3, 3>(cols[i], cols[j]) -= sign[i] * sign[j] * du;
-          c_.block<3, 3>(cols[i], cols[j]) -= sign[i] * sign[j] * dud;
+          entries_.block(cols[i], cols[j], -sign[i] * sign[j] * du, entries_.k_weight);
+          entries_.block(cols[i], cols[j], -sign[i] * sign[j] * dud, entries_.c_weight);
         }
     }
   }
@@ -794,9 +800,8 @@ void NaturalSolver::forces(const Eigen::VectorXd& x, const Eigen::VectorXd& v, b
         const int cj = nm_.nodes[nodes[j]].column;
         if (cj < 0)
           continue;
-        k_.block<3, 3>(ci2, cj).noalias() += cs.stiffness * g[i] * g[j].transpose();
-        if (damping > 0.0)
-          c_.block<3, 3>(ci2, cj).noalias() += damping * g[i] * g[j].transpose();
+        const Mat3 gg = g[i] * g[j].transpose();
+        entries_.block(ci2, cj, gg, cs.stiffness * entries_.k_weight + damping * entries_.c_weight);
       }
     }
     for (int i = 0; i + 1 < count; ++i)
@@ -804,13 +809,13 @@ void NaturalSolver::forces(const Eigen::VectorXd& x, const Eigen::VectorXd& v, b
       const Mat3 gs = tension / len[i] * (Mat3::Identity() - e[i] * e[i].transpose());
       const int c0 = nm_.nodes[nodes[i]].column, c1 = nm_.nodes[nodes[i + 1]].column;
       if (c0 >= 0)
-        k_.block<3, 3>(c0, c0) += gs;
+        entries_.block(c0, c0, gs, entries_.k_weight);
       if (c1 >= 0)
-        k_.block<3, 3>(c1, c1) += gs;
+        entries_.block(c1, c1, gs, entries_.k_weight);
       if (c0 >= 0 && c1 >= 0)
       {
-        k_.block<3, 3>(c0, c1) -= gs;
-        k_.block<3, 3>(c1, c0) -= gs;
+        entries_.block(c0, c1, gs, -entries_.k_weight);
+        entries_.block(c1, c0, gs, -entries_.k_weight);
       }
     }
   }
@@ -849,8 +854,7 @@ void NaturalSolver::contactForces(const Eigen::VectorXd& x, const Eigen::VectorX
       for (int j = 0; j < 14; ++j)
         if (cols[j] >= 0)
         {
-          k_(cols[i], cols[j]) += kk(i, j);
-          c_(cols[i], cols[j]) += cc(i, j);
+          entries_.add(cols[i], cols[j], entries_.k_weight * kk(i, j) + entries_.c_weight * cc(i, j));
         }
     }
   }
@@ -861,9 +865,32 @@ namespace active_tensegrity::core
 {
 namespace
 {
-constexpr double kNearFloor = 1e-4;  // m: the least motion the near pairs allow for
+constexpr double kNearFloor = 1e-4;   // m: the least motion the near pairs allow for
+constexpr int kDenseMost = 160;       // Newton matrices up to this size are factorized dense, larger ones sparse
+constexpr int kDirectPairsMost = 64;  // up to this many strut pairs are checked without the broad phase
 constexpr double kSafety = 0.9, kMaxGrowth = 2.0, kMinShrink = 0.1, kKeepBand = 1.2;
 }  // namespace
+
+bool NaturalSolver::factorize(int size)
+{
+  dense_mode_ = entries_.to_dense;
+  if (dense_mode_)
+  {
+    dense_lu_.compute(entries_.dense);
+    return true;
+  }
+  sparse_.resize(size, size);
+  sparse_.setFromTriplets(entries_.triplets.begin(), entries_.triplets.end());
+  sparse_lu_.compute(sparse_);
+  return sparse_lu_.info() == Eigen::Success;
+}
+
+Eigen::VectorXd NaturalSolver::solve(const Eigen::VectorXd& rhs)
+{
+  if (dense_mode_)
+    return dense_lu_.solve(rhs);
+  return sparse_lu_.solve(rhs);
+}
 
 double NaturalSolver::largestMotion(const Eigen::VectorXd& x0, const Eigen::VectorXd& x1) const
 {
@@ -877,15 +904,32 @@ void NaturalSolver::findNear(const NaturalState& s, double motion)
 {
   near_.clear();
   near_motion_ = motion;
+  if (nm_.contacts.empty())
+    return;
   ActuationValues u = u_;  // (u_ holds the step's end; the start's driven nodes move by less than `motion`)
-  for (size_t k = 0; k < nm_.contacts.size(); ++k)
+  // the strut pairs whose boxes, grown by the motion, overlap (broad_phase.h), then the ground's spheres
+  // (a few pairs are cheaper to check directly than to box)
+  candidates_.clear();
+  if (first_ground_ > kDirectPairsMost)
   {
-    const int ki = static_cast<int>(k);
+    broad_q_ = naturalToBodyCoordinates(nm_, s.x, u);
+    broad_phase_.candidates(broad_q_, motion, candidates_);
+  }
+  for (int k = first_ground_ > kDirectPairsMost ? first_ground_ : 0; k < static_cast<int>(nm_.contacts.size()); ++k)
+    candidates_.push_back(nm_.contacts[k].slot);
+  for (const int slot : candidates_)
+  {
+    // (the contacts are in ascending slot order)
+    const auto at = std::lower_bound(nm_.contacts.begin(), nm_.contacts.end(), slot,
+                                     [](const NaturalContactSlot& c, int x) { return c.slot < x; });
+    if (at == nm_.contacts.end() || at->slot != slot)
+      continue;
+    const int k = static_cast<int>(at - nm_.contacts.begin());
     const ContactPairState st =
-        naturalContact(nm_, ki, naturalContactInput(nm_, ki, s.x, s.v, u), 0.0, nullptr, nullptr, nullptr);
+        naturalContact(nm_, k, naturalContactInput(nm_, k, s.x, s.v, u), 0.0, nullptr, nullptr, nullptr);
     if (st.gap > 2.0 * motion)
       continue;
-    near_.push_back(ki);
+    near_.push_back(k);
     const double memory = s.contact_speed[k];
     step_speeds_[k] = memory > 0.0 ? memory : std::max(st.penetration_rate, model_.contact.min_impact_speed);
   }
@@ -900,17 +944,16 @@ Summary NaturalSolver::initialize(NaturalState& s, const ActuationLaw& law)
   forces(s.x, s.v, false);
   contactForces(s.x, s.v, false);
   // [M G^T; G 0] [a; lambda] = [F; -2 |u_dot|^2 - 2 u . (driven accelerations)]
-  Eigen::MatrixXd a = Eigen::MatrixXd::Zero(n + m, n + m);
+  entries_.clear(n + m, n + m <= kDenseMost);
+  entries_.addMatrix(nm_.mass);
   Eigen::VectorXd rhs = Eigen::VectorXd::Zero(n + m);
-  a.topLeftCorner(n, n) = nm_.mass;
   rhs.head(n) = f_;
   const int struts = static_cast<int>(nm_.struts.size());
   for (int k = struts; k < m; ++k)
   {
     const NaturalRow& row = nm_.rows[k - struts];
     const int col = nm_.nodes[row.node].column;
-    a.block<3, 1>(col, n + k) = row.direction;
-    a.block<1, 3>(n + k, col) = row.direction.transpose();
+    entries_.column(col, n + k, row.direction);
     rhs(n + k) = row.actuator >= 0 ? u_[row.actuator].accel : 0.0;
   }
   for (int k = 0; k < struts; ++k)
@@ -923,16 +966,15 @@ Summary NaturalSolver::initialize(NaturalState& s, const ActuationLaw& law)
     {
       const NaturalNode& nd = nm_.nodes[node];
       if (nd.column >= 0)
-      {
-        a.block<3, 1>(nd.column, n + k) = 2.0 * sign * d;
-        a.block<1, 3>(n + k, nd.column) = 2.0 * sign * d.transpose();
-      }
+        entries_.column(nd.column, n + k, 2.0 * sign * d);
       else if (nd.kind == NaturalNode::Kind::kDriven)
         r -= 2.0 * sign * d.dot(u_[nd.actuator].accel * nd.direction);
     }
     rhs(n + k) = r;
   }
-  const Eigen::VectorXd z = a.partialPivLu().solve(rhs);
+  factorize(n + m);
+  have_lu_ = false;  // (not a Newton matrix)
+  const Eigen::VectorXd z = solve(rhs);
   if (!z.allFinite())
   {
     out.status = SolveStatus::kNonFinite;
@@ -971,14 +1013,16 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
     x_ = x_pred + bh2 * acc_;
     v_ = v_pred + gh * acc_;
     const bool build = rebuild || it >= 3 || !options_.reuse_jacobian;
+    if (build)
+    {
+      entries_.clear(n + m, n + m <= kDenseMost);
+      entries_.addMatrix(nm_.mass);
+      entries_.k_weight = bh2;
+      entries_.c_weight = gh;
+    }
     forces(x_, v_, build);
     contactForces(x_, v_, build);
     residual_.head(n).noalias() = nm_.mass * acc_ - f_;
-    if (build)
-    {
-      jac_.setZero(n + m, n + m);
-      jac_.topLeftCorner(n, n) = nm_.mass + bh2 * k_ + gh * c_;
-    }
     const int struts = static_cast<int>(nm_.struts.size());
     for (int k = struts; k < m; ++k)
     {
@@ -989,10 +1033,7 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
           bh2;
       residual_.segment<3>(col) += lambda_(k) * row.direction;
       if (build)
-      {
-        jac_.block<3, 1>(col, n + k) = row.direction;
-        jac_.block<1, 3>(n + k, col) = row.direction.transpose();
-      }
+        entries_.column(col, n + k, row.direction);
     }
     for (int k = 0; k < struts; ++k)
     {
@@ -1009,31 +1050,35 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
         continue;
       if (cb >= 0)
       {
-        jac_.block<3, 1>(cb, n + k) = 2.0 * d;
-        jac_.block<1, 3>(n + k, cb) = 2.0 * d.transpose();
-        jac_.block<3, 3>(cb, cb).diagonal().array() += bh2 * l2;
+        entries_.column(cb, n + k, 2.0 * d);
+        entries_.diagonal(cb, cb, bh2 * l2);
       }
       if (ca >= 0)
       {
-        jac_.block<3, 1>(ca, n + k) = -2.0 * d;
-        jac_.block<1, 3>(n + k, ca) = -2.0 * d.transpose();
-        jac_.block<3, 3>(ca, ca).diagonal().array() += bh2 * l2;
+        entries_.column(ca, n + k, -2.0 * d);
+        entries_.diagonal(ca, ca, bh2 * l2);
       }
       if (ca >= 0 && cb >= 0)
       {
-        jac_.block<3, 3>(ca, cb).diagonal().array() -= bh2 * l2;
-        jac_.block<3, 3>(cb, ca).diagonal().array() -= bh2 * l2;
+        entries_.diagonal(ca, cb, -bh2 * l2);
+        entries_.diagonal(cb, ca, -bh2 * l2);
       }
     }
     if (build)
     {
-      lu_.compute(jac_);
+      if (!factorize(n + m))
+      {
+        out.status = SolveStatus::kSingular;
+        out.message = "natural coordinates: a singular Newton matrix";
+        have_lu_ = false;
+        return out;
+      }
       have_lu_ = true;
       lu_h_ = h;
       rebuild = false;
       ++stats_.factorizations;
     }
-    correction_ = lu_.solve(-residual_);
+    correction_ = solve(-residual_);
     ++out.iterations;
     ++stats_.iterations;
     if (!correction_.allFinite())

@@ -27,7 +27,10 @@
 
 #include <Eigen/Core>
 #include <Eigen/LU>
+#include <Eigen/SparseCore>
+#include <Eigen/SparseLU>
 
+#include "active_tensegrity/core/broad_phase.h"
 #include "active_tensegrity/core/contact.h"
 #include "active_tensegrity/core/dynamics.h"
 #include "active_tensegrity/core/model.h"
@@ -91,7 +94,7 @@ struct NaturalModel
   std::vector<int> node_of_body;              // per point-mass body: its node, or -1
   int positions = 0;                          // the free nodes' coordinates (3 each), first
   int coordinates = 0;                        // then one spin rate per strut when the scene has friction
-  Eigen::MatrixXd mass;                       // constant, coordinates x coordinates
+  Eigen::SparseMatrix<double> mass;           // constant, coordinates x coordinates
   Eigen::VectorXd gravity;                    // the weight's generalized force
   std::vector<NaturalContactSlot> contacts;
 };
@@ -186,11 +189,65 @@ private:
   SolverOptions options_;
   double beta_, gamma_;
   ActuationValues u_;
-  Eigen::VectorXd f_;      // applied forces at the iterate
-  Eigen::MatrixXd k_, c_;  // their tangents -dF/dx, -dF/dv (when asked)
-  Eigen::MatrixXd jac_;
+  /// The Newton matrix's entries as triplets (duplicates summed): M + k_weight K + c_weight C and the rows.
+  struct Entries
+  {
+    std::vector<Eigen::Triplet<double>> triplets;
+    Eigen::MatrixXd dense;  // small matrices: summed here instead
+    bool to_dense = false;
+    double k_weight = 0.0, c_weight = 0.0;
+    void clear(int size, bool small)
+    {
+      triplets.clear();
+      to_dense = small;
+      if (small)
+        dense.setZero(size, size);
+    }
+    void add(int r, int c, double v)
+    {
+      if (to_dense)
+        dense(r, c) += v;
+      else if (v != 0.0)
+        triplets.emplace_back(r, c, v);
+    }
+    void block(int r, int c, const Mat3& m, double w)
+    {
+      for (int j = 0; j < 3; ++j)
+        for (int i = 0; i < 3; ++i)
+          add(r + i, c + j, w * m(i, j));
+    }
+    void diagonal(int r, int c, double v)
+    {
+      for (int i = 0; i < 3; ++i)
+        add(r + i, c + i, v);
+    }
+    /// g at rows r.. of column c and its transpose at row c
+    void column(int r, int c, const Vec3& g)
+    {
+      for (int i = 0; i < 3; ++i)
+      {
+        add(r + i, c, g(i));
+        add(c, r + i, g(i));
+      }
+    }
+    void addMatrix(const Eigen::SparseMatrix<double>& m)
+    {
+      for (int k = 0; k < m.outerSize(); ++k)
+        for (Eigen::SparseMatrix<double>::InnerIterator it(m, k); it; ++it)
+          add(static_cast<int>(it.row()), static_cast<int>(it.col()), it.value());
+    }
+  };
+  /// Factorizes the matrix of `entries_` (size x size): dense when small, else sparse; false when singular.
+  bool factorize(int size);
+  Eigen::VectorXd solve(const Eigen::VectorXd& rhs);
+
+  Eigen::VectorXd f_;  // applied forces at the iterate
+  Entries entries_;
+  Eigen::SparseMatrix<double> sparse_;
+  Eigen::PartialPivLU<Eigen::MatrixXd> dense_lu_;
+  Eigen::SparseLU<Eigen::SparseMatrix<double>> sparse_lu_;
+  bool dense_mode_ = true;
   Eigen::VectorXd residual_, correction_, acc_, lambda_, x_, v_;
-  Eigen::PartialPivLU<Eigen::MatrixXd> lu_;
   bool have_lu_ = false;
   double lu_h_ = 0.0;
   /// The pairs whose gap at s is within 2 * motion (indices into NaturalModel::contacts), with the impact speed
@@ -201,6 +258,10 @@ private:
 
   std::vector<double> step_speeds_;  // per pair: the impact speed this step uses
   std::vector<int> near_;
+  BroadPhase broad_phase_;
+  int first_ground_ = 0;  // contacts before it are strut pairs
+  std::vector<int> candidates_;
+  Eigen::VectorXd broad_q_;
   double near_motion_ = 0.0;
   std::vector<Vec3> points_;
   double error_ = 0.0;
