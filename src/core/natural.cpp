@@ -707,6 +707,7 @@ NaturalSolver::NaturalSolver(const NaturalModel& nm, const SolverOptions& option
   gamma_ = options.newmark_gamma;
   step_speeds_.assign(nm.contacts.size(), model_.contact.min_impact_speed);
   h_next_ = options.dt;
+  mass_scale_ = nm.mass.coeffs().size() > 0 ? nm.mass.coeffs().cwiseAbs().maxCoeff() : 1.0;
 }
 
 void NaturalSolver::forces(const Eigen::VectorXd& x, const Eigen::VectorXd& v, bool tangents)
@@ -866,6 +867,7 @@ namespace active_tensegrity::core
 namespace
 {
 constexpr double kNearFloor = 1e-4;   // m: the least motion the near pairs allow for
+constexpr double kRateFloor = 0.05;   // the least contraction rate assumed of modified Newton
 constexpr int kDenseMost = 160;       // Newton matrices up to this size are factorized dense, larger ones sparse
 constexpr int kDirectPairsMost = 64;  // up to this many strut pairs are checked without the broad phase
 constexpr double kSafety = 0.9, kMaxGrowth = 2.0, kMinShrink = 0.1, kKeepBand = 1.2;
@@ -1006,8 +1008,17 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
   residual_.resize(n + m);
   const Eigen::VectorXd x_pred = s.x + h * s.v + h * h * (0.5 - beta_) * s.a;
   const Eigen::VectorXd v_pred = s.v + h * (1.0 - gamma_) * s.a;
-  bool rebuild = !have_lu_ || std::abs(h - lu_h_) > 0.25 * lu_h_;
-  double last_norm = std::numeric_limits<double>::infinity();
+  // modified Newton keeps the factorization while it serves: a new one for a new step size (beyond 25 %), an old one
+  // (max_jacobian_age steps), or a change of the pairs touching at the start (a kept matrix with a contact stiffness
+  // that is gone makes small increments of a wrong iterate)
+  touching_.clear();
+  for (size_t k = 0; k < s.contact_speed.size(); ++k)
+    if (s.contact_speed[k] > 0.0)
+      touching_.push_back(static_cast<int>(k));
+  bool rebuild = !have_lu_ || std::abs(h - lu_h_) > 0.25 * lu_h_ || factor_age_ >= options_.max_jacobian_age ||
+                 touching_ != factor_contacts_;
+  bool built_this_step = false;
+  double previous = 0.0;  // the last increment over the tolerance
   for (int it = 0; it < options_.max_iterations; ++it)
   {
     x_ = x_pred + bh2 * acc_;
@@ -1076,6 +1087,12 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
       have_lu_ = true;
       lu_h_ = h;
       rebuild = false;
+      built_this_step = true;
+      factor_age_ = 0;
+      factor_contacts_ = touching_;
+      theta_ = 0.0;
+      theta_known_ = false;
+      previous = 0.0;
       ++stats_.factorizations;
     }
     correction_ = solve(-residual_);
@@ -1092,7 +1109,26 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
     lambda_ += correction_.tail(m);
     const double norm = bh2 * correction_.head(n).lpNorm<Eigen::Infinity>();
     out.residual = norm;
-    if (norm <= options_.newton_tolerance)
+    // A Newton step's increment (a matrix built in this step) is its error; with an older matrix the error left
+    // is about theta / (1 - theta) times the increment, theta the largest contraction rate seen with that matrix
+    // (floored), and the iteration must contract (theta <= 0.5).
+    // (the multipliers to the tolerance relative to their size, above the round-off of phi / (beta h^2))
+    const double lambda_floor =
+        10.0 * std::numeric_limits<double>::epsilon() * (1.0 + s.x.lpNorm<Eigen::Infinity>()) * mass_scale_ / bh2;
+    const double lambda_part =
+        m > 0 ? correction_.tail(m).lpNorm<Eigen::Infinity>() /
+                    (options_.newton_tolerance * (1.0 + lambda_.lpNorm<Eigen::Infinity>()) + lambda_floor) :
+                0.0;
+    const double scaled = std::max(norm / options_.newton_tolerance, lambda_part);
+    if (!build && previous > 0.0 && scaled > 1e-3)
+    {
+      theta_ = std::max(theta_, scaled / previous);
+      theta_known_ = true;
+    }
+    previous = scaled;
+    const double rate = std::max(theta_, kRateFloor);
+    const double left = built_this_step ? scaled : (theta_known_ ? rate / (1.0 - rate) : 1.0) * scaled;
+    if (left <= 1.0 && !(theta_ > 0.5))
     {
       x_ = x_pred + bh2 * acc_;
       // a node went further than the near pairs allow for: again with the pairs it can reach
@@ -1127,12 +1163,12 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
       s.t = t1;
       s.contact_speed = std::move(speeds);
       ++stats_.steps;
+      ++factor_age_;
       return out;
     }
-    // slow convergence on an old matrix: a new one
-    if (norm > 0.5 * last_norm)
+    // an old matrix that does not contract: a new one
+    if (theta_ > 0.5)
       rebuild = true;
-    last_norm = norm;
   }
   out.status = SolveStatus::kMaxIterations;
   out.message = "natural coordinates: Newton did not converge";

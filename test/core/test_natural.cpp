@@ -234,7 +234,7 @@ TEST(Natural, SpinningStrutKeepsItsAngularMomentum)
 {
   // a free strut tumbling and spinning with no force: its angular momentum J_t w_perp + J_a w_s e is constant (the
   // gyroscopic couple turns the transverse rotation as the axis moves), its spin rate too, and the trapezoidal rule
-  // keeps the energy
+  // keeps the energy (both to about 1e-9 here; without the gyroscopic couple the momentum is off by 2.5 N m s)
   Model model = freeStrutModel("S", 1.2, 0.05, 2700.0, Vec3(1.0, 0.3, 0.2).normalized());
   model.contact.enabled = true;  // (friction: the struts get spin rates)
   model.contact.friction = 0.3;
@@ -258,6 +258,7 @@ TEST(Natural, SpinningStrutKeepsItsAngularMomentum)
   const Vec3 h0 = momentum(s);
   const double e0 = energy(s);
   SolverOptions o = trapezoidalOptions(1e-4, 1e-12);
+  o.reuse_jacobian = false;  // (Newton's own errors out of the measure: the formulation and the scheme alone)
   NaturalSolver solver(nm, o);
   const ActuationLaw law = [](double) { return ActuationValues{}; };
   ASSERT_TRUE(solver.initialize(s, law).ok());
@@ -265,8 +266,8 @@ TEST(Natural, SpinningStrutKeepsItsAngularMomentum)
   const Vec3 u1 = s.x.segment<3>(nm.nodes[st.b].column) - s.x.segment<3>(nm.nodes[st.a].column);
   EXPECT_GT((u1.normalized() - u0.normalized()).norm(), 0.5) << "the axis turned";
   EXPECT_NEAR(s.v(st.spin), 40.0, 1e-9);
-  EXPECT_LT((momentum(s) - h0).norm(), 1e-6 * h0.norm());
-  EXPECT_NEAR(energy(s), e0, 1e-6 * e0);
+  EXPECT_LT((momentum(s) - h0).norm(), 1e-7 * h0.norm());
+  EXPECT_NEAR(energy(s), e0, 1e-7 * e0);
 }
 
 TEST(Natural, RefusesWhatItDoesNotCover)

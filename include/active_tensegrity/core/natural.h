@@ -248,6 +248,11 @@ private:
   Eigen::SparseLU<Eigen::SparseMatrix<double>> sparse_lu_;
   bool dense_mode_ = true;
   Eigen::VectorXd residual_, correction_, acc_, lambda_, x_, v_;
+  std::vector<int> touching_, factor_contacts_;  // contacts touching at the step's start, and when factorized
+  int factor_age_ = 0;                           // steps since the factorization
+  double mass_scale_ = 1.0;                      // the mass matrix's largest entry
+  double theta_ = 0.0;                           // the largest contraction rate seen with the factorization
+  bool theta_known_ = false;
   bool have_lu_ = false;
   double lu_h_ = 0.0;
   /// The pairs whose gap at s is within 2 * motion (indices into NaturalModel::contacts), with the impact speed
