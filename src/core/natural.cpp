@@ -309,41 +309,32 @@ void groundKernel(const Model& model, const GroundConstants& gc, const V3<T> r[4
   F(12) = e.dot(m);
 }
 
-PairConstants pairConstants(const NaturalModel& nm, int slot)
+PairConstants pairConstants(const NaturalModel& nm, const NaturalContactSlot& cs)
 {
-  const Model& model = *nm.model;
-  const StrutPair p = model.strutPair(slot);
   PairConstants pc;
-  const int bodies[2] = { p.body_a, p.body_b };
   for (int k = 0; k < 2; ++k)
   {
-    const Body& b = model.bodies[bodies[k]];
-    pc.radius[k] = b.radius();
-    pc.inv_length[k] = 1.0 / b.length;
-    pc.inv_length2[k] = 1.0 / (b.length * b.length);
-    pc.scale += 0.5 * b.length;
+    pc.radius[k] = cs.radius[k];
+    pc.inv_length[k] = cs.inv_length[k];
+    pc.inv_length2[k] = cs.inv_length[k] * cs.inv_length[k];
+    pc.scale += 0.5 / cs.inv_length[k];
   }
-  pc.stiffness90 = p.stiffness90;
-  pc.core_stiffness90 = p.core_stiffness90;
-  pc.core_gap = p.core_gap;
-  pc.floor_sin = std::sin(model.contact.min_crossing_angle);
+  pc.stiffness90 = cs.stiffness90;
+  pc.core_stiffness90 = cs.core_stiffness90;
+  pc.core_gap = cs.core_gap;
+  pc.floor_sin = nm.floor_sin;
   return pc;
 }
 
-GroundConstants groundConstants(const NaturalModel& nm, const NaturalContactSlot& cs)
+GroundConstants groundConstants(const NaturalContactSlot& cs)
 {
-  const GroundContact& g = nm.model->groundContactOf(cs.slot);
   GroundConstants gc;
-  gc.radius = g.radius;
-  gc.stiffness = g.stiffness;
+  gc.radius = cs.radius[0];
+  gc.stiffness = cs.stiffness90;
   gc.strut = cs.struts[0] >= 0;
   gc.sphere_end = cs.sphere_end;
-  if (gc.strut)
-  {
-    const double l = nm.struts[cs.struts[0]].length;
-    gc.inv_length = 1.0 / l;
-    gc.inv_length2 = 1.0 / (l * l);
-  }
+  gc.inv_length = cs.inv_length[0];
+  gc.inv_length2 = cs.inv_length[0] * cs.inv_length[0];
   return gc;
 }
 }  // namespace
@@ -433,6 +424,7 @@ NaturalModel buildNaturalModel(const Model& model, bool spin)
   for (size_t k = 0; k < model.cables.size(); ++k)
     for (const PointRef& p : model.cables[k].points)
       nm.cable_nodes[k].push_back(pointNode(nm, model, p, tol, "cable " + model.cables[k].name));
+  nm.floor_sin = std::sin(model.contact.min_crossing_angle);
   // the contacts: the checked strut pairs, then the ground's spheres (each at a node)
   std::vector<int> pairs;
   if (model.contact.enabled)
@@ -450,6 +442,16 @@ NaturalModel buildNaturalModel(const Model& model, bool spin)
     cs.nodes[3] = b.b;
     cs.struts[0] = nm.strut_of_body[body_a];
     cs.struts[1] = nm.strut_of_body[body_b];
+    const StrutPair p = model.strutPair(slot);
+    for (int k = 0; k < 2; ++k)
+    {
+      const NaturalStrut& st = k == 0 ? a : b;
+      cs.radius[k] = st.radius;
+      cs.inv_length[k] = 1.0 / st.length;
+    }
+    cs.stiffness90 = p.stiffness90;
+    cs.core_stiffness90 = p.core_stiffness90;
+    cs.core_gap = p.core_gap;
     nm.contacts.push_back(cs);
   }
   for (size_t i = 0; i < model.ground_contacts.size(); ++i)
@@ -469,6 +471,10 @@ NaturalModel buildNaturalModel(const Model& model, bool spin)
     }
     else
       cs.nodes[0] = node;
+    cs.radius[0] = g.radius;
+    cs.stiffness90 = g.stiffness;
+    if (strut >= 0)
+      cs.inv_length[0] = 1.0 / nm.struts[strut].length;
     nm.contacts.push_back(cs);
   }
   for (NaturalNode& n : nm.nodes)
@@ -620,14 +626,14 @@ ContactPairState naturalContact(const NaturalModel& nm, int k, const NaturalCont
   {
     st.body_a = model.groundContactOf(cs.slot).body;
     st.body_b = -1;
-    gc = groundConstants(nm, cs);
+    gc = groundConstants(cs);
   }
   else
   {
     const auto [body_a, body_b] = model.pairBodies(cs.slot);
     st.body_a = body_a;
     st.body_b = body_b;
-    pc = pairConstants(nm, cs.slot);
+    pc = pairConstants(nm, cs);
   }
   const auto kernel = [&](auto r, auto v, auto spin, bool with_force, auto& f)
   {
@@ -1003,8 +1009,26 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
       reach = std::max(reach, std::abs(u_[nd.actuator].rate) * h + std::abs(u_[nd.actuator].accel) * h * h);
   findNear(s, std::max(2.0 * reach, kNearFloor));
   const double bh2 = beta_ * h * h, gh = gamma_ * h;
+  // Newton's first guess: through the last three step ends quadratic, through two linear (from the state the last
+  // step ended in), else the start's
   acc_ = s.a;
   lambda_ = s.lambda;
+  const int known = s.t == last_end_t_ ? history_count_ : 0;
+  if (known == 1)
+  {
+    const double r = h / (s.t - history_[0].t);
+    acc_ += r * (s.a - history_[0].a);
+    lambda_ += r * (s.lambda - history_[0].lambda);
+  }
+  else if (known == 2)
+  {
+    const double t = s.t + h, t2 = s.t, t1 = history_[0].t, t0 = history_[1].t;
+    const double w2 = (t - t0) * (t - t1) / ((t2 - t0) * (t2 - t1));
+    const double w1 = (t - t0) * (t - t2) / ((t1 - t0) * (t1 - t2));
+    const double w0 = (t - t1) * (t - t2) / ((t0 - t1) * (t0 - t2));
+    acc_ = w2 * s.a + w1 * history_[0].a + w0 * history_[1].a;
+    lambda_ = w2 * s.lambda + w1 * history_[0].lambda + w0 * history_[1].lambda;
+  }
   residual_.resize(n + m);
   const Eigen::VectorXd x_pred = s.x + h * s.v + h * h * (0.5 - beta_) * s.a;
   const Eigen::VectorXd v_pred = s.v + h * (1.0 - gamma_) * s.a;
@@ -1156,6 +1180,14 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
           continue;
         onset_depth_ = -st.gap;
       }
+      // the history of Newton's first guess
+      if (s.t == last_end_t_ && history_count_ > 0)
+        std::swap(history_[0], history_[1]);
+      history_count_ = s.t == last_end_t_ ? std::min(history_count_ + 1, 2) : 1;
+      history_[0].t = s.t;
+      history_[0].a = s.a;
+      history_[0].lambda = s.lambda;
+      last_end_t_ = t1;
       s.x = x_;
       s.v = v_;
       s.a = acc_;

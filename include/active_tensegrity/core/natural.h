@@ -81,6 +81,11 @@ struct NaturalContactSlot
   int nodes[4] = { -1, -1, -1, -1 };
   int struts[2] = { -1, -1 };  // the struts whose spins it turns
   int sphere_end = 0;          // ground: the sphere at nodes[0] (0) or nodes[1] (1)
+  // its constants: each strut's (or the sphere's) radius and 1 / length; the pair's stiffnesses at a right angle
+  // and the sleeves' thickness (contact.h), or the sphere's stiffness
+  double radius[2] = { 0.0, 0.0 };
+  double inv_length[2] = { 0.0, 0.0 };
+  double stiffness90 = 0.0, core_stiffness90 = 0.0, core_gap = 0.0;
 };
 
 struct NaturalModel
@@ -97,6 +102,7 @@ struct NaturalModel
   Eigen::SparseMatrix<double> mass;           // constant, coordinates x coordinates
   Eigen::VectorXd gravity;                    // the weight's generalized force
   std::vector<NaturalContactSlot> contacts;
+  double floor_sin = 0.0;  // sin(contact.min_crossing_angle)
 };
 
 /// The natural-coordinate description of `model` (positions at model.q0). Throws std::invalid_argument naming what
@@ -248,6 +254,14 @@ private:
   Eigen::SparseLU<Eigen::SparseMatrix<double>> sparse_lu_;
   bool dense_mode_ = true;
   Eigen::VectorXd residual_, correction_, acc_, lambda_, x_, v_;
+  struct History
+  {
+    double t = 0.0;
+    Eigen::VectorXd a, lambda;
+  };
+  History history_[2];  // the starts of the last two accepted steps, newest first (Newton's first guess)
+  int history_count_ = 0;
+  double last_end_t_ = -1.0;
   std::vector<int> touching_, factor_contacts_;  // contacts touching at the step's start, and when factorized
   int factor_age_ = 0;                           // steps since the factorization
   double mass_scale_ = 1.0;                      // the mass matrix's largest entry
