@@ -872,10 +872,13 @@ namespace active_tensegrity::core
 {
 namespace
 {
-constexpr double kNearFloor = 1e-4;   // m: the least motion the near pairs allow for
-constexpr double kRateFloor = 0.05;   // the least contraction rate assumed of modified Newton
-constexpr int kDenseMost = 160;       // Newton matrices up to this size are factorized dense, larger ones sparse
-constexpr int kDirectPairsMost = 64;  // up to this many strut pairs are checked without the broad phase
+constexpr double kNearFloor = 1e-4;  // m: the least motion the near pairs allow for
+constexpr double kRateFloor = 0.05;  // the least contraction rate assumed of modified Newton
+constexpr int kDenseMost = 160;      // Newton matrices up to this size are factorized dense, larger ones sparse
+constexpr int kDirectPairsMost = 64;
+constexpr double kListMarginLeast = 2e-3;  // m: the least margin of the listed contacts
+constexpr double kListMarginSteps =
+    8.0;  // the margin in steps' motions  // up to this many strut pairs are checked without the broad phase
 constexpr double kSafety = 0.9, kMaxGrowth = 2.0, kMinShrink = 0.1, kKeepBand = 1.2;
 }  // namespace
 
@@ -915,24 +918,49 @@ void NaturalSolver::findNear(const NaturalState& s, double motion)
   if (nm_.contacts.empty())
     return;
   ActuationValues u = u_;  // (u_ holds the step's end; the start's driven nodes move by less than `motion`)
-  // the strut pairs whose boxes, grown by the motion, overlap (broad_phase.h), then the ground's spheres
-  // (a few pairs are cheaper to check directly than to box)
-  candidates_.clear();
-  if (first_ground_ > kDirectPairsMost)
+  // The contacts within a margin V, kept while no node has moved by D since they were listed with 2 D + 2 motion < V:
+  // a pair's gap falls by at most the largest motion of each strut's nodes, so a contact left out (gap > V then) is
+  // still more than 2 motion apart.
+  node_now_.resize(nm_.nodes.size());
+  double moved = 0.0;
+  for (size_t i = 0; i < nm_.nodes.size(); ++i)
   {
-    broad_q_ = naturalToBodyCoordinates(nm_, s.x, u);
-    broad_phase_.candidates(broad_q_, motion, candidates_);
+    node_now_[i] = naturalNodePosition(nm_, static_cast<int>(i), s.x, u);
+    if (listed_)
+      moved = std::max(moved, (node_now_[i] - listed_nodes_[i]).norm());
   }
-  for (int k = first_ground_ > kDirectPairsMost ? first_ground_ : 0; k < static_cast<int>(nm_.contacts.size()); ++k)
-    candidates_.push_back(nm_.contacts[k].slot);
-  for (const int slot : candidates_)
+  if (!listed_ || 2.0 * moved + 2.0 * motion >= list_margin_)
   {
-    // (the contacts are in ascending slot order)
-    const auto at = std::lower_bound(nm_.contacts.begin(), nm_.contacts.end(), slot,
-                                     [](const NaturalContactSlot& c, int x) { return c.slot < x; });
-    if (at == nm_.contacts.end() || at->slot != slot)
-      continue;
-    const int k = static_cast<int>(at - nm_.contacts.begin());
+    list_margin_ = std::max(kListMarginLeast, kListMarginSteps * motion);
+    // the strut pairs whose boxes, grown by half the margin, overlap (broad_phase.h), then the ground's spheres (a
+    // few pairs are cheaper to check directly than to box)
+    candidates_.clear();
+    if (first_ground_ > kDirectPairsMost)
+    {
+      broad_q_ = naturalToBodyCoordinates(nm_, s.x, u);
+      broad_phase_.candidates(broad_q_, 0.5 * list_margin_, candidates_);
+    }
+    for (int k = first_ground_ > kDirectPairsMost ? first_ground_ : 0; k < static_cast<int>(nm_.contacts.size()); ++k)
+      candidates_.push_back(nm_.contacts[k].slot);
+    listed_contacts_.clear();
+    for (const int slot : candidates_)
+    {
+      // (the contacts are in ascending slot order)
+      const auto at = std::lower_bound(nm_.contacts.begin(), nm_.contacts.end(), slot,
+                                       [](const NaturalContactSlot& c, int x) { return c.slot < x; });
+      if (at == nm_.contacts.end() || at->slot != slot)
+        continue;
+      const int k = static_cast<int>(at - nm_.contacts.begin());
+      const ContactPairState st =
+          naturalContact(nm_, k, naturalContactInput(nm_, k, s.x, s.v, u), 0.0, nullptr, nullptr, nullptr);
+      if (st.gap <= list_margin_)
+        listed_contacts_.push_back(k);
+    }
+    listed_nodes_ = node_now_;
+    listed_ = true;
+  }
+  for (const int k : listed_contacts_)
+  {
     const ContactPairState st =
         naturalContact(nm_, k, naturalContactInput(nm_, k, s.x, s.v, u), 0.0, nullptr, nullptr, nullptr);
     if (st.gap > 2.0 * motion)

@@ -280,6 +280,10 @@ private:
   BroadPhase broad_phase_;
   int first_ground_ = 0;  // contacts before it are strut pairs
   std::vector<int> candidates_;
+  std::vector<int> listed_contacts_;  // the contacts within list_margin_ when listed
+  std::vector<Vec3> listed_nodes_, node_now_;
+  double list_margin_ = 0.0;
+  bool listed_ = false;
   Eigen::VectorXd broad_q_;
   double near_motion_ = 0.0;
   std::vector<Vec3> points_;
