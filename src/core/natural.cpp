@@ -721,6 +721,14 @@ void NaturalSolver::forces(const Eigen::VectorXd& x, const Eigen::VectorXd& v, b
   const int n = nm_.coordinates;
   f_ = nm_.gravity;
   static_cast<void>(n);
+  // every node's position and velocity at this iterate, read below and by contactForces and the rows
+  pos_.resize(nm_.nodes.size());
+  vel_.resize(nm_.nodes.size());
+  for (size_t i = 0; i < nm_.nodes.size(); ++i)
+  {
+    pos_[i] = naturalNodePosition(nm_, static_cast<int>(i), x, u_);
+    vel_[i] = naturalNodeVelocity(nm_, static_cast<int>(i), v, u_);
+  }
   // a spinning strut's gyroscopic moment -J_a w_s e_dot on its transverse motion, as the couple
   // F_b = -F_a = (J_a / L^3) w_s u x u_dot at its nodes (no work)
   for (const NaturalStrut& st : nm_.struts)
@@ -728,8 +736,8 @@ void NaturalSolver::forces(const Eigen::VectorXd& x, const Eigen::VectorXd& v, b
     if (st.spin < 0 || v(st.spin) == 0.0)
       continue;
     const double c = model_.bodies[st.body].inertia.z() / (st.length * st.length * st.length), ws = v(st.spin);
-    const Vec3 u = naturalNodePosition(nm_, st.b, x, u_) - naturalNodePosition(nm_, st.a, x, u_);
-    const Vec3 ud = naturalNodeVelocity(nm_, st.b, v, u_) - naturalNodeVelocity(nm_, st.a, v, u_);
+    const Vec3 u = pos_[st.b] - pos_[st.a];
+    const Vec3 ud = vel_[st.b] - vel_[st.a];
     const Vec3 fb = c * ws * u.cross(ud);
     const int ca = nm_.nodes[st.a].column, cb = nm_.nodes[st.b].column;
     if (cb >= 0)
@@ -771,14 +779,14 @@ void NaturalSolver::forces(const Eigen::VectorXd& x, const Eigen::VectorXd& v, b
     double len[Cable::kMaxPoints];
     double l = 0.0, rate = 0.0;
     for (int i = 0; i < count; ++i)
-      p[i] = naturalNodePosition(nm_, nodes[i], x, u_);
+      p[i] = pos_[nodes[i]];
     for (int i = 0; i + 1 < count; ++i)
     {
       const Vec3 d = p[i + 1] - p[i];
       len[i] = d.norm();
       e[i] = d / len[i];
       l += len[i];
-      rate += e[i].dot(naturalNodeVelocity(nm_, nodes[i + 1], v, u_) - naturalNodeVelocity(nm_, nodes[i], v, u_));
+      rate += e[i].dot(vel_[nodes[i + 1]] - vel_[nodes[i]]);
     }
     const CableState cs = cableLaw(cable, l, rate, u_, model_.damping_enabled);
     if (cs.slack)
@@ -828,15 +836,27 @@ void NaturalSolver::forces(const Eigen::VectorXd& x, const Eigen::VectorXd& v, b
   }
 }
 
-void NaturalSolver::contactForces(const Eigen::VectorXd& x, const Eigen::VectorXd& v, bool tangents)
+void NaturalSolver::contactForces(const Eigen::VectorXd& /*x: forces() cached the nodes*/, const Eigen::VectorXd& v,
+                                  bool tangents)
 {
   for (const int k : near_)
   {
     const NaturalContactSlot& cs = nm_.contacts[k];
     Vec14 f;
     Mat14 kk, cc;
-    const ContactPairState st = naturalContact(nm_, k, naturalContactInput(nm_, k, x, v, u_), step_speeds_[k], &f,
-                                               tangents ? &kk : nullptr, tangents ? &cc : nullptr);
+    // (the nodes as forces() left them at this iterate)
+    NaturalContactInput in;
+    for (int i = 0; i < 4; ++i)
+      if (cs.nodes[i] >= 0)
+      {
+        in.r[i] = pos_[cs.nodes[i]];
+        in.v[i] = vel_[cs.nodes[i]];
+      }
+    for (int i = 0; i < 2; ++i)
+      if (cs.struts[i] >= 0 && nm_.struts[cs.struts[i]].spin >= 0)
+        in.spin[i] = v(nm_.struts[cs.struts[i]].spin);
+    const ContactPairState st =
+        naturalContact(nm_, k, in, step_speeds_[k], &f, tangents ? &kk : nullptr, tangents ? &cc : nullptr);
     if (!(st.normal_force > 0.0))
       continue;
     ++stats_.contact_evaluations;
@@ -958,16 +978,30 @@ void NaturalSolver::findNear(const NaturalState& s, double motion)
     }
     listed_nodes_ = node_now_;
     listed_ = true;
+    ++list_version_;
   }
+  // (the gaps and rates the last accepted step left at its end, which is this start, when the list is the same)
+  const bool cached = s.t == end_t_ && list_version_ == end_list_version_;
   for (const int k : listed_contacts_)
   {
-    const ContactPairState st =
-        naturalContact(nm_, k, naturalContactInput(nm_, k, s.x, s.v, u), 0.0, nullptr, nullptr, nullptr);
-    if (st.gap > 2.0 * motion)
+    double gap = 0.0, rate = 0.0;
+    if (cached)
+    {
+      gap = end_gap_[k];
+      rate = end_rate_[k];
+    }
+    else
+    {
+      const ContactPairState st =
+          naturalContact(nm_, k, naturalContactInput(nm_, k, s.x, s.v, u), 0.0, nullptr, nullptr, nullptr);
+      gap = st.gap;
+      rate = st.penetration_rate;
+    }
+    if (gap > 2.0 * motion)
       continue;
     near_.push_back(k);
     const double memory = s.contact_speed[k];
-    step_speeds_[k] = memory > 0.0 ? memory : std::max(st.penetration_rate, model_.contact.min_impact_speed);
+    step_speeds_[k] = memory > 0.0 ? memory : std::max(rate, model_.contact.min_impact_speed);
   }
 }
 
@@ -1101,7 +1135,7 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
     for (int k = 0; k < struts; ++k)
     {
       const NaturalStrut& st = nm_.struts[k];
-      const Vec3 d = naturalNodePosition(nm_, st.b, x_, u_) - naturalNodePosition(nm_, st.a, x_, u_);
+      const Vec3 d = pos_[st.b] - pos_[st.a];
       residual_(n + k) = (d.squaredNorm() - st.length * st.length) / bh2;
       const int ca = nm_.nodes[st.a].column, cb = nm_.nodes[st.b].column;
       const double l2 = 2.0 * lambda_(k);
@@ -1196,18 +1230,27 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
         error_ = std::max(error_, factor * (acc_.segment<3>(c) - s.a.segment<3>(c)).norm());
       v_ = v_pred + gh * acc_;
       onset_depth_ = 0.0;
-      std::vector<double> speeds(nm_.contacts.size(), 0.0);
-      for (const int k : near_)
+      // the listed contacts at the end (the next step's start reads them), a new contact's depth, and the contact
+      // memory: the contacts touching at the end keep (or take) this step's impact speed, the others forget it
+      end_gap_.resize(nm_.contacts.size());
+      end_rate_.resize(nm_.contacts.size());
+      for (const int k : listed_contacts_)
       {
         const ContactPairState st =
             naturalContact(nm_, k, naturalContactInput(nm_, k, x_, v_, u_), 0.0, nullptr, nullptr, nullptr);
-        if (st.gap >= 0.0)
-          continue;
-        speeds[k] = step_speeds_[k];
-        if (s.contact_speed[k] > 0.0 || -st.gap <= onset_depth_)
-          continue;
-        onset_depth_ = -st.gap;
+        end_gap_[k] = st.gap;
+        end_rate_[k] = st.penetration_rate;
       }
+      end_t_ = t1;
+      end_list_version_ = list_version_;
+      for (const int k : near_)
+        if (end_gap_[k] < 0.0 && !(s.contact_speed[k] > 0.0) && -end_gap_[k] > onset_depth_)
+          onset_depth_ = -end_gap_[k];
+      for (const int k : touching_)
+        s.contact_speed[k] = 0.0;
+      for (const int k : near_)
+        if (end_gap_[k] < 0.0)
+          s.contact_speed[k] = step_speeds_[k];
       // the history of Newton's first guess
       if (s.t == last_end_t_ && history_count_ > 0)
         std::swap(history_[0], history_[1]);
@@ -1221,7 +1264,6 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
       s.a = acc_;
       s.lambda = lambda_;
       s.t = t1;
-      s.contact_speed = std::move(speeds);
       ++stats_.steps;
       ++factor_age_;
       return out;

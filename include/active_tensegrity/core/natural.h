@@ -247,7 +247,8 @@ private:
   bool factorize(int size);
   Eigen::VectorXd solve(const Eigen::VectorXd& rhs);
 
-  Eigen::VectorXd f_;  // applied forces at the iterate
+  Eigen::VectorXd f_;            // applied forces at the iterate
+  std::vector<Vec3> pos_, vel_;  // every node's position and velocity at the iterate (forces())
   Entries entries_;
   Eigen::SparseMatrix<double> sparse_;
   Eigen::PartialPivLU<Eigen::MatrixXd> dense_lu_;
@@ -283,6 +284,10 @@ private:
   std::vector<int> listed_contacts_;  // the contacts within list_margin_ when listed
   std::vector<Vec3> listed_nodes_, node_now_;
   double list_margin_ = 0.0;
+  long list_version_ = 0;                   // listings so far
+  std::vector<double> end_gap_, end_rate_;  // per contact: at the last step's end (the listed ones)
+  double end_t_ = -1.0;
+  long end_list_version_ = -1;
   bool listed_ = false;
   Eigen::VectorXd broad_q_;
   double near_motion_ = 0.0;
