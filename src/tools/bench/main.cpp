@@ -59,11 +59,12 @@ const Section kSections[] = {
     "  --paths writes each run's path: the bodies' mass centre per output step (scheme,dt,t,x,y,z).\n" },
   { "natural",
     "       tensegrity_bench natural SCENE.yaml [--set key=value]... [--dts a,b,..] [--tols a,b,..] [--ref-dt R]\n"
-    "                        [--repeat N] [--csv FILE] [--no-spin]\n"
+    "                        [--repeat N] [--csv FILE] [--no-spin] [--fixed-only]\n"
     "  The dynamic analysis in body coordinates and in natural (nodal) coordinates, fixed steps (default\n"
     "  4e-4,2e-4,1e-4 s) and adaptive (tolerances 1e-4,1e-5,1e-6 m), against a fine reference of each at R\n"
     "  (default 2.5e-5 s): steps, Newton iterations, least wall time of N (default 3), errors, and the time\n"
-    "  ratio at equal error; --no-spin: the natural coordinates without the struts' spin rates.\n" },
+    "  ratio at equal error; --no-spin: the natural coordinates without the struts' spin rates;\n"
+    "  --fixed-only: no adaptive runs.\n" },
   { "stress", "       tensegrity_bench stress [--quick] [--case TEXT]... [--skip TEXT]...\n"
               "  The stability stress cases (docs/benchmarks.md): one row per case; --quick runs the short ones;\n"
               "  --case runs only the cases whose name contains one of the TEXTs, --skip leaves out those that do.\n" },

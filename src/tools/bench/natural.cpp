@@ -1,5 +1,5 @@
 //   tensegrity_bench natural SCENE [--set key=value]... [--dts a,b,..] [--tols a,b,..] [--ref-dt R] [--repeat N]
-//                            [--csv FILE]
+//                            [--csv FILE] [--no-spin] [--fixed-only]
 // The scene's dynamic analysis in body coordinates (the package's solver) and in natural coordinates
 // (core/natural.h), in one run: each over the fixed steps `dts` and, adaptive, over the error tolerances `tols`,
 // with the scene's integrator (Newmark family) and Newton settings. Each run is compared with a fine reference of
@@ -298,6 +298,8 @@ int natural(const std::string& scene, const std::vector<std::string>& args)
       csv_path = next();
     else if (a == "--no-spin")
       spin = false;
+    else if (a == "--fixed-only")
+      tols.clear();
     else
       throw std::invalid_argument("unknown argument '" + a + "'");
   }
