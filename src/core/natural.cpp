@@ -902,6 +902,20 @@ constexpr double kListMarginSteps =
 constexpr double kSafety = 0.9, kMaxGrowth = 2.0, kMinShrink = 0.1, kKeepBand = 1.2;
 }  // namespace
 
+std::vector<ContactPairState> NaturalSolver::contactsAt(const NaturalState& s) const
+{
+  std::vector<ContactPairState> out;
+  for (const int k : listed_contacts_)
+  {
+    Vec14 f;
+    const ContactPairState st =
+        naturalContact(nm_, k, naturalContactInput(nm_, k, s.x, s.v, u_), s.contact_speed[k], &f, nullptr, nullptr);
+    if (st.active)
+      out.push_back(st);
+  }
+  return out;
+}
+
 bool NaturalSolver::factorize(int size)
 {
   dense_mode_ = entries_.to_dense;

@@ -175,6 +175,10 @@ public:
   Summary advanceTo(NaturalState& s, double t_end, const ActuationLaw& law,
                     const std::function<void(const NaturalState&)>& on_step = {});
 
+  /// The touching contacts at s, the end of the last accepted step (those the solver keeps listed: all within its
+  /// margin), with their impact speeds.
+  std::vector<ContactPairState> contactsAt(const NaturalState& s) const;
+
   const NaturalStats& stats() const
   {
     return stats_;

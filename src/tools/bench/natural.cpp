@@ -187,12 +187,10 @@ Run runNatural(const at::Model& model, bool spin)
     return run;
   }
   ContactAccount account{ run };
-  at::ActuationValues u;
   const std::function<void(const at::NaturalState&)> each = [&](const at::NaturalState& st)
   {
     const Clock::time_point c0 = Clock::now();
-    at::scheduledActuation(model, st.t, u);
-    account.add(st.t, at::naturalContacts(nm, st, u));
+    account.add(st.t, solver.contactsAt(st));
     run.callbacks += seconds(c0, Clock::now());
   };
   for (size_t k = 0; k < stops.times.size(); ++k)
