@@ -685,21 +685,6 @@ ContactPairState naturalContact(const NaturalModel& nm, int k, const NaturalCont
   return st;
 }
 
-std::vector<ContactPairState> naturalContacts(const NaturalModel& nm, const NaturalState& s, const ActuationValues& u)
-{
-  std::vector<ContactPairState> out;
-  for (size_t k = 0; k < nm.contacts.size(); ++k)
-  {
-    Vec14 f;
-    const ContactPairState st =
-        naturalContact(nm, static_cast<int>(k), naturalContactInput(nm, static_cast<int>(k), s.x, s.v, u),
-                       s.contact_speed[k], &f, nullptr, nullptr);
-    if (st.active)
-      out.push_back(st);
-  }
-  return out;
-}
-
 // ---- the solver ----------------------------------------------------------------------------------------
 
 NaturalSolver::NaturalSolver(const NaturalModel& nm, const SolverOptions& options)
@@ -718,9 +703,7 @@ NaturalSolver::NaturalSolver(const NaturalModel& nm, const SolverOptions& option
 
 void NaturalSolver::forces(const Eigen::VectorXd& x, const Eigen::VectorXd& v, bool tangents)
 {
-  const int n = nm_.coordinates;
   f_ = nm_.gravity;
-  static_cast<void>(n);
   // every node's position and velocity at this iterate, read below and by contactForces and the rows
   pos_.resize(nm_.nodes.size());
   vel_.resize(nm_.nodes.size());

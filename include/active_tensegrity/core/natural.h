@@ -146,9 +146,6 @@ ContactPairState naturalContact(const NaturalModel& nm, int k, const NaturalCont
                                 Eigen::Matrix<double, 14, 1>* force, Eigen::Matrix<double, 14, 14>* stiffness,
                                 Eigen::Matrix<double, 14, 14>* damping);
 
-/// The touching pairs of s (forces with each pair's impact speed from its memory).
-std::vector<ContactPairState> naturalContacts(const NaturalModel& nm, const NaturalState& s, const ActuationValues& u);
-
 /// Counts of a NaturalSolver's work.
 struct NaturalStats
 {
@@ -159,8 +156,12 @@ struct NaturalStats
   long rejected_error = 0, rejected_onset = 0, rejected_solver = 0;
 };
 
-/// Index-3 Newmark in natural coordinates with modified Newton: the dense Newton matrix
-/// [M + beta h^2 K + gamma h C, G^T; G, 0] is factorized when a step cannot converge on the last one.
+/// Index-3 Newmark in natural coordinates with modified Newton, by the body solver's rules (dynamics.h): the Newton
+/// matrix [M + beta h^2 K + gamma h C, G^T; G, 0] (dense LU up to 160 unknowns, sparse LU above) is kept across
+/// steps and built anew for a new step size, after solver.max_jacobian_age steps, when the pairs touching at a step's
+/// start change, or when the iteration stops contracting; an iterate is accepted when the error its contraction rate
+/// implies is within the tolerance. Newton starts from the accelerations extrapolated through the last three steps.
+/// The contacts within a margin are listed through the broad phase and kept until the nodes have moved half of it.
 class NaturalSolver
 {
 public:
