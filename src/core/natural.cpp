@@ -36,7 +36,14 @@ int nodeAt(NaturalModel& nm, const Vec3& p, double tolerance)
 int pointNode(NaturalModel& nm, const Model& model, const PointRef& p, double tolerance, const std::string& what)
 {
   if (p.body < 0)
-    throw std::invalid_argument(what + ": a point of the ground is not a node of the natural coordinates");
+  {
+    // a point of the ground: a fixed node of its own (never merged with a body's node that starts there)
+    NaturalNode n;
+    n.kind = NaturalNode::Kind::kFixed;
+    n.position0 = p.local;
+    nm.nodes.push_back(n);
+    return static_cast<int>(nm.nodes.size()) - 1;
+  }
   const Body& b = model.bodies[p.body];
   if (b.kind == BodyKind::kStrut)
   {
@@ -543,6 +550,7 @@ NaturalState naturalInitialState(const NaturalModel& nm)
       s.x.segment<3>(n.column) = n.position0;
   s.v.setZero(nm.coordinates);
   s.a.setZero(nm.coordinates);
+  s.qdd.setZero(nm.coordinates);
   s.lambda.setZero(static_cast<int>(nm.struts.size() + nm.rows.size()));
   s.contact_speed.assign(nm.contacts.size(), 0.0);
   return s;
@@ -692,10 +700,20 @@ NaturalSolver::NaturalSolver(const NaturalModel& nm, const SolverOptions& option
 {
   while (first_ground_ < static_cast<int>(nm.contacts.size()) && !nm.contacts[first_ground_].ground)
     ++first_ground_;
-  if (options.integrator != Integrator::kNewmark)
-    throw std::invalid_argument("natural coordinates: only the Newmark family is covered");
-  beta_ = options.newmark_beta;
-  gamma_ = options.newmark_gamma;
+  if (options.integrator == Integrator::kGeneralizedAlpha)
+  {
+    // Chung and Hulbert's parameters from the spectral radius at infinite frequency (as the body solver's)
+    const double rho = options.rho_infinity;
+    alpha_m_ = (2.0 * rho - 1.0) / (rho + 1.0);
+    alpha_f_ = rho / (rho + 1.0);
+    gamma_ = 0.5 + alpha_f_ - alpha_m_;
+    beta_ = 0.25 * (gamma_ + 0.5) * (gamma_ + 0.5);
+  }
+  else
+  {
+    beta_ = options.newmark_beta;
+    gamma_ = options.newmark_gamma;
+  }
   step_speeds_.assign(nm.contacts.size(), model_.contact.min_impact_speed);
   h_next_ = options.dt;
   mass_scale_ = nm.mass.coeffs().size() > 0 ? nm.mass.coeffs().cwiseAbs().maxCoeff() : 1.0;
@@ -1049,6 +1067,7 @@ Summary NaturalSolver::initialize(NaturalState& s, const ActuationLaw& law)
     return out;
   }
   s.a = z.head(n);
+  s.qdd = s.a;
   s.lambda = z.tail(m);
   return out;
 }
@@ -1067,16 +1086,21 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
     if (nd.kind == NaturalNode::Kind::kDriven)
       reach = std::max(reach, std::abs(u_[nd.actuator].rate) * h + std::abs(u_[nd.actuator].accel) * h * h);
   findNear(s, std::max(2.0 * reach, kNearFloor));
-  const double bh2 = beta_ * h * h, gh = gamma_ * h;
+  // The unknowns are the accelerations qdd at the step's end; the algorithmic accelerations are
+  // a = c1 qdd + c0 (generalized-alpha: (1 - alpha_m) a + alpha_m a_n = (1 - alpha_f) qdd + alpha_f qdd_n; Newmark:
+  // a = qdd), and x = x_n + h v_n + h^2 ((1/2 - beta) a_n + beta a), v = v_n + h ((1 - gamma) a_n + gamma a).
+  const double c1 = (1.0 - alpha_f_) / (1.0 - alpha_m_);
+  const Eigen::VectorXd c0 = (alpha_f_ * s.qdd - alpha_m_ * s.a) / (1.0 - alpha_m_);
+  const double bh2 = beta_ * h * h * c1, gh = gamma_ * h * c1;
   // Newton's first guess: through the last three step ends quadratic, through two linear (from the state the last
   // step ended in), else the start's
-  acc_ = s.a;
+  acc_ = s.qdd;
   lambda_ = s.lambda;
   const int known = s.t == last_end_t_ ? history_count_ : 0;
   if (known == 1)
   {
     const double r = h / (s.t - history_[0].t);
-    acc_ += r * (s.a - history_[0].a);
+    acc_ += r * (s.qdd - history_[0].a);
     lambda_ += r * (s.lambda - history_[0].lambda);
   }
   else if (known == 2)
@@ -1085,12 +1109,12 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
     const double w2 = (t - t0) * (t - t1) / ((t2 - t0) * (t2 - t1));
     const double w1 = (t - t0) * (t - t2) / ((t1 - t0) * (t1 - t2));
     const double w0 = (t - t1) * (t - t2) / ((t0 - t1) * (t0 - t2));
-    acc_ = w2 * s.a + w1 * history_[0].a + w0 * history_[1].a;
+    acc_ = w2 * s.qdd + w1 * history_[0].a + w0 * history_[1].a;
     lambda_ = w2 * s.lambda + w1 * history_[0].lambda + w0 * history_[1].lambda;
   }
   residual_.resize(n + m);
-  const Eigen::VectorXd x_pred = s.x + h * s.v + h * h * (0.5 - beta_) * s.a;
-  const Eigen::VectorXd v_pred = s.v + h * (1.0 - gamma_) * s.a;
+  const Eigen::VectorXd x_pred = s.x + h * s.v + h * h * ((0.5 - beta_) * s.a + beta_ * c0);
+  const Eigen::VectorXd v_pred = s.v + h * ((1.0 - gamma_) * s.a + gamma_ * c0);
   // modified Newton keeps the factorization while it serves: a new one for a new step size (beyond 25 %), an old one
   // (max_jacobian_age steps), or a change of the pairs touching at the start (a kept matrix with a contact stiffness
   // that is gone makes small increments of a wrong iterate)
@@ -1223,8 +1247,9 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
       // the local error and a new contact's depth
       error_ = 0.0;
       const double factor = h * h * (std::abs(beta_ - 1.0 / 6.0) + std::abs(gamma_ - 0.5));
+      const Eigen::VectorXd a_end = c1 * acc_ + c0;
       for (int c = 0; c < nm_.positions; c += 3)
-        error_ = std::max(error_, factor * (acc_.segment<3>(c) - s.a.segment<3>(c)).norm());
+        error_ = std::max(error_, factor * (a_end.segment<3>(c) - s.a.segment<3>(c)).norm());
       v_ = v_pred + gh * acc_;
       onset_depth_ = 0.0;
       // the listed contacts at the end (the next step's start reads them), a new contact's depth, and the contact
@@ -1253,12 +1278,13 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
         std::swap(history_[0], history_[1]);
       history_count_ = s.t == last_end_t_ ? std::min(history_count_ + 1, 2) : 1;
       history_[0].t = s.t;
-      history_[0].a = s.a;
+      history_[0].a = s.qdd;
       history_[0].lambda = s.lambda;
       last_end_t_ = t1;
       s.x = x_;
       s.v = v_;
-      s.a = acc_;
+      s.a = a_end;
+      s.qdd = acc_;
       s.lambda = lambda_;
       s.t = t1;
       ++stats_.steps;

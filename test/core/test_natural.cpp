@@ -209,24 +209,55 @@ std::vector<Vec3> centresNatural(const Model& model, double t_end, double* impul
 TEST(Natural, AgreesWithBodyCoordinatesThroughContact)
 {
   // the quadruplex pressed into contact (first touch at 0.29 s, touching again from 0.45 s): the two formulations
-  // integrate the same equations (no friction, so spin plays no part) with the same scheme. Each is 4e-5 to 1.3e-4 m
-  // off a run at a tenth of the step (tensegrity_bench natural); between them the difference must be far smaller.
-  for (const double dt : { 2e-4, 1e-4 })
-  {
-    const Model model = scene("quadruplex_linear_contact.yaml", { { "solver.integrator", "newmark" },
-                                                                  { "solver.dt", std::to_string(dt) },
-                                                                  { "solver.newton_tolerance", "1e-10" } });
-    double speed = 0.0;
-    const std::vector<Vec3> body = centresBody(model, 0.5), natural = centresNatural(model, 0.5, &speed);
-    EXPECT_GT(speed, 0.0) << "in contact at the end";
-    double most = 0.0, moved = 0.0;
-    for (size_t i = 0; i < body.size(); ++i)
+  // integrate the same equations (no friction, so spin plays no part) with the same scheme, Newmark or the scene's
+  // generalized-alpha. Each is 4e-5 to 1.3e-4 m off a run at a tenth of the step (tensegrity_bench natural); between
+  // them the difference must be far smaller.
+  for (const char* integrator : { "newmark", "generalized_alpha" })
+    for (const double dt : { 2e-4, 1e-4 })
     {
-      most = std::max(most, (body[i] - natural[i]).norm());
-      moved = std::max(moved, (body[i] - model.q0.segment<3>(model.bodies[i].offset)).norm());
+      const Model model = scene("quadruplex_linear_contact.yaml", { { "solver.integrator", integrator },
+                                                                    { "solver.dt", std::to_string(dt) },
+                                                                    { "solver.newton_tolerance", "1e-10" } });
+      double speed = 0.0;
+      const std::vector<Vec3> body = centresBody(model, 0.5), natural = centresNatural(model, 0.5, &speed);
+      EXPECT_GT(speed, 0.0) << "in contact at the end";
+      double most = 0.0, moved = 0.0;
+      for (size_t i = 0; i < body.size(); ++i)
+      {
+        most = std::max(most, (body[i] - natural[i]).norm());
+        moved = std::max(moved, (body[i] - model.q0.segment<3>(model.bodies[i].offset)).norm());
+      }
+      EXPECT_GT(moved, 0.1);
+      EXPECT_LT(most, 1e-5) << integrator << " dt " << dt;
     }
-    EXPECT_GT(moved, 0.1);
-    EXPECT_LT(most, 1e-5) << "dt " << dt;
+}
+
+TEST(Natural, GeneralizedAlphaConvergesAtSecondOrder)
+{
+  // the prism turned and released: generalized-alpha's position error against a run at a sixteenth of the step falls
+  // about four times per halving
+  const auto run = [](double dt)
+  {
+    const Model model = scene("prism_released.yaml", { { "solver.integrator", "generalized_alpha" },
+                                                       { "solver.dt", std::to_string(dt) },
+                                                       { "solver.newton_tolerance", "1e-12" } });
+    return centresNatural(model, 0.2);
+  };
+  const std::vector<Vec3> fine = run(2.5e-5 / 4.0);
+  double previous = 0.0;
+  for (const double dt : { 1e-4, 5e-5 })
+  {
+    const std::vector<Vec3> c = run(dt);
+    double most = 0.0;
+    for (size_t i = 0; i < c.size(); ++i)
+      most = std::max(most, (c[i] - fine[i]).norm());
+    EXPECT_GT(most, 0.0);
+    if (previous > 0.0)
+    {
+      EXPECT_GT(previous / most, 3.0) << "dt " << dt;
+      EXPECT_LT(previous / most, 5.5) << "dt " << dt;
+    }
+    previous = most;
   }
 }
 
@@ -272,10 +303,36 @@ TEST(Natural, SpinningStrutKeepsItsAngularMomentum)
 
 TEST(Natural, RefusesWhatItDoesNotCover)
 {
-  const Model tower = scene("tower.yaml", { { "analysis.type", "dynamic" } });
-  const NaturalModel nm = buildNaturalModel(tower);
-  SolverOptions ga = tower.solver;
-  ga.integrator = Integrator::kGeneralizedAlpha;
-  EXPECT_THROW(NaturalSolver(nm, ga), std::invalid_argument);
+  // a joint of two struts whose ends start apart, and a cable to a point along a strut: no node is both, and the
+  // refusal names the element
+  try
+  {
+    buildNaturalModel(active_tensegrity::test::mixedModel());
+    FAIL() << "the mixed model was accepted";
+  }
+  catch (const std::invalid_argument& e)
+  {
+    EXPECT_NE(std::string(e.what()).find("joint"), std::string::npos) << e.what();
+  }
+  Model cable = active_tensegrity::test::freeStrutModel("S", 1.0, 0.02, 2700.0, Vec3::UnitZ());
+  cable.cables.push_back(active_tensegrity::test::makeCable("mid", PointRef{ 0, Vec3(0.0, 0.0, 0.1) },
+                                                            PointRef{ -1, Vec3(1.0, 0.0, 0.0) }, 100.0, 0.5, 0.0));
+  try
+  {
+    buildNaturalModel(cable);
+    FAIL() << "a cable at the middle of a strut was accepted";
+  }
+  catch (const std::invalid_argument& e)
+  {
+    EXPECT_NE(std::string(e.what()).find("cable mid"), std::string::npos) << e.what();
+  }
+  // a cable to a point of the ground: a fixed node of its own
+  Model anchored = active_tensegrity::test::freeStrutModel("S", 1.0, 0.02, 2700.0, Vec3::UnitZ());
+  anchored.cables.push_back(active_tensegrity::test::makeCable("tie", PointRef{ 0, Vec3(0.0, 0.0, 0.5) },
+                                                               PointRef{ -1, Vec3(1.0, 0.0, 0.5) }, 100.0, 0.5, 0.0));
+  const NaturalModel nm = buildNaturalModel(anchored);
+  ASSERT_EQ(nm.cable_nodes[0].size(), 2u);
+  EXPECT_EQ(nm.nodes[nm.cable_nodes[0][1]].kind, NaturalNode::Kind::kFixed);
+  EXPECT_EQ(nm.coordinates, 6);
 }
 }  // namespace

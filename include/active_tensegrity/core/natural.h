@@ -17,8 +17,8 @@
 /// automatic differentiation of the same kernels (natural.cpp).
 ///
 /// This is a second formulation measured against the body coordinates (state.h, dynamics.h) by
-/// `tensegrity_bench natural`: dynamics without external loads, with the Newmark family at fixed or adaptive steps
-/// (no energy check).
+/// `tensegrity_bench natural`: dynamics without external loads, with Newmark or generalized-alpha at fixed or adaptive
+/// steps (no energy check).
 #pragma once
 
 #include <array>
@@ -106,14 +106,16 @@ struct NaturalModel
 };
 
 /// The natural-coordinate description of `model` (positions at model.q0). Throws std::invalid_argument naming what
-/// the formulation does not cover (ground contact, a cable or joint away from a strut end).
+/// the formulation does not cover (a cable or joint away from a strut end or a point mass, a joint of two bodies at
+/// different points).
 /// With `spin` false no strut has a spin rate (friction then cannot turn a strut about its axis).
 NaturalModel buildNaturalModel(const Model& model, bool spin = true);
 
 struct NaturalState
 {
   double t = 0.0;
-  Eigen::VectorXd x, v, a;            // free coordinates, velocities and (algorithmic) accelerations
+  Eigen::VectorXd x, v, a;            // free coordinates, velocities and algorithmic accelerations
+  Eigen::VectorXd qdd;                // accelerations (equal to a with Newmark)
   Eigen::VectorXd lambda;             // one multiplier per strut, then per NaturalModel::rows entry
   std::vector<double> contact_speed;  // per NaturalModel::contacts entry: impact speed while touching, else 0
 };
@@ -156,12 +158,13 @@ struct NaturalStats
   long rejected_error = 0, rejected_onset = 0, rejected_solver = 0;
 };
 
-/// Index-3 Newmark in natural coordinates with modified Newton, by the body solver's rules (dynamics.h): the Newton
-/// matrix [M + beta h^2 K + gamma h C, G^T; G, 0] (dense LU up to 160 unknowns, sparse LU above) is kept across
-/// steps and built anew for a new step size, after solver.max_jacobian_age steps, when the pairs touching at a step's
-/// start change, or when the iteration stops contracting; an iterate is accepted when the error its contraction rate
-/// implies is within the tolerance. Newton starts from the accelerations extrapolated through the last three steps.
-/// The contacts within a margin are listed through the broad phase and kept until the nodes have moved half of it.
+/// Index-3 Newmark or generalized-alpha in natural coordinates with modified Newton, by the body solver's rules
+/// (dynamics.h): the Newton matrix [M + beta h^2 K + gamma h C, G^T; G, 0] (dense LU up to 160 unknowns, sparse LU
+/// above) is kept across steps and built anew for a new step size, after solver.max_jacobian_age steps, when the pairs
+/// touching at a step's start change, or when the iteration stops contracting; an iterate is accepted when the error
+/// its contraction rate implies is within the tolerance. Newton starts from the accelerations extrapolated through the
+/// last three steps. The contacts within a margin are listed through the broad phase and kept until the nodes have
+/// moved half of it.
 class NaturalSolver
 {
 public:
@@ -199,6 +202,7 @@ private:
   const Model& model_;
   SolverOptions options_;
   double beta_, gamma_;
+  double alpha_m_ = 0.0, alpha_f_ = 0.0;  // generalized-alpha (0 with Newmark)
   ActuationValues u_;
   /// The Newton matrix's entries as triplets (duplicates summed): M + k_weight K + c_weight C and the rows.
   struct Entries

@@ -2,7 +2,7 @@
 //                            [--csv FILE] [--no-spin] [--fixed-only]
 // The scene's dynamic analysis in body coordinates (the package's solver) and in natural coordinates
 // (core/natural.h), in one run: each over the fixed steps `dts` and, adaptive, over the error tolerances `tols`,
-// with the scene's integrator (Newmark family) and Newton settings. Each run is compared with a fine reference of
+// with the scene's integrator and Newton settings. Each run is compared with a fine reference of
 // the body coordinates (generalized-alpha at R, tolerance 1e-10) on the output grid: the largest error of a strut
 // centre or point mass; the natural coordinates' own fine reference (trapezoidal at R) gives the two models'
 // difference. Wall time is the least of N repeats of the bare stepping loop (no outputs formed in it).
@@ -328,8 +328,9 @@ int natural(const std::string& scene, const std::vector<std::string>& args)
   };
   std::fprintf(stderr, "natural: references at dt %g s ...\n", ref_dt);
   const double gamma = base.solver.newmark_gamma, beta = base.solver.newmark_beta;
-  const Run ref = runBody(configured(false, ref_dt, at::Integrator::kNewmark, gamma, beta, 1e-10));
-  const Run nat_ref = runNatural(configured(false, ref_dt, at::Integrator::kNewmark, gamma, beta, 1e-10), spin);
+  const at::Integrator integrator = base.solver.integrator;
+  const Run ref = runBody(configured(false, ref_dt, integrator, gamma, beta, 1e-10));
+  const Run nat_ref = runNatural(configured(false, ref_dt, integrator, gamma, beta, 1e-10), spin);
   if (ref.status != "converged" || nat_ref.status != "converged")
   {
     std::cerr << "tensegrity_bench: a reference run failed: body " << ref.status << ", natural " << nat_ref.status
@@ -339,11 +340,12 @@ int natural(const std::string& scene, const std::vector<std::string>& args)
   const double model_difference = pathError(ref.path, nat_ref.path);
   const auto relative = [](double a, double b) { return b > 0.0 ? std::abs(a - b) / b : std::abs(a); };
   std::printf("# %s: %s, %s\n", scene.c_str(), cpuModel().c_str(), cpuVectorFlags().c_str());
-  std::printf("# references at dt %g s (the scene's Newmark, Newton tolerance 1e-10): contact impulse %.6g and %.6g N "
-              "s (difference %.2e), first touch at %.4f and %.4f s, largest "
-              "position difference %.3e m\n",
-              ref_dt, ref.impulse, nat_ref.impulse, relative(nat_ref.impulse, ref.impulse), ref.first_contact,
-              nat_ref.first_contact, model_difference);
+  std::printf(
+      "# references at dt %g s (the scene's integrator, Newton tolerance 1e-10): contact impulse %.6g and %.6g N "
+      "s (difference %.2e), first touch at %.4f and %.4f s, largest "
+      "position difference %.3e m\n",
+      ref_dt, ref.impulse, nat_ref.impulse, relative(nat_ref.impulse, ref.impulse), ref.first_contact,
+      nat_ref.first_contact, model_difference);
   const at::Vec3 ref_end = endCentre(base, ref.path), nat_end = endCentre(base, nat_ref.path);
   std::printf("# mass centre at the end: body (%.4f, %.4f, %.4f) m, natural%s (%.4f, %.4f, %.4f) m\n", ref_end.x(),
               ref_end.y(), ref_end.z(), spin ? "" : " without spin", nat_end.x(), nat_end.y(), nat_end.z());
