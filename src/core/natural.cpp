@@ -806,6 +806,18 @@ void NaturalSolver::forces(const Eigen::VectorXd& x, const Eigen::VectorXd& v, b
     if (!tangents)
       continue;
     const double damping = model_.damping_enabled ? cable.damping : 0.0;
+    // the damping's rate moves with the positions too: dl_dot/dr of each point, from de_i/dr = (I - e_i e_i^T) / l_i
+    Vec3 w[Cable::kMaxPoints];
+    for (int i = 0; i < count; ++i)
+      w[i].setZero();
+    if (damping > 0.0)
+      for (int i = 0; i + 1 < count; ++i)
+      {
+        const Vec3 dv = vel_[nodes[i + 1]] - vel_[nodes[i]];
+        const Vec3 turn = (dv - e[i].dot(dv) * e[i]) / len[i];
+        w[i + 1] += turn;
+        w[i] -= turn;
+      }
     for (int i = 0; i < count; ++i)
     {
       const int ci2 = nm_.nodes[nodes[i]].column;
@@ -818,6 +830,8 @@ void NaturalSolver::forces(const Eigen::VectorXd& x, const Eigen::VectorXd& v, b
           continue;
         const Mat3 gg = g[i] * g[j].transpose();
         entries_.block(ci2, cj, gg, cs.stiffness * entries_.k_weight + damping * entries_.c_weight);
+        if (damping > 0.0)
+          entries_.block(ci2, cj, g[i] * w[j].transpose(), damping * entries_.k_weight);
       }
     }
     for (int i = 0; i + 1 < count; ++i)
@@ -902,6 +916,24 @@ constexpr double kListMarginSteps =
     8.0;  // the margin in steps' motions  // up to this many strut pairs are checked without the broad phase
 constexpr double kSafety = 0.9, kMaxGrowth = 2.0, kMinShrink = 0.1, kKeepBand = 1.2;
 }  // namespace
+
+void NaturalSolver::appliedForces(const Eigen::VectorXd& x, const Eigen::VectorXd& v, const ActuationValues& u,
+                                  Eigen::VectorXd& force, Eigen::MatrixXd* stiffness, Eigen::MatrixXd* damping)
+{
+  u_ = u;
+  const int n = nm_.coordinates;
+  for (int pass = 0; pass < 2; ++pass)
+  {
+    Eigen::MatrixXd* out = pass == 0 ? stiffness : damping;
+    entries_.clear(n, true);
+    entries_.k_weight = pass == 0 ? 1.0 : 0.0;
+    entries_.c_weight = pass == 0 ? 0.0 : 1.0;
+    forces(x, v, out != nullptr);
+    if (out)
+      *out = entries_.dense;
+  }
+  force = f_;
+}
 
 std::vector<ContactPairState> NaturalSolver::contactsAt(const NaturalState& s) const
 {

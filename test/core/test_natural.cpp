@@ -143,6 +143,55 @@ TEST(Natural, GroundTangentsMatchCentralDifferences)
   EXPECT_GT(with_friction, 0);
 }
 
+TEST(Natural, ForceTangentsMatchCentralDifferences)
+{
+  // the six-bar's prestressed, damped springs (pulled in by their actuators) and its spinning struts' gyroscopic
+  // couples, away from its start
+  const Model model = scene("six_bar.yaml");
+  const NaturalModel nm = buildNaturalModel(model);
+  ASSERT_GE(nm.struts[0].spin, 0);
+  NaturalSolver solver(nm, model.solver);
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> uni(-1.0, 1.0);
+  NaturalState s = naturalInitialState(nm);
+  Eigen::VectorXd x = s.x, v(nm.coordinates);
+  for (int i = 0; i < nm.coordinates; ++i)
+  {
+    if (i < nm.positions)
+      x(i) += 0.01 * uni(rng);
+    v(i) = (i < nm.positions ? 0.5 : 20.0) * uni(rng);
+  }
+  ActuationValues u(model.actuators.size());
+  for (ActuationValue& a : u)
+  {
+    a.value = 0.05 * (1.0 + uni(rng));
+    a.rate = 0.2 * uni(rng);
+  }
+  Eigen::VectorXd f, fp, fm;
+  Eigen::MatrixXd k, c;
+  solver.appliedForces(x, v, u, f, &k, &c);
+  Eigen::MatrixXd k_fd(nm.coordinates, nm.coordinates), c_fd(nm.coordinates, nm.coordinates);
+  const double h = 1e-7;
+  for (int j = 0; j < nm.coordinates; ++j)
+  {
+    Eigen::VectorXd xp = x, xm = x, vp = v, vm = v;
+    xp(j) += h;
+    xm(j) -= h;
+    solver.appliedForces(xp, v, u, fp, nullptr, nullptr);
+    solver.appliedForces(xm, v, u, fm, nullptr, nullptr);
+    k_fd.col(j) = -(fp - fm) / (2.0 * h);
+    vp(j) += h;
+    vm(j) -= h;
+    solver.appliedForces(x, vp, u, fp, nullptr, nullptr);
+    solver.appliedForces(x, vm, u, fm, nullptr, nullptr);
+    c_fd.col(j) = -(fp - fm) / (2.0 * h);
+  }
+  EXPECT_GT(c.cwiseAbs().maxCoeff(), 0.0);
+  EXPECT_GT(c.rightCols(nm.coordinates - nm.positions).cwiseAbs().maxCoeff(), 0.0) << "gyroscopic: the spin columns";
+  EXPECT_LE((k - k_fd).cwiseAbs().maxCoeff(), 1e-5 * k.cwiseAbs().maxCoeff());
+  EXPECT_LE((c - c_fd).cwiseAbs().maxCoeff(), 1e-5 * c.cwiseAbs().maxCoeff());
+}
+
 TEST(Natural, MassMatrixGivesTheRigidStrutsKineticEnergy)
 {
   // a free strut: 1/2 v^T M v = 1/2 m |v_c|^2 + 1/2 J_t |w|^2 for every motion that keeps its length

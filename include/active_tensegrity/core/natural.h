@@ -179,6 +179,11 @@ public:
   Summary advanceTo(NaturalState& s, double t_end, const ActuationLaw& law,
                     const std::function<void(const NaturalState&)>& on_step = {});
 
+  /// The applied forces other than contact (weight, cables and springs, the spinning struts' gyroscopic couples) at
+  /// (x, v) under u into `force`, and their tangents K = -dF/dx and C = -dF/dv (dense) when asked.
+  void appliedForces(const Eigen::VectorXd& x, const Eigen::VectorXd& v, const ActuationValues& u,
+                     Eigen::VectorXd& force, Eigen::MatrixXd* stiffness, Eigen::MatrixXd* damping);
+
   /// The touching contacts at s, the end of the last accepted step (those the solver keeps listed: all within its
   /// margin), with their impact speeds.
   std::vector<ContactPairState> contactsAt(const NaturalState& s) const;
