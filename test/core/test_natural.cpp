@@ -101,7 +101,9 @@ TEST(Natural, ContactTangentsMatchCentralDifferences)
     {
       const NaturalContactInput in = crossing(rng, depth);
       ContactPairState st;
-      expectTangentsMatch(nm, 0, in, 0.3 + 0.1 * trial, &st);
+      // (an impact speed of 3 m/s or more keeps the Lankarani-Nikravesh factor 1 + D zeta_dot above 0.3 for any
+      // of these velocities: every sample pushes)
+      expectTangentsMatch(nm, 0, in, 3.0 + 0.5 * trial, &st);
       ASSERT_TRUE(st.active);
       ASSERT_GT(st.normal_force, 0.0);
       with_friction += st.friction_force > 0.0;
