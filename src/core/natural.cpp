@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <sstream>
 #include <stdexcept>
 
 #include <unsupported/Eigen/AutoDiff>
@@ -356,7 +355,6 @@ NaturalModel buildNaturalModel(const Model& model, bool spin)
   const double tol = 1e-9 * std::max(1.0, size);
   nm.strut_of_body.assign(model.bodies.size(), -1);
   nm.node_of_body.assign(model.bodies.size(), -1);
-  std::vector<double> node_mass;
   for (size_t i = 0; i < model.bodies.size(); ++i)
   {
     const Body& b = model.bodies[i];
