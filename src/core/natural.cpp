@@ -1120,7 +1120,8 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
   // a = c1 qdd + c0 (generalized-alpha: (1 - alpha_m) a + alpha_m a_n = (1 - alpha_f) qdd + alpha_f qdd_n; Newmark:
   // a = qdd), and x = x_n + h v_n + h^2 ((1/2 - beta) a_n + beta a), v = v_n + h ((1 - gamma) a_n + gamma a).
   const double c1 = (1.0 - alpha_f_) / (1.0 - alpha_m_);
-  const Eigen::VectorXd c0 = (alpha_f_ * s.qdd - alpha_m_ * s.a) / (1.0 - alpha_m_);
+  // (members, kept between steps: no allocation in the step loop once they have their size)
+  c0_ = (alpha_f_ * s.qdd - alpha_m_ * s.a) / (1.0 - alpha_m_);
   const double bh2 = beta_ * h * h * c1, gh = gamma_ * h * c1;
   // Newton's first guess: through the last three step ends quadratic, through two linear (from the state the last
   // step ended in), else the start's
@@ -1143,8 +1144,8 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
     lambda_ = w2 * s.lambda + w1 * history_[0].lambda + w0 * history_[1].lambda;
   }
   residual_.resize(n + m);
-  const Eigen::VectorXd x_pred = s.x + h * s.v + h * h * ((0.5 - beta_) * s.a + beta_ * c0);
-  const Eigen::VectorXd v_pred = s.v + h * ((1.0 - gamma_) * s.a + gamma_ * c0);
+  x_pred_ = s.x + h * s.v + h * h * ((0.5 - beta_) * s.a + beta_ * c0_);
+  v_pred_ = s.v + h * ((1.0 - gamma_) * s.a + gamma_ * c0_);
   // modified Newton keeps the factorization while it serves: a new one for a new step size (beyond 25 %), an old one
   // (max_jacobian_age steps), or a change of the pairs touching at the start (a kept matrix with a contact stiffness
   // that is gone makes small increments of a wrong iterate)
@@ -1158,8 +1159,8 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
   double previous = 0.0;  // the last increment over the tolerance
   for (int it = 0; it < options_.max_iterations; ++it)
   {
-    x_ = x_pred + bh2 * acc_;
-    v_ = v_pred + gh * acc_;
+    x_ = x_pred_ + bh2 * acc_;
+    v_ = v_pred_ + gh * acc_;
     const bool build = rebuild || it >= 3 || !options_.reuse_jacobian;
     if (build)
     {
@@ -1267,7 +1268,7 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
     const double left = built_this_step ? scaled : (theta_known_ ? rate / (1.0 - rate) : 1.0) * scaled;
     if (left <= 1.0 && !(theta_ > 0.5))
     {
-      x_ = x_pred + bh2 * acc_;
+      x_ = x_pred_ + bh2 * acc_;
       // a node went further than the near pairs allow for: again with the pairs it can reach
       if (largestMotion(s.x, x_) > near_motion_)
       {
@@ -1277,10 +1278,10 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
       // the local error and a new contact's depth
       error_ = 0.0;
       const double factor = h * h * (std::abs(beta_ - 1.0 / 6.0) + std::abs(gamma_ - 0.5));
-      const Eigen::VectorXd a_end = c1 * acc_ + c0;
+      a_end_ = c1 * acc_ + c0_;
       for (int c = 0; c < nm_.positions; c += 3)
-        error_ = std::max(error_, factor * (a_end.segment<3>(c) - s.a.segment<3>(c)).norm());
-      v_ = v_pred + gh * acc_;
+        error_ = std::max(error_, factor * (a_end_.segment<3>(c) - s.a.segment<3>(c)).norm());
+      v_ = v_pred_ + gh * acc_;
       onset_depth_ = 0.0;
       // the listed contacts at the end (the next step's start reads them), a new contact's depth, and the contact
       // memory: the contacts touching at the end keep (or take) this step's impact speed, the others forget it
@@ -1313,7 +1314,7 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
       last_end_t_ = t1;
       s.x = x_;
       s.v = v_;
-      s.a = a_end;
+      s.a = a_end_;
       s.qdd = acc_;
       s.lambda = lambda_;
       s.t = t1;
@@ -1386,8 +1387,8 @@ Summary NaturalSolver::advanceTo(NaturalState& s, double t_end, const ActuationL
       clipped = true;
     }
     const bool at_min = h <= options_.dt_min * (1.0 + 1e-9);
-    NaturalState trial = s;
-    const Summary r = tryStep(trial, h, law);
+    trial_ = s;  // (a member: assigned into its buffers, no allocation once they have their size)
+    const Summary r = tryStep(trial_, h, law);
     total.iterations += r.iterations;
     if (!r.ok())
     {
@@ -1408,7 +1409,7 @@ Summary NaturalSolver::advanceTo(NaturalState& s, double t_end, const ActuationL
       // aim at half the allowed depth from the pair's gap at the start
       double gap_start = 0.0;
       for (const int k : near_)
-        if (trial.contact_speed[k] > 0.0 && !(s.contact_speed[k] > 0.0))
+        if (trial_.contact_speed[k] > 0.0 && !(s.contact_speed[k] > 0.0))
         {
           ActuationValues u0;
           law(s.t, u0);
@@ -1427,7 +1428,7 @@ Summary NaturalSolver::advanceTo(NaturalState& s, double t_end, const ActuationL
       h_next_ = std::max(options_.dt_min, h * std::clamp(kSafety * std::cbrt(1.0 / err), kMinShrink, kSafety));
       continue;
     }
-    s = std::move(trial);
+    std::swap(s, trial_);
     if (on_step)
       on_step(s);
     double ratio = std::clamp(kSafety * std::cbrt(1.0 / std::max(err, 1e-12)), kMinShrink, kMaxGrowth);

@@ -269,6 +269,8 @@ private:
   Eigen::SparseLU<Eigen::SparseMatrix<double>> sparse_lu_;
   bool dense_mode_ = true;
   Eigen::VectorXd residual_, correction_, acc_, lambda_, x_, v_;
+  Eigen::VectorXd c0_, x_pred_, v_pred_, a_end_;  // a step's predictors and end accelerations (tryStep)
+  NaturalState trial_;                            // an adaptive step's trial (advanceTo)
   struct History
   {
     double t = 0.0;
