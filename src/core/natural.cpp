@@ -430,35 +430,7 @@ NaturalModel buildNaturalModel(const Model& model, bool spin)
     for (const PointRef& p : model.cables[k].points)
       nm.cable_nodes[k].push_back(pointNode(nm, model, p, tol, "cable " + model.cables[k].name));
   nm.floor_sin = std::sin(model.contact.min_crossing_angle);
-  // the contacts: the checked strut pairs, then the ground's spheres (each at a node)
-  std::vector<int> pairs;
-  if (model.contact.enabled)
-    model.checkedPairList(&pairs);
-  for (const int slot : pairs)
-  {
-    const auto [body_a, body_b] = model.pairBodies(slot);
-    const NaturalStrut& a = nm.struts[nm.strut_of_body[body_a]];
-    const NaturalStrut& b = nm.struts[nm.strut_of_body[body_b]];
-    NaturalContactSlot cs;
-    cs.slot = slot;
-    cs.nodes[0] = a.a;
-    cs.nodes[1] = a.b;
-    cs.nodes[2] = b.a;
-    cs.nodes[3] = b.b;
-    cs.struts[0] = nm.strut_of_body[body_a];
-    cs.struts[1] = nm.strut_of_body[body_b];
-    const StrutPair p = model.strutPair(slot);
-    for (int k = 0; k < 2; ++k)
-    {
-      const NaturalStrut& st = k == 0 ? a : b;
-      cs.radius[k] = st.radius;
-      cs.inv_length[k] = 1.0 / st.length;
-    }
-    cs.stiffness90 = p.stiffness90;
-    cs.core_stiffness90 = p.core_stiffness90;
-    cs.core_gap = p.core_gap;
-    nm.contacts.push_back(cs);
-  }
+  // the ground's spheres, each at a node (the strut pairs' contacts are made when asked: naturalContactSlot)
   for (size_t i = 0; i < model.ground_contacts.size(); ++i)
   {
     const GroundContact& g = model.ground_contacts[i];
@@ -480,7 +452,7 @@ NaturalModel buildNaturalModel(const Model& model, bool spin)
     cs.stiffness90 = g.stiffness;
     if (strut >= 0)
       cs.inv_length[0] = 1.0 / nm.struts[strut].length;
-    nm.contacts.push_back(cs);
+    nm.ground_contacts.push_back(cs);
   }
   for (NaturalNode& n : nm.nodes)
     if (n.kind == NaturalNode::Kind::kFree)
@@ -550,8 +522,42 @@ NaturalState naturalInitialState(const NaturalModel& nm)
   s.a.setZero(nm.coordinates);
   s.qdd.setZero(nm.coordinates);
   s.lambda.setZero(static_cast<int>(nm.struts.size() + nm.rows.size()));
-  s.contact_speed.assign(nm.contacts.size(), 0.0);
   return s;
+}
+
+double NaturalState::contactSpeed(int slot) const
+{
+  const auto at =
+      std::lower_bound(touching.begin(), touching.end(), slot, [](const NaturalTouch& c, int x) { return c.slot < x; });
+  return at != touching.end() && at->slot == slot ? at->speed : 0.0;
+}
+
+NaturalContactSlot naturalContactSlot(const NaturalModel& nm, int slot)
+{
+  const Model& model = *nm.model;
+  if (model.isGroundSlot(slot))
+    return nm.ground_contacts[static_cast<size_t>(slot - model.pairSlots())];
+  const auto [body_a, body_b] = model.pairBodies(slot);
+  const int sa = nm.strut_of_body[body_a], sb = nm.strut_of_body[body_b];
+  NaturalContactSlot cs;
+  cs.slot = slot;
+  cs.nodes[0] = nm.struts[sa].a;
+  cs.nodes[1] = nm.struts[sa].b;
+  cs.nodes[2] = nm.struts[sb].a;
+  cs.nodes[3] = nm.struts[sb].b;
+  cs.struts[0] = sa;
+  cs.struts[1] = sb;
+  for (int k = 0; k < 2; ++k)
+  {
+    const NaturalStrut& st = nm.struts[k == 0 ? sa : sb];
+    cs.radius[k] = st.radius;
+    cs.inv_length[k] = 1.0 / st.length;
+  }
+  const StrutPair p = model.strutPair(slot);
+  cs.stiffness90 = p.stiffness90;
+  cs.core_stiffness90 = p.core_stiffness90;
+  cs.core_gap = p.core_gap;
+  return cs;
 }
 
 Vec3 naturalNodePosition(const NaturalModel& nm, int i, const Eigen::VectorXd& x, const ActuationValues& u)
@@ -601,10 +607,9 @@ Eigen::VectorXd naturalToBodyCoordinates(const NaturalModel& nm, const Eigen::Ve
   return q;
 }
 
-NaturalContactInput naturalContactInput(const NaturalModel& nm, int k, const Eigen::VectorXd& x,
+NaturalContactInput naturalContactInput(const NaturalModel& nm, const NaturalContactSlot& cs, const Eigen::VectorXd& x,
                                         const Eigen::VectorXd& v, const ActuationValues& u)
 {
-  const NaturalContactSlot& cs = nm.contacts[k];
   NaturalContactInput in;
   for (int i = 0; i < 4; ++i)
   {
@@ -619,11 +624,10 @@ NaturalContactInput naturalContactInput(const NaturalModel& nm, int k, const Eig
   return in;
 }
 
-ContactPairState naturalContact(const NaturalModel& nm, int k, const NaturalContactInput& in, double impact_speed,
-                                Vec14* force, Mat14* stiffness, Mat14* damping)
+ContactPairState naturalContact(const NaturalModel& nm, const NaturalContactSlot& cs, const NaturalContactInput& in,
+                                double impact_speed, Vec14* force, Mat14* stiffness, Mat14* damping)
 {
   const Model& model = *nm.model;
-  const NaturalContactSlot& cs = nm.contacts[k];
   ContactPairState st;
   st.pair = cs.slot;
   PairConstants pc;
@@ -691,13 +695,29 @@ ContactPairState naturalContact(const NaturalModel& nm, int k, const NaturalCont
   return st;
 }
 
+namespace
+{
+constexpr double kNearFloor = 1e-4;        // m: the least motion the near pairs allow for
+constexpr double kRateFloor = 0.05;        // the least contraction rate assumed of modified Newton
+constexpr int kDenseMost = 160;            // Newton matrices up to this size are factorized dense, larger ones sparse
+constexpr int kDirectPairsMost = 64;       // up to this many strut pairs are checked without the broad phase
+constexpr double kListMarginLeast = 2e-3;  // m: the least margin of the listed contacts
+constexpr double kListMarginSteps = 8.0;   // the margin in steps' motions
+constexpr double kSafety = 0.9, kMaxGrowth = 2.0, kMinShrink = 0.1, kKeepBand = 1.2;
+}  // namespace
+
 // ---- the solver ----------------------------------------------------------------------------------------
 
 NaturalSolver::NaturalSolver(const NaturalModel& nm, const SolverOptions& options)
   : nm_(nm), model_(*nm.model), options_(options), broad_phase_(*nm.model)
 {
-  while (first_ground_ < static_cast<int>(nm.contacts.size()) && !nm.contacts[first_ground_].ground)
-    ++first_ground_;
+  // a few pairs are cheaper to check directly than to box
+  if (model_.contact.enabled)
+  {
+    use_broad_phase_ = model_.checkedPairCount() > kDirectPairsMost;
+    if (!use_broad_phase_)
+      model_.checkedPairList(&direct_pairs_);
+  }
   if (options.integrator == Integrator::kGeneralizedAlpha)
   {
     // Chung and Hulbert's parameters from the spectral radius at infinite frequency (as the body solver's)
@@ -712,7 +732,6 @@ NaturalSolver::NaturalSolver(const NaturalModel& nm, const SolverOptions& option
     beta_ = options.newmark_beta;
     gamma_ = options.newmark_gamma;
   }
-  step_speeds_.assign(nm.contacts.size(), model_.contact.min_impact_speed);
   h_next_ = options.dt;
   mass_scale_ = nm.mass.coeffs().size() > 0 ? nm.mass.coeffs().cwiseAbs().maxCoeff() : 1.0;
 }
@@ -854,7 +873,7 @@ void NaturalSolver::contactForces(const Eigen::VectorXd& /*x: forces() cached th
 {
   for (const int k : near_)
   {
-    const NaturalContactSlot& cs = nm_.contacts[k];
+    const NaturalContactSlot& cs = listed_[k].c;
     Vec14 f;
     Mat14 kk, cc;
     // (the nodes as forces() left them at this iterate)
@@ -869,7 +888,7 @@ void NaturalSolver::contactForces(const Eigen::VectorXd& /*x: forces() cached th
       if (cs.struts[i] >= 0 && nm_.struts[cs.struts[i]].spin >= 0)
         in.spin[i] = v(nm_.struts[cs.struts[i]].spin);
     const ContactPairState st =
-        naturalContact(nm_, k, in, step_speeds_[k], &f, tangents ? &kk : nullptr, tangents ? &cc : nullptr);
+        naturalContact(nm_, cs, in, listed_[k].step_speed, &f, tangents ? &kk : nullptr, tangents ? &cc : nullptr);
     if (!(st.normal_force > 0.0))
       continue;
     ++stats_.contact_evaluations;
@@ -899,21 +918,6 @@ void NaturalSolver::contactForces(const Eigen::VectorXd& /*x: forces() cached th
     }
   }
 }
-}  // namespace active_tensegrity::core
-
-namespace active_tensegrity::core
-{
-namespace
-{
-constexpr double kNearFloor = 1e-4;  // m: the least motion the near pairs allow for
-constexpr double kRateFloor = 0.05;  // the least contraction rate assumed of modified Newton
-constexpr int kDenseMost = 160;      // Newton matrices up to this size are factorized dense, larger ones sparse
-constexpr int kDirectPairsMost = 64;
-constexpr double kListMarginLeast = 2e-3;  // m: the least margin of the listed contacts
-constexpr double kListMarginSteps =
-    8.0;  // the margin in steps' motions  // up to this many strut pairs are checked without the broad phase
-constexpr double kSafety = 0.9, kMaxGrowth = 2.0, kMinShrink = 0.1, kKeepBand = 1.2;
-}  // namespace
 
 void NaturalSolver::appliedForces(const Eigen::VectorXd& x, const Eigen::VectorXd& v, const ActuationValues& u,
                                   Eigen::VectorXd& force, Eigen::MatrixXd* stiffness, Eigen::MatrixXd* damping)
@@ -936,11 +940,11 @@ void NaturalSolver::appliedForces(const Eigen::VectorXd& x, const Eigen::VectorX
 std::vector<ContactPairState> NaturalSolver::contactsAt(const NaturalState& s) const
 {
   std::vector<ContactPairState> out;
-  for (const int k : listed_contacts_)
+  for (const Listed& l : listed_)
   {
     Vec14 f;
-    const ContactPairState st =
-        naturalContact(nm_, k, naturalContactInput(nm_, k, s.x, s.v, u_), s.contact_speed[k], &f, nullptr, nullptr);
+    const ContactPairState st = naturalContact(nm_, l.c, naturalContactInput(nm_, l.c, s.x, s.v, u_),
+                                               s.contactSpeed(l.c.slot), &f, nullptr, nullptr);
     if (st.active)
       out.push_back(st);
   }
@@ -957,8 +961,27 @@ bool NaturalSolver::factorize(int size)
   }
   sparse_.resize(size, size);
   sparse_.setFromTriplets(entries_.triplets.begin(), entries_.triplets.end());
-  sparse_lu_.compute(sparse_);
-  return sparse_lu_.info() == Eigen::Success;
+  // the ordering and symbolic analysis serve while the pattern stays (the same taut cables and touching contacts)
+  const Eigen::Index nnz = sparse_.nonZeros();
+  const bool same = pattern_ready_ && static_cast<Eigen::Index>(pattern_outer_.size()) == sparse_.outerSize() + 1 &&
+                    static_cast<Eigen::Index>(pattern_inner_.size()) == nnz &&
+                    std::equal(pattern_outer_.begin(), pattern_outer_.end(), sparse_.outerIndexPtr()) &&
+                    std::equal(pattern_inner_.begin(), pattern_inner_.end(), sparse_.innerIndexPtr());
+  if (!same)
+  {
+    sparse_lu_.analyzePattern(sparse_);
+    pattern_outer_.assign(sparse_.outerIndexPtr(), sparse_.outerIndexPtr() + sparse_.outerSize() + 1);
+    pattern_inner_.assign(sparse_.innerIndexPtr(), sparse_.innerIndexPtr() + nnz);
+    pattern_ready_ = true;
+    ++stats_.analyses;
+  }
+  sparse_lu_.factorize(sparse_);
+  if (sparse_lu_.info() != Eigen::Success)
+  {
+    pattern_ready_ = false;
+    return false;
+  }
+  return true;
 }
 
 Eigen::VectorXd NaturalSolver::solve(const Eigen::VectorXd& rhs)
@@ -980,7 +1003,7 @@ void NaturalSolver::findNear(const NaturalState& s, double motion)
 {
   near_.clear();
   near_motion_ = motion;
-  if (nm_.contacts.empty())
+  if (!model_.contact.enabled && nm_.ground_contacts.empty())
     return;
   ActuationValues u = u_;  // (u_ holds the step's end; the start's driven nodes move by less than `motion`)
   // The contacts within a margin V, kept while no node has moved by D since they were listed with 2 D + 2 motion < V:
@@ -991,62 +1014,65 @@ void NaturalSolver::findNear(const NaturalState& s, double motion)
   for (size_t i = 0; i < nm_.nodes.size(); ++i)
   {
     node_now_[i] = naturalNodePosition(nm_, static_cast<int>(i), s.x, u);
-    if (listed_)
+    if (have_list_)
       moved = std::max(moved, (node_now_[i] - listed_nodes_[i]).norm());
   }
-  if (!listed_ || 2.0 * moved + 2.0 * motion >= list_margin_)
+  if (!have_list_ || 2.0 * moved + 2.0 * motion >= list_margin_)
   {
     list_margin_ = std::max(kListMarginLeast, kListMarginSteps * motion);
-    // the strut pairs whose boxes, grown by half the margin, overlap (broad_phase.h), then the ground's spheres (a
-    // few pairs are cheaper to check directly than to box)
+    // the strut pairs whose boxes, grown by half the margin, overlap (broad_phase.h), or the few checked pairs, then
+    // the ground's spheres
     candidates_.clear();
-    if (first_ground_ > kDirectPairsMost)
+    if (use_broad_phase_)
     {
       broad_q_ = naturalToBodyCoordinates(nm_, s.x, u);
       broad_phase_.candidates(broad_q_, 0.5 * list_margin_, candidates_);
+      std::sort(candidates_.begin(), candidates_.end());
     }
-    for (int k = first_ground_ > kDirectPairsMost ? first_ground_ : 0; k < static_cast<int>(nm_.contacts.size()); ++k)
-      candidates_.push_back(nm_.contacts[k].slot);
-    listed_contacts_.clear();
+    else
+      candidates_ = direct_pairs_;
+    for (size_t i = 0; i < nm_.ground_contacts.size(); ++i)
+      candidates_.push_back(model_.pairSlots() + static_cast<int>(i));
+    listed_.clear();
     for (const int slot : candidates_)
     {
-      // (the contacts are in ascending slot order)
-      const auto at = std::lower_bound(nm_.contacts.begin(), nm_.contacts.end(), slot,
-                                       [](const NaturalContactSlot& c, int x) { return c.slot < x; });
-      if (at == nm_.contacts.end() || at->slot != slot)
-        continue;
-      const int k = static_cast<int>(at - nm_.contacts.begin());
+      Listed l;
+      l.c = naturalContactSlot(nm_, slot);
       const ContactPairState st =
-          naturalContact(nm_, k, naturalContactInput(nm_, k, s.x, s.v, u), 0.0, nullptr, nullptr, nullptr);
-      if (st.gap <= list_margin_)
-        listed_contacts_.push_back(k);
+          naturalContact(nm_, l.c, naturalContactInput(nm_, l.c, s.x, s.v, u), 0.0, nullptr, nullptr, nullptr);
+      if (!(st.gap <= list_margin_))
+        continue;
+      l.end_gap = st.gap;
+      l.end_rate = st.penetration_rate;
+      listed_.push_back(l);
     }
     listed_nodes_ = node_now_;
-    listed_ = true;
+    have_list_ = true;
     ++list_version_;
+    end_list_version_ = list_version_;  // (the gaps and rates just formed are this start's)
+    end_t_ = s.t;
   }
   // (the gaps and rates the last accepted step left at its end, which is this start, when the list is the same)
   const bool cached = s.t == end_t_ && list_version_ == end_list_version_;
-  for (const int k : listed_contacts_)
+  // the contact memory: s.touching and listed_ both ascend by slot
+  auto memory = s.touching.begin();
+  for (size_t k = 0; k < listed_.size(); ++k)
   {
-    double gap = 0.0, rate = 0.0;
-    if (cached)
-    {
-      gap = end_gap_[k];
-      rate = end_rate_[k];
-    }
-    else
+    Listed& l = listed_[k];
+    if (!cached)
     {
       const ContactPairState st =
-          naturalContact(nm_, k, naturalContactInput(nm_, k, s.x, s.v, u), 0.0, nullptr, nullptr, nullptr);
-      gap = st.gap;
-      rate = st.penetration_rate;
+          naturalContact(nm_, l.c, naturalContactInput(nm_, l.c, s.x, s.v, u), 0.0, nullptr, nullptr, nullptr);
+      l.end_gap = st.gap;
+      l.end_rate = st.penetration_rate;
     }
-    if (gap > 2.0 * motion)
+    if (l.end_gap > 2.0 * motion)
       continue;
-    near_.push_back(k);
-    const double memory = s.contact_speed[k];
-    step_speeds_[k] = memory > 0.0 ? memory : std::max(rate, model_.contact.min_impact_speed);
+    near_.push_back(static_cast<int>(k));
+    while (memory != s.touching.end() && memory->slot < l.c.slot)
+      ++memory;
+    const double speed = memory != s.touching.end() && memory->slot == l.c.slot ? memory->speed : 0.0;
+    l.step_speed = speed > 0.0 ? speed : std::max(l.end_rate, model_.contact.min_impact_speed);
   }
 }
 
@@ -1150,9 +1176,8 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
   // (max_jacobian_age steps), or a change of the pairs touching at the start (a kept matrix with a contact stiffness
   // that is gone makes small increments of a wrong iterate)
   touching_.clear();
-  for (size_t k = 0; k < s.contact_speed.size(); ++k)
-    if (s.contact_speed[k] > 0.0)
-      touching_.push_back(static_cast<int>(k));
+  for (const NaturalTouch& c : s.touching)
+    touching_.push_back(c.slot);
   bool rebuild = !have_lu_ || std::abs(h - lu_h_) > 0.25 * lu_h_ || factor_age_ >= options_.max_jacobian_age ||
                  touching_ != factor_contacts_;
   bool built_this_step = false;
@@ -1285,25 +1310,26 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
       onset_depth_ = 0.0;
       // the listed contacts at the end (the next step's start reads them), a new contact's depth, and the contact
       // memory: the contacts touching at the end keep (or take) this step's impact speed, the others forget it
-      end_gap_.resize(nm_.contacts.size());
-      end_rate_.resize(nm_.contacts.size());
-      for (const int k : listed_contacts_)
+      for (Listed& l : listed_)
       {
         const ContactPairState st =
-            naturalContact(nm_, k, naturalContactInput(nm_, k, x_, v_, u_), 0.0, nullptr, nullptr, nullptr);
-        end_gap_[k] = st.gap;
-        end_rate_[k] = st.penetration_rate;
+            naturalContact(nm_, l.c, naturalContactInput(nm_, l.c, x_, v_, u_), 0.0, nullptr, nullptr, nullptr);
+        l.end_gap = st.gap;
+        l.end_rate = st.penetration_rate;
       }
       end_t_ = t1;
       end_list_version_ = list_version_;
+      // (near_ ascends by slot, as listed_ does)
+      s.touching.clear();
       for (const int k : near_)
-        if (end_gap_[k] < 0.0 && !(s.contact_speed[k] > 0.0) && -end_gap_[k] > onset_depth_)
-          onset_depth_ = -end_gap_[k];
-      for (const int k : touching_)
-        s.contact_speed[k] = 0.0;
-      for (const int k : near_)
-        if (end_gap_[k] < 0.0)
-          s.contact_speed[k] = step_speeds_[k];
+      {
+        const Listed& l = listed_[k];
+        if (!(l.end_gap < 0.0))
+          continue;
+        s.touching.push_back({ l.c.slot, l.step_speed });
+        if (-l.end_gap > onset_depth_ && !std::binary_search(touching_.begin(), touching_.end(), l.c.slot))
+          onset_depth_ = -l.end_gap;
+      }
       // the history of Newton's first guess
       if (s.t == last_end_t_ && history_count_ > 0)
         std::swap(history_[0], history_[1]);
@@ -1408,14 +1434,15 @@ Summary NaturalSolver::advanceTo(NaturalState& s, double t_end, const ActuationL
     {
       // aim at half the allowed depth from the pair's gap at the start
       double gap_start = 0.0;
-      for (const int k : near_)
-        if (trial_.contact_speed[k] > 0.0 && !(s.contact_speed[k] > 0.0))
+      for (const NaturalTouch& c : trial_.touching)
+        if (!(s.contactSpeed(c.slot) > 0.0))
         {
           ActuationValues u0;
           law(s.t, u0);
+          const NaturalContactSlot cs = naturalContactSlot(nm_, c.slot);
           gap_start = std::max(
               gap_start,
-              naturalContact(nm_, k, naturalContactInput(nm_, k, s.x, s.v, u0), 0.0, nullptr, nullptr, nullptr).gap);
+              naturalContact(nm_, cs, naturalContactInput(nm_, cs, s.x, s.v, u0), 0.0, nullptr, nullptr, nullptr).gap);
         }
       ++stats_.rejected_onset;
       const double fraction = (gap_start + 0.5 * options_.onset_depth) / (gap_start + onset_depth_);

@@ -17,6 +17,7 @@
 #include "command.h"
 
 #include "active_tensegrity/core/analysis.h"
+#include "active_tensegrity/core/natural.h"
 #include "active_tensegrity/core/scene.h"
 #include "active_tensegrity/core/statics.h"
 #include "cli.h"
@@ -217,6 +218,49 @@ TEST(Lattice, SmallLatticeRunsDynamicStepsToConvergence)
   EXPECT_GT(r.final_state.u[0].value, 0.0);
   EXPECT_LT(r.final_state.u[0].value, 0.04);
   EXPECT_LT(at::structureHeight(m, r.final_state.q), 0.5);
+}
+
+TEST(Lattice, NaturalCoordinatesKeepEveryTouchingPairInTheirList)
+{
+  // 24 struts (276 pairs: listed through the broad phase) folding into contact: at every step's end the pairs the
+  // natural coordinates' solver remembers as touching are exactly those of every checked pair whose gap is negative
+  const at::Model m = folding(3, 2, 0.3);
+  ASSERT_GT(m.checkedPairCount(), 64);
+  const at::NaturalModel nm = at::buildNaturalModel(m);
+  at::NaturalSolver solver(nm, m.solver);
+  const at::ActuationLaw law = [&m](double t) { return at::scheduledActuation(m, t); };
+  at::NaturalState s = at::naturalInitialState(nm);
+  ASSERT_TRUE(solver.initialize(s, law).ok());
+  std::vector<int> pairs;
+  m.checkedPairList(&pairs);
+  int steps = 0, most_touching = 0;
+  bool same = true;
+  const at::Summary r = solver.advanceTo(
+      s, m.analysis.duration, law,
+      [&](const at::NaturalState& e)
+      {
+        const at::ActuationValues u = at::scheduledActuation(m, e.t);
+        std::vector<int> brute, kept;
+        for (const int slot : pairs)
+        {
+          const at::NaturalContactSlot c = at::naturalContactSlot(nm, slot);
+          if (at::naturalContact(nm, c, at::naturalContactInput(nm, c, e.x, e.v, u), 0.0, nullptr, nullptr, nullptr).gap <
+              0.0)
+            brute.push_back(slot);
+        }
+        for (const at::NaturalTouch& t : e.touching)
+        {
+          kept.push_back(t.slot);
+          same = same && t.speed > 0.0;
+        }
+        same = same && kept == brute;
+        most_touching = std::max(most_touching, static_cast<int>(kept.size()));
+        ++steps;
+      });
+  ASSERT_TRUE(r.ok()) << r.message;
+  EXPECT_TRUE(same);
+  EXPECT_GT(steps, 100);
+  EXPECT_GT(most_touching, 4) << "the fold brings struts into contact";
 }
 
 TEST(LatticeSizes, LadderComesCloseToTheTargets)

@@ -73,7 +73,8 @@ struct NaturalRow
 };
 
 /// A contact of the natural coordinates: a checked strut pair (nodes a, b of each strut) or a sphere on the ground
-/// (the strut's nodes a and b with the sphere at one of them, or a point mass's node).
+/// (the strut's nodes a and b with the sphere at one of them, or a point mass's node). Made per slot when asked
+/// (naturalContactSlot): a scene with `pairs: auto` has a slot for every two struts, and nothing of that size is built.
 struct NaturalContactSlot
 {
   int slot = -1;  // the model's contact slot (contact.h)
@@ -93,16 +94,16 @@ struct NaturalModel
   const Model* model = nullptr;
   std::vector<NaturalNode> nodes;
   std::vector<NaturalStrut> struts;
-  std::vector<NaturalRow> rows;               // after the struts' rows
-  std::vector<std::vector<int>> cable_nodes;  // per Model::cables entry: the node of each point
-  std::vector<int> strut_of_body;             // per body: its index in `struts`, or -1
-  std::vector<int> node_of_body;              // per point-mass body: its node, or -1
-  int positions = 0;                          // the free nodes' coordinates (3 each), first
-  int coordinates = 0;                        // then one spin rate per strut when the scene has friction
-  Eigen::SparseMatrix<double> mass;           // constant, coordinates x coordinates
-  Eigen::VectorXd gravity;                    // the weight's generalized force
-  std::vector<NaturalContactSlot> contacts;
-  double floor_sin = 0.0;  // sin(contact.min_crossing_angle)
+  std::vector<NaturalRow> rows;                     // after the struts' rows
+  std::vector<std::vector<int>> cable_nodes;        // per Model::cables entry: the node of each point
+  std::vector<int> strut_of_body;                   // per body: its index in `struts`, or -1
+  std::vector<int> node_of_body;                    // per point-mass body: its node, or -1
+  int positions = 0;                                // the free nodes' coordinates (3 each), first
+  int coordinates = 0;                              // then one spin rate per strut when the scene has friction
+  Eigen::SparseMatrix<double> mass;                 // constant, coordinates x coordinates
+  Eigen::VectorXd gravity;                          // the weight's generalized force
+  std::vector<NaturalContactSlot> ground_contacts;  // per Model::ground_contacts entry (slots after the pairs')
+  double floor_sin = 0.0;                           // sin(contact.min_crossing_angle)
 };
 
 /// The natural-coordinate description of `model` (positions at model.q0). Throws std::invalid_argument naming what
@@ -111,13 +112,22 @@ struct NaturalModel
 /// With `spin` false no strut has a spin rate (friction then cannot turn a strut about its axis).
 NaturalModel buildNaturalModel(const Model& model, bool spin = true);
 
+/// A contact touching at a state's instant: its slot and the impact speed it remembers (m/s).
+struct NaturalTouch
+{
+  int slot = -1;
+  double speed = 0.0;
+};
+
 struct NaturalState
 {
   double t = 0.0;
-  Eigen::VectorXd x, v, a;            // free coordinates, velocities and algorithmic accelerations
-  Eigen::VectorXd qdd;                // accelerations (equal to a with Newmark)
-  Eigen::VectorXd lambda;             // one multiplier per strut, then per NaturalModel::rows entry
-  std::vector<double> contact_speed;  // per NaturalModel::contacts entry: impact speed while touching, else 0
+  Eigen::VectorXd x, v, a;             // free coordinates, velocities and algorithmic accelerations
+  Eigen::VectorXd qdd;                 // accelerations (equal to a with Newmark)
+  Eigen::VectorXd lambda;              // one multiplier per strut, then per NaturalModel::rows entry
+  std::vector<NaturalTouch> touching;  // the contacts touching, ascending by slot (the others remember nothing)
+  /// The impact speed slot remembers (0: not touching).
+  double contactSpeed(int slot) const;
 };
 
 /// At rest at the scene's start.
@@ -131,6 +141,9 @@ Vec3 naturalNodeVelocity(const NaturalModel& nm, int i, const Eigen::VectorXd& v
 /// strut's axis with no spin; point masses at their nodes.
 Eigen::VectorXd naturalToBodyCoordinates(const NaturalModel& nm, const Eigen::VectorXd& x, const ActuationValues& u);
 
+/// Contact slot `slot` of the model (a checked strut pair's or a ground contact's).
+NaturalContactSlot naturalContactSlot(const NaturalModel& nm, int slot);
+
 /// What one contact reads: its nodes' positions and velocities (NaturalContactSlot::nodes) and the struts' spin rates.
 struct NaturalContactInput
 {
@@ -138,15 +151,15 @@ struct NaturalContactInput
   Vec3 v[4] = { Vec3::Zero(), Vec3::Zero(), Vec3::Zero(), Vec3::Zero() };
   double spin[2] = { 0.0, 0.0 };
 };
-NaturalContactInput naturalContactInput(const NaturalModel& nm, int k, const Eigen::VectorXd& x,
+NaturalContactInput naturalContactInput(const NaturalModel& nm, const NaturalContactSlot& c, const Eigen::VectorXd& x,
                                         const Eigen::VectorXd& v, const ActuationValues& u);
 
-/// Contact k of NaturalModel::contacts with impact speed v0: `force` (14: 3 per node, then the two spins) gets its
+/// Contact c with impact speed v0: `force` (14: 3 per node, then the two spins) gets its
 /// generalized forces; with `stiffness` and `damping` (14x14) also K = -dF/dr and C = -dF/dv (over the nodes'
 /// velocities and the spin rates), exact.
-ContactPairState naturalContact(const NaturalModel& nm, int k, const NaturalContactInput& in, double impact_speed,
-                                Eigen::Matrix<double, 14, 1>* force, Eigen::Matrix<double, 14, 14>* stiffness,
-                                Eigen::Matrix<double, 14, 14>* damping);
+ContactPairState naturalContact(const NaturalModel& nm, const NaturalContactSlot& c, const NaturalContactInput& in,
+                                double impact_speed, Eigen::Matrix<double, 14, 1>* force,
+                                Eigen::Matrix<double, 14, 14>* stiffness, Eigen::Matrix<double, 14, 14>* damping);
 
 /// Counts of a NaturalSolver's work.
 struct NaturalStats
@@ -154,6 +167,7 @@ struct NaturalStats
   long steps = 0;
   long iterations = 0;
   long factorizations = 0;
+  long analyses = 0;             // orderings and symbolic analyses of a sparse Newton matrix (a new pattern)
   long contact_evaluations = 0;  // pair evaluations in contact (force, with or without tangents)
   long rejected_error = 0, rejected_onset = 0, rejected_solver = 0;
 };
@@ -267,6 +281,8 @@ private:
   Eigen::SparseMatrix<double> sparse_;
   Eigen::PartialPivLU<Eigen::MatrixXd> dense_lu_;
   Eigen::SparseLU<Eigen::SparseMatrix<double>> sparse_lu_;
+  std::vector<int> pattern_outer_, pattern_inner_;  // the pattern sparse_lu_ analysed
+  bool pattern_ready_ = false;
   bool dense_mode_ = true;
   Eigen::VectorXd residual_, correction_, acc_, lambda_, x_, v_;
   Eigen::VectorXd c0_, x_pred_, v_pred_, a_end_;  // a step's predictors and end accelerations (tryStep)
@@ -279,32 +295,39 @@ private:
   History history_[2];  // the starts of the last two accepted steps, newest first (Newton's first guess)
   int history_count_ = 0;
   double last_end_t_ = -1.0;
-  std::vector<int> touching_, factor_contacts_;  // contacts touching at the step's start, and when factorized
+  std::vector<int> touching_, factor_contacts_;  // slots touching at the step's start, and when factorized
   int factor_age_ = 0;                           // steps since the factorization
   double mass_scale_ = 1.0;                      // the mass matrix's largest entry
   double theta_ = 0.0;                           // the largest contraction rate seen with the factorization
   bool theta_known_ = false;
   bool have_lu_ = false;
   double lu_h_ = 0.0;
-  /// The pairs whose gap at s is within 2 * motion (indices into NaturalModel::contacts), with the impact speed
+  /// The listed contacts whose gap at s is within 2 * motion (near_, indices into listed_), with the impact speed
   /// each uses in the step.
   void findNear(const NaturalState& s, double motion);
   /// The largest distance a node moved between x0 and x1.
   double largestMotion(const Eigen::VectorXd& x0, const Eigen::VectorXd& x1) const;
 
-  std::vector<double> step_speeds_;  // per pair: the impact speed this step uses
-  std::vector<int> near_;
+  /// A contact within the listing margin: its slot's constants, its gap and approach rate where the last accepted step
+  /// ended (when the list is unchanged since), and the impact speed the step being solved uses.
+  struct Listed
+  {
+    NaturalContactSlot c;
+    double end_gap = 0.0, end_rate = 0.0;
+    double step_speed = 0.0;
+  };
+  std::vector<Listed> listed_;  // ascending by slot
+  std::vector<int> near_;       // indices into listed_
   BroadPhase broad_phase_;
-  int first_ground_ = 0;  // contacts before it are strut pairs
+  std::vector<int> direct_pairs_;  // the checked pairs' slots when few (checked without the broad phase)
+  bool use_broad_phase_ = false;
   std::vector<int> candidates_;
-  std::vector<int> listed_contacts_;  // the contacts within list_margin_ when listed
   std::vector<Vec3> listed_nodes_, node_now_;
   double list_margin_ = 0.0;
-  long list_version_ = 0;                   // listings so far
-  std::vector<double> end_gap_, end_rate_;  // per contact: at the last step's end (the listed ones)
+  long list_version_ = 0;  // listings so far
   double end_t_ = -1.0;
   long end_list_version_ = -1;
-  bool listed_ = false;
+  bool have_list_ = false;
   Eigen::VectorXd broad_q_;
   double near_motion_ = 0.0;
   std::vector<Vec3> points_;
