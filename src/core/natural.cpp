@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
+#include <string>
 
 #include <unsupported/Eigen/AutoDiff>
 
@@ -430,6 +431,8 @@ NaturalModel buildNaturalModel(const Model& model, bool spin)
     for (const PointRef& p : model.cables[k].points)
       nm.cable_nodes[k].push_back(pointNode(nm, model, p, tol, "cable " + model.cables[k].name));
   nm.floor_sin = std::sin(model.contact.min_crossing_angle);
+  for (const PointLoad& l : model.loads)
+    nm.loads.push_back(naturalLoad(nm, l));
   // the ground's spheres, each at a node (the strut pairs' contacts are made when asked: naturalContactSlot)
   for (size_t i = 0; i < model.ground_contacts.size(); ++i)
   {
@@ -523,6 +526,40 @@ NaturalState naturalInitialState(const NaturalModel& nm)
   s.qdd.setZero(nm.coordinates);
   s.lambda.setZero(static_cast<int>(nm.struts.size() + nm.rows.size()));
   return s;
+}
+
+NaturalLoad naturalLoad(const NaturalModel& nm, const PointLoad& load)
+{
+  const Model& model = *nm.model;
+  NaturalLoad out;
+  out.force = load.force;
+  const int body = load.point.body;
+  if (body < 0)
+    return out;
+  if (body >= static_cast<int>(model.bodies.size()))
+    throw std::invalid_argument("load " + load.name + ": no body " + std::to_string(body));
+  const Body& b = model.bodies[static_cast<size_t>(body)];
+  const Vec3& p = load.point.local;
+  const double tolerance = 1e-9 * std::max(1.0, b.length);
+  if (b.kind != BodyKind::kStrut)
+  {
+    if (p.norm() > tolerance)
+      throw std::invalid_argument("load " + load.name + ": a point away from point mass " + b.name);
+    out.nodes[0] = nm.node_of_body[static_cast<size_t>(body)];
+    out.weights[0] = 1.0;
+    return out;
+  }
+  if (p.head<2>().norm() > tolerance)
+    throw std::invalid_argument("load " + load.name + ": a point " + std::to_string(p.head<2>().norm()) +
+                                " m off the axis of strut " + b.name +
+                                " (the natural coordinates take forces on strut axes)");
+  const NaturalStrut& st = nm.struts[static_cast<size_t>(nm.strut_of_body[static_cast<size_t>(body)])];
+  const double along = p.z() / b.length + 0.5;  // from node a (at -L/2) to node b
+  out.nodes[0] = st.a;
+  out.nodes[1] = st.b;
+  out.weights[0] = 1.0 - along;
+  out.weights[1] = along;
+  return out;
 }
 
 double NaturalState::contactSpeed(int slot) const
@@ -739,6 +776,12 @@ NaturalSolver::NaturalSolver(const NaturalModel& nm, const SolverOptions& option
 void NaturalSolver::forces(const Eigen::VectorXd& x, const Eigen::VectorXd& v, bool tangents)
 {
   f_ = nm_.gravity;
+  // point loads: linear in the nodes' positions, constant forces (no tangent)
+  for (const std::vector<NaturalLoad>* loads : { &nm_.loads, static_cast<const std::vector<NaturalLoad>*>(&external_) })
+    for (const NaturalLoad& l : *loads)
+      for (int i = 0; i < 2; ++i)
+        if (l.nodes[i] >= 0 && nm_.nodes[l.nodes[i]].column >= 0)
+          f_.segment<3>(nm_.nodes[l.nodes[i]].column) += l.weights[i] * l.force;
   // every node's position and velocity at this iterate, read below and by contactForces and the rows
   pos_.resize(nm_.nodes.size());
   vel_.resize(nm_.nodes.size());
@@ -1126,6 +1169,18 @@ Summary NaturalSolver::initialize(NaturalState& s, const ActuationLaw& law)
   s.qdd = s.a;
   s.lambda = z.tail(m);
   return out;
+}
+
+Summary NaturalSolver::setExternalLoads(const std::vector<PointLoad>& loads, NaturalState& s, const ActuationLaw& law)
+{
+  std::vector<NaturalLoad> converted;
+  converted.reserve(loads.size());
+  for (const PointLoad& l : loads)
+    converted.push_back(naturalLoad(nm_, l));
+  external_ = std::move(converted);
+  history_count_ = 0;
+  last_end_t_ = -1.0;
+  return initialize(s, law);
 }
 
 Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& law)

@@ -359,6 +359,56 @@ TEST(Natural, SpinningStrutKeepsItsAngularMomentum)
   EXPECT_NEAR(energy(s), e0, 1e-7 * e0);
 }
 
+TEST(Natural, PushedFreeStrutGainsTheImpulseAndKeepsItsLength)
+{
+  // a free strut along x without gravity, pushed at its +L/2 end by a constant force for 0.3 s: the trapezoidal rule
+  // gives the momentum F t and the centre F t^2 / (2 m) exactly (the restart makes the accelerations consistent with
+  // the push), the length stays, and the velocity stays once the push is off
+  const Model m = freeStrutModel("A", 1.0, 0.02, 7800.0, Vec3::UnitX());
+  SolverOptions options = trapezoidalOptions(1e-3, 1e-12);
+  const NaturalModel nm = buildNaturalModel(m);
+  NaturalSolver solver(nm, options);
+  const ActuationLaw law = [](double) { return ActuationValues(); };
+  NaturalState s = naturalInitialState(nm);
+  ASSERT_TRUE(solver.initialize(s, law).ok());
+  const Vec3 force(3.0, -2.0, 5.0);
+  ASSERT_TRUE(solver.setExternalLoads({ PointLoad{ "push", PointRef{ 0, Vec3(0.0, 0.0, 0.5) }, force } }, s, law).ok());
+  // a push off the axis is refused by name, and the one in force stays
+  const NaturalState before = s;
+  try
+  {
+    solver.setExternalLoads({ PointLoad{ "side", PointRef{ 0, Vec3(0.01, 0.0, 0.2) }, force } }, s, law);
+    ADD_FAILURE() << "a push off the strut's axis was taken";
+  }
+  catch (const std::invalid_argument& e)
+  {
+    EXPECT_NE(std::string(e.what()).find("load side"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("strut A"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(s.x, before.x);
+  EXPECT_EQ(s.a, before.a);
+  const NaturalStrut& st = nm.struts[0];
+  const auto centre = [&](const Eigen::VectorXd& x)
+  { return 0.5 * (x.segment<3>(nm.nodes[st.a].column) + x.segment<3>(nm.nodes[st.b].column)); };
+  const Vec3 c0 = centre(s.x);
+  const double h = 1e-3;
+  for (int k = 0; k < 300; ++k)
+    ASSERT_TRUE(solver.tryStep(s, h, law).ok());
+  ASSERT_NEAR(s.t, 0.3, 1e-12);
+  const double mass = m.bodies[0].mass;
+  const Vec3 momentum = mass * centre(s.v);
+  EXPECT_LT((momentum - force * s.t).norm(), 1e-9 * force.norm() * s.t) << momentum.transpose();
+  EXPECT_LT((centre(s.x) - c0 - 0.5 * force / mass * s.t * s.t).norm(), 1e-9);
+  const Vec3 u = s.x.segment<3>(nm.nodes[st.b].column) - s.x.segment<3>(nm.nodes[st.a].column);
+  EXPECT_NEAR(u.norm(), 1.0, 1e-10);
+  EXPECT_LT(u.normalized().dot(Vec3::UnitX()), 0.999) << "the end's push turns the strut";
+  ASSERT_TRUE(solver.setExternalLoads({}, s, law).ok());
+  const Vec3 v = centre(s.v);
+  for (int k = 0; k < 50; ++k)
+    ASSERT_TRUE(solver.tryStep(s, h, law).ok());
+  EXPECT_LT((centre(s.v) - v).norm(), 1e-12);
+}
+
 TEST(Natural, RefusesWhatItDoesNotCover)
 {
   // a joint of two struts whose ends start apart, and a cable to a point along a strut: no node is both, and the

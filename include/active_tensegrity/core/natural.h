@@ -17,8 +17,8 @@
 /// automatic differentiation of the same kernels (natural.cpp).
 ///
 /// This is a second formulation measured against the body coordinates (state.h, dynamics.h) by
-/// `tensegrity_bench natural`: dynamics without external loads, with Newmark or generalized-alpha at fixed or adaptive
-/// steps (no energy check).
+/// `tensegrity_bench natural`: dynamics with the scene's point loads and forces from outside (on strut axes and point
+/// masses), with Newmark or generalized-alpha at fixed or adaptive steps (no energy check).
 #pragma once
 
 #include <array>
@@ -89,6 +89,14 @@ struct NaturalContactSlot
   double stiffness90 = 0.0, core_stiffness90 = 0.0, core_gap = 0.0;
 };
 
+/// A force at a point of a strut's axis or at a point mass, shared by the nodes it lies between.
+struct NaturalLoad
+{
+  int nodes[2] = { -1, -1 };
+  double weights[2] = { 0.0, 0.0 };  // (1 - s, s) at the fraction s of the axis from nodes[0]; (1, 0) at one node
+  Vec3 force = Vec3::Zero();         // N, world frame
+};
+
 struct NaturalModel
 {
   const Model* model = nullptr;
@@ -102,6 +110,7 @@ struct NaturalModel
   int coordinates = 0;                              // then one spin rate per strut when the scene has friction
   Eigen::SparseMatrix<double> mass;                 // constant, coordinates x coordinates
   Eigen::VectorXd gravity;                          // the weight's generalized force
+  std::vector<NaturalLoad> loads;                   // the scene's point loads (Model::loads, at load factor 1)
   std::vector<NaturalContactSlot> ground_contacts;  // per Model::ground_contacts entry (slots after the pairs')
   double floor_sin = 0.0;                           // sin(contact.min_crossing_angle)
 };
@@ -129,6 +138,10 @@ struct NaturalState
   /// The impact speed slot remembers (0: not touching).
   double contactSpeed(int slot) const;
 };
+
+/// `load` as the natural coordinates apply it. Throws std::invalid_argument naming the load when its point is off a
+/// strut's axis (its moment about the axis would be lost) or away from a point mass. A load on the ground is no load.
+NaturalLoad naturalLoad(const NaturalModel& nm, const PointLoad& load);
 
 /// At rest at the scene's start.
 NaturalState naturalInitialState(const NaturalModel& nm);
@@ -186,6 +199,11 @@ public:
 
   /// Consistent accelerations and multipliers at s (forces at s.t).
   Summary initialize(NaturalState& s, const ActuationLaw& law);
+  /// Forces from outside the scene from s on (each converted by naturalLoad, all before any is applied; on a refusal
+  /// nothing changes). The forces jump there, so the integration restarts from s: accelerations and multipliers
+  /// consistent with them, Newton's first guess not extrapolated across the jump.
+  Summary setExternalLoads(const std::vector<PointLoad>& loads, NaturalState& s, const ActuationLaw& law);
+
   /// One step of h; on failure s is unchanged.
   Summary tryStep(NaturalState& s, double h, const ActuationLaw& law);
   /// Fixed steps of options.dt to t_end (a failed step is halved up to max_step_cuts times), or adaptive steps
@@ -275,8 +293,9 @@ private:
   bool factorize(int size);
   Eigen::VectorXd solve(const Eigen::VectorXd& rhs);
 
-  Eigen::VectorXd f_;            // applied forces at the iterate
-  std::vector<Vec3> pos_, vel_;  // every node's position and velocity at the iterate (forces())
+  std::vector<NaturalLoad> external_;  // setExternalLoads
+  Eigen::VectorXd f_;                  // applied forces at the iterate
+  std::vector<Vec3> pos_, vel_;        // every node's position and velocity at the iterate (forces())
   Entries entries_;
   Eigen::SparseMatrix<double> sparse_;
   Eigen::PartialPivLU<Eigen::MatrixXd> dense_lu_;
