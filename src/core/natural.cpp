@@ -776,12 +776,27 @@ NaturalSolver::NaturalSolver(const NaturalModel& nm, const SolverOptions& option
 void NaturalSolver::forces(const Eigen::VectorXd& x, const Eigen::VectorXd& v, bool tangents)
 {
   f_ = nm_.gravity;
+  if (held_ && model_.gravity_enabled)
+  {
+    // (the weight at the fixed and driven nodes: half a strut's at each end, a point mass's at its node)
+    for (const NaturalStrut& st : nm_.struts)
+      for (const int node : { st.a, st.b })
+        if (nm_.nodes[static_cast<size_t>(node)].column < 0)
+          (*held_)[static_cast<size_t>(node)] +=
+              0.5 * model_.bodies[static_cast<size_t>(st.body)].mass * model_.gravity;
+    for (size_t b = 0; b < model_.bodies.size(); ++b)
+    {
+      const int node = nm_.node_of_body[b];
+      if (node >= 0 && nm_.nodes[static_cast<size_t>(node)].column < 0)
+        (*held_)[static_cast<size_t>(node)] += model_.bodies[b].mass * model_.gravity;
+    }
+  }
   // point loads: linear in the nodes' positions, constant forces (no tangent)
   for (const std::vector<NaturalLoad>* loads : { &nm_.loads, static_cast<const std::vector<NaturalLoad>*>(&external_) })
     for (const NaturalLoad& l : *loads)
       for (int i = 0; i < 2; ++i)
-        if (l.nodes[i] >= 0 && nm_.nodes[l.nodes[i]].column >= 0)
-          f_.segment<3>(nm_.nodes[l.nodes[i]].column) += l.weights[i] * l.force;
+        if (l.nodes[i] >= 0)
+          addNodeForce(l.nodes[i], l.weights[i] * l.force);
   // every node's position and velocity at this iterate, read below and by contactForces and the rows
   pos_.resize(nm_.nodes.size());
   vel_.resize(nm_.nodes.size());
@@ -801,10 +816,8 @@ void NaturalSolver::forces(const Eigen::VectorXd& x, const Eigen::VectorXd& v, b
     const Vec3 ud = vel_[st.b] - vel_[st.a];
     const Vec3 fb = c * ws * u.cross(ud);
     const int ca = nm_.nodes[st.a].column, cb = nm_.nodes[st.b].column;
-    if (cb >= 0)
-      f_.segment<3>(cb) += fb;
-    if (ca >= 0)
-      f_.segment<3>(ca) -= fb;
+    addNodeForce(st.b, fb);
+    addNodeForce(st.a, -fb);
     if (!tangents)
       continue;
     // dF_b/du = -c w_s [u_dot]x, dF_b/du_dot = c w_s [u]x, dF_b/dw_s = c u x u_dot; u = r_b - r_a
@@ -858,11 +871,7 @@ void NaturalSolver::forces(const Eigen::VectorXd& x, const Eigen::VectorXd& v, b
     for (int i = 0; i < count; ++i)
       g[i] = (i > 0 ? e[i - 1] : Vec3::Zero()) - (i + 1 < count ? e[i] : Vec3::Zero());
     for (int i = 0; i < count; ++i)
-    {
-      const int col = nm_.nodes[nodes[i]].column;
-      if (col >= 0)
-        f_.segment<3>(col) -= tension * g[i];
-    }
+      addNodeForce(nodes[i], -tension * g[i]);
     if (!tangents)
       continue;
     const double damping = model_.damping_enabled ? cable.damping : 0.0;
@@ -946,6 +955,10 @@ void NaturalSolver::contactForces(const Eigen::VectorXd& /*x: forces() cached th
       else
         cols[i] = cs.struts[i - 12] >= 0 ? nm_.struts[cs.struts[i - 12]].spin : -1;
     }
+    if (held_)
+      for (int i = 0; i < 12; i += 3)
+        if (cs.nodes[i / 3] >= 0 && cols[i] < 0)
+          (*held_)[static_cast<size_t>(cs.nodes[i / 3])] += f.segment<3>(i);
     for (int i = 0; i < 14; ++i)
     {
       if (cols[i] < 0)
@@ -960,6 +973,85 @@ void NaturalSolver::contactForces(const Eigen::VectorXd& /*x: forces() cached th
         }
     }
   }
+}
+
+double NaturalSolver::actuationForce(const NaturalState& s, const ActuationValues& u, int actuator)
+{
+  const Actuator& act = model_.actuators[static_cast<size_t>(actuator)];
+  double force = 0.0;
+  // driven rows: the force on the node is -lambda along the row
+  const int struts = static_cast<int>(nm_.struts.size());
+  for (size_t k = 0; k < nm_.rows.size(); ++k)
+    if (nm_.rows[k].actuator == actuator)
+      force -= s.lambda(struts + static_cast<int>(k));
+  // the cables it pulls in: their tension
+  for (const int c : act.cables)
+  {
+    const std::vector<int>& nodes = nm_.cable_nodes[static_cast<size_t>(c)];
+    double l = 0.0, rate = 0.0;
+    for (size_t i = 0; i + 1 < nodes.size(); ++i)
+    {
+      const Vec3 d = naturalNodePosition(nm_, nodes[i + 1], s.x, u) - naturalNodePosition(nm_, nodes[i], s.x, u);
+      const double li = d.norm();
+      l += li;
+      if (li > 0.0)
+        rate += d.dot(naturalNodeVelocity(nm_, nodes[i + 1], s.v, u) - naturalNodeVelocity(nm_, nodes[i], s.v, u)) / li;
+    }
+    force += cableLaw(model_.cables[static_cast<size_t>(c)], l, rate, u, model_.damping_enabled).tension;
+  }
+  // the nodes it drives: the reaction R = M_D qdd - F_D + (G^T lambda)_D that prescribes each one's motion, along the
+  // direction
+  bool drives = false;
+  for (const NaturalNode& nd : nm_.nodes)
+    drives = drives || (nd.kind == NaturalNode::Kind::kDriven && nd.actuator == actuator);
+  if (!drives)
+    return force;
+  held_force_.assign(nm_.nodes.size(), Vec3::Zero());
+  held_ = &held_force_;
+  u_ = u;
+  forces(s.x, s.v, false);
+  for (const Listed& l : listed_)
+  {
+    const NaturalContactInput in = naturalContactInput(nm_, l.c, s.x, s.v, u);
+    Vec14 f;
+    naturalContact(nm_, l.c, in, s.contactSpeed(l.c.slot), &f, nullptr, nullptr);
+    for (int i = 0; i < 4; ++i)
+      if (l.c.nodes[i] >= 0 && nm_.nodes[l.c.nodes[i]].column < 0)
+        held_force_[static_cast<size_t>(l.c.nodes[i])] += f.segment<3>(3 * i);
+  }
+  held_ = nullptr;
+  const auto accel = [&](int node)
+  {
+    const NaturalNode& nd = nm_.nodes[static_cast<size_t>(node)];
+    if (nd.column >= 0)
+      return Vec3(s.qdd.segment<3>(nd.column));
+    return nd.kind == NaturalNode::Kind::kDriven ? Vec3(u[nd.actuator].accel * nd.direction) : Vec3(Vec3::Zero());
+  };
+  for (size_t i = 0; i < nm_.nodes.size(); ++i)
+  {
+    const NaturalNode& nd = nm_.nodes[i];
+    if (nd.kind != NaturalNode::Kind::kDriven || nd.actuator != actuator)
+      continue;
+    Vec3 r = -held_force_[i];
+    for (size_t k = 0; k < nm_.struts.size(); ++k)
+    {
+      const NaturalStrut& st = nm_.struts[k];
+      if (st.a != static_cast<int>(i) && st.b != static_cast<int>(i))
+        continue;
+      const Body& b = model_.bodies[static_cast<size_t>(st.body)];
+      const double jt = b.inertia.x(), l2 = st.length * st.length;
+      const double diag = 0.25 * b.mass + jt / l2, off = 0.25 * b.mass - jt / l2;
+      const int other = st.a == static_cast<int>(i) ? st.b : st.a;
+      r += diag * accel(static_cast<int>(i)) + off * accel(other);
+      const Vec3 d = naturalNodePosition(nm_, st.b, s.x, u) - naturalNodePosition(nm_, st.a, s.x, u);
+      r += (st.b == static_cast<int>(i) ? 2.0 : -2.0) * s.lambda(static_cast<int>(k)) * d;
+    }
+    for (size_t b = 0; b < model_.bodies.size(); ++b)
+      if (nm_.node_of_body[b] == static_cast<int>(i))
+        r += model_.bodies[b].mass * accel(static_cast<int>(i));
+    force += nd.direction.dot(r);
+  }
+  return force;
 }
 
 void NaturalSolver::appliedForces(const Eigen::VectorXd& x, const Eigen::VectorXd& v, const ActuationValues& u,

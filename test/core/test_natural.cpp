@@ -6,6 +6,7 @@
 #include <string>
 
 #include "active_tensegrity/core/analysis.h"
+#include "active_tensegrity/core/cable.h"
 #include "active_tensegrity/core/natural.h"
 #include "active_tensegrity/core/scene.h"
 #include "active_tensegrity/core/state.h"
@@ -288,6 +289,80 @@ TEST(Natural, AgreesWithBodyCoordinatesThroughContact)
       EXPECT_GT(moved, 0.1);
       EXPECT_LT(most, 1e-5) << integrator << " dt " << dt;
     }
+}
+
+TEST(Natural, ActuationForcesAgreeWithBodyCoordinatesAndTheDrivenBodysBalance)
+{
+  // the quadruplex's unguided top nodes (a driven row's multiplier in both formulations): the force agrees with the
+  // body coordinates' along the path into contact (the two paths agree to 1e-8 m)
+  {
+    const Model model =
+        scene("quadruplex_linear_contact.yaml",
+              { { "solver.integrator", "newmark" }, { "solver.dt", "2e-4" }, { "solver.newton_tolerance", "1e-10" } });
+    const ActuationLaw law = [&model](double t) { return scheduledActuation(model, t); };
+    DynamicsSolver body(model, model.solver);
+    State bs = initialState(model);
+    ASSERT_TRUE(body.initialize(bs, law).ok());
+    const NaturalModel nm = buildNaturalModel(model);
+    NaturalSolver natural(nm, model.solver);
+    NaturalState ns = naturalInitialState(nm);
+    ASSERT_TRUE(natural.initialize(ns, law).ok());
+    for (const double t_end : { 0.3, 0.6, 1.0 })
+    {
+      while (bs.t < t_end - 1e-12)
+      {
+        const double t1 = bs.t + model.solver.dt;
+        ASSERT_TRUE(body.step(bs, model.solver.dt, law).ok());
+        bs.t = t1;
+        ASSERT_TRUE(natural.tryStep(ns, model.solver.dt, law).ok());
+      }
+      const double fb = actuationForce(model, bs, 0);
+      const double fn = natural.actuationForce(ns, scheduledActuation(model, ns.t), 0);
+      EXPECT_GT(std::abs(fb), 1000.0);
+      EXPECT_NEAR(fn, fb, 1e-5 * std::abs(fb)) << "at " << t_end << " s";
+    }
+  }
+  // the tower's guided driven bodies (a reaction in the natural coordinates): the 1 kg body B1 hangs on cable L1, whose
+  // last segment runs straight up to the pulley G1, and is pulled down (d = -z), so the drive holds T - m g + m a_d
+  // (gravity on here; the scene has none); the fold's paths depend on round-off, so it is checked against the run's
+  // own tension
+  {
+    const Model model = scene("tower.yaml", { { "analysis.type", "dynamic" }, { "gravity.enabled", "true" } });
+    ASSERT_TRUE(model.gravity_enabled);
+    const ActuationLaw law = [&model](double t) { return scheduledActuation(model, t); };
+    const NaturalModel nm = buildNaturalModel(model);
+    NaturalSolver natural(nm, model.solver);
+    NaturalState ns = naturalInitialState(nm);
+    ASSERT_TRUE(natural.initialize(ns, law).ok());
+    int cable = -1;
+    for (size_t k = 0; k < model.cables.size(); ++k)
+      if (model.cables[k].name == "L1")
+        cable = static_cast<int>(k);
+    ASSERT_GE(cable, 0);
+    const std::vector<int>& nodes = nm.cable_nodes[static_cast<size_t>(cable)];
+    int taut = 0;
+    for (const double t_end : { 0.5, 1.0, 1.5, 2.0, 2.5 })
+    {
+      ASSERT_TRUE(natural.advanceTo(ns, t_end, law).ok());
+      const ActuationValues u = scheduledActuation(model, ns.t);
+      double l = 0.0, rate = 0.0;
+      for (size_t i = 0; i + 1 < nodes.size(); ++i)
+      {
+        const Vec3 d = naturalNodePosition(nm, nodes[i + 1], ns.x, u) - naturalNodePosition(nm, nodes[i], ns.x, u);
+        l += d.norm();
+        rate += d.normalized().dot(naturalNodeVelocity(nm, nodes[i + 1], ns.v, u) -
+                                   naturalNodeVelocity(nm, nodes[i], ns.v, u));
+      }
+      const double tension = cableLaw(model.cables[static_cast<size_t>(cable)], l, rate, u, true).tension;
+      const Vec3 last =
+          naturalNodePosition(nm, nodes[nodes.size() - 2], ns.x, u) - naturalNodePosition(nm, nodes.back(), ns.x, u);
+      ASSERT_LT(last.normalized().cross(Vec3::UnitZ()).norm(), 1e-9) << "the last segment runs straight up";
+      const double expected = tension + 1.0 * model.gravity.z() + 1.0 * u[0].accel;
+      EXPECT_NEAR(natural.actuationForce(ns, u, 0), expected, 1e-9 * std::max(1.0, tension)) << "at " << t_end << " s";
+      taut += tension > 1.0;
+    }
+    EXPECT_GT(taut, 0) << "the pull cable is taut at some of the instants";
+  }
 }
 
 TEST(Natural, GeneralizedAlphaConvergesAtSecondOrder)

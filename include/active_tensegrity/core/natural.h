@@ -216,6 +216,11 @@ public:
   void appliedForces(const Eigen::VectorXd& x, const Eigen::VectorXd& v, const ActuationValues& u,
                      Eigen::VectorXd& force, Eigen::MatrixXd* stiffness, Eigen::MatrixXd* damping);
 
+  /// The force actuator `actuator` exerts at s under u (N; s the state the last step ended in, or initialized):
+  /// along its direction at each node it drives, the reaction that prescribes the node's motion, or a driven row's
+  /// multiplier; plus the tension of each cable it pulls in.
+  double actuationForce(const NaturalState& s, const ActuationValues& u, int actuator);
+
   /// The touching contacts at s, the end of the last accepted step (those the solver keeps listed: all within its
   /// margin), with their impact speeds.
   std::vector<ContactPairState> contactsAt(const NaturalState& s) const;
@@ -295,7 +300,18 @@ private:
 
   std::vector<NaturalLoad> external_;  // setExternalLoads
   Eigen::VectorXd f_;                  // applied forces at the iterate
-  std::vector<Vec3> pos_, vel_;        // every node's position and velocity at the iterate (forces())
+  /// Adds f at node i: to f_ at a free node, to *held_ (when collecting) at a fixed or driven one.
+  void addNodeForce(int i, const Vec3& f)
+  {
+    const int col = nm_.nodes[static_cast<size_t>(i)].column;
+    if (col >= 0)
+      f_.segment<3>(col) += f;
+    else if (held_)
+      (*held_)[static_cast<size_t>(i)] += f;
+  }
+  std::vector<Vec3>* held_ = nullptr;  // forces() collects the fixed and driven nodes' forces here when set
+  std::vector<Vec3> held_force_;
+  std::vector<Vec3> pos_, vel_;  // every node's position and velocity at the iterate (forces())
   Entries entries_;
   Eigen::SparseMatrix<double> sparse_;
   Eigen::PartialPivLU<Eigen::MatrixXd> dense_lu_;
