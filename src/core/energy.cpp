@@ -9,10 +9,7 @@
 
 namespace active_tensegrity::core
 {
-namespace
-{
-/// The elastic part of a contact's normal force (N): what its elastic energy is the integral of.
-double elasticNormalForce(const Model& model, const ContactPairState& st)
+double contactElasticNormalForce(const Model& model, const ContactPairState& st)
 {
   const ContactLaw law = st.body_b < 0 ? model.ground.law : model.contact.law;
   if (law == ContactLaw::kLinear)
@@ -21,9 +18,7 @@ double elasticNormalForce(const Model& model, const ContactPairState& st)
          st.core_stiffness * st.core_penetration * std::sqrt(st.core_penetration);
 }
 
-/// The elastic energy's derivative with respect to the pull-in s at fixed positions (N): the tension's elastic
-/// part, plus, for a material cable (k = EA / l0, l0 shortening with s), (1/2) k stretch^2 / l0.
-double pullInForce(const Cable& cable, const CableState& s)
+double cablePullInForce(const Cable& cable, const CableState& s)
 {
   const double stretch = s.length - s.rest_length;
   if (!(stretch > 0.0 || !cable.tension_only) || s.length <= 0.0)
@@ -31,7 +26,6 @@ double pullInForce(const Cable& cable, const CableState& s)
   const double elastic = s.stiffness * stretch;
   return elastic + (cable.area > 0.0 ? 0.5 * s.stiffness * stretch * stretch / s.rest_length : 0.0);
 }
-}  // namespace
 
 double EnergyPoint::scale() const
 {
@@ -76,7 +70,7 @@ EnergyPoint EnergyMeter::at(const State& state, const std::vector<ContactPairSta
     if (c.actuator >= 0 && c.actuator < static_cast<int>(state.u.size()))
     {
       const double rate = state.u[c.actuator].rate;
-      e.actuator_power += (pullInForce(c, s) + (s.slack ? 0.0 : s.damping_tension)) * rate;
+      e.actuator_power += (cablePullInForce(c, s) + (s.slack ? 0.0 : s.damping_tension)) * rate;
     }
   }
   for (const ContactPairState& st : contacts)
@@ -84,8 +78,8 @@ EnergyPoint EnergyMeter::at(const State& state, const std::vector<ContactPairSta
     if (!st.active)
       continue;
     e.elastic += contactElasticEnergy(model, st);
-    e.contact_power +=
-        (st.normal_force - elasticNormalForce(model, st)) * st.penetration_rate + st.friction_force * st.slip_speed;
+    e.contact_power += (st.normal_force - contactElasticNormalForce(model, st)) * st.penetration_rate +
+                       st.friction_force * st.slip_speed;
   }
   // driven constraint rows: the constraint forces -Phi_q^T lambda do work lambda^T Phi_t = -lambda^T rhs, rhs the
   // right-hand side of Phi_q qd = -Phi_t (zero on every undriven row)

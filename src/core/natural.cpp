@@ -2,12 +2,14 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 #include <string>
 
 #include <unsupported/Eigen/AutoDiff>
 
 #include "active_tensegrity/core/cable.h"
+#include "active_tensegrity/core/energy.h"
 #include "active_tensegrity/core/kinematics.h"
 #include "active_tensegrity/core/rotation.h"
 
@@ -741,6 +743,9 @@ constexpr int kDirectPairsMost = 64;       // up to this many strut pairs are ch
 constexpr double kListMarginLeast = 2e-3;  // m: the least margin of the listed contacts
 constexpr double kListMarginSteps = 8.0;   // the margin in steps' motions
 constexpr double kSafety = 0.9, kMaxGrowth = 2.0, kMinShrink = 0.1, kKeepBand = 1.2;
+// after a step refused for its energy, the steps stay below kEnergyMargin times the refused one, a bound that grows by
+// kEnergyRelease per accepted step (the event that made it may pass)
+constexpr double kEnergyMargin = 0.9, kEnergyRelease = 1.01;
 }  // namespace
 
 // ---- the solver ----------------------------------------------------------------------------------------
@@ -999,17 +1004,29 @@ double NaturalSolver::actuationForce(const NaturalState& s, const ActuationValue
     }
     force += cableLaw(model_.cables[static_cast<size_t>(c)], l, rate, u, model_.damping_enabled).tension;
   }
-  // the nodes it drives: the reaction R = M_D qdd - F_D + (G^T lambda)_D that prescribes each one's motion, along the
-  // direction
+  // the nodes it drives: the reaction that prescribes each one's motion, along the direction
   bool drives = false;
   for (const NaturalNode& nd : nm_.nodes)
     drives = drives || (nd.kind == NaturalNode::Kind::kDriven && nd.actuator == actuator);
   if (!drives)
     return force;
+  drivenReactions(s, u);
+  for (size_t i = 0; i < nm_.nodes.size(); ++i)
+    if (nm_.nodes[i].kind == NaturalNode::Kind::kDriven && nm_.nodes[i].actuator == actuator)
+      force += reaction_along_[i];
+  return force;
+}
+
+void NaturalSolver::drivenReactions(const NaturalState& s, const ActuationValues& u)
+{
+  // R = M_D qdd - F_D + (G^T lambda)_D at each driven node D: what it takes, beyond the forces on it, to give it the
+  // prescribed motion
   held_force_.assign(nm_.nodes.size(), Vec3::Zero());
+  reaction_along_.assign(nm_.nodes.size(), 0.0);
   held_ = &held_force_;
   u_ = u;
   forces(s.x, s.v, false);
+  held_ = nullptr;
   for (const Listed& l : listed_)
   {
     const NaturalContactInput in = naturalContactInput(nm_, l.c, s.x, s.v, u);
@@ -1019,7 +1036,6 @@ double NaturalSolver::actuationForce(const NaturalState& s, const ActuationValue
       if (l.c.nodes[i] >= 0 && nm_.nodes[l.c.nodes[i]].column < 0)
         held_force_[static_cast<size_t>(l.c.nodes[i])] += f.segment<3>(3 * i);
   }
-  held_ = nullptr;
   const auto accel = [&](int node)
   {
     const NaturalNode& nd = nm_.nodes[static_cast<size_t>(node)];
@@ -1030,7 +1046,7 @@ double NaturalSolver::actuationForce(const NaturalState& s, const ActuationValue
   for (size_t i = 0; i < nm_.nodes.size(); ++i)
   {
     const NaturalNode& nd = nm_.nodes[i];
-    if (nd.kind != NaturalNode::Kind::kDriven || nd.actuator != actuator)
+    if (nd.kind != NaturalNode::Kind::kDriven)
       continue;
     Vec3 r = -held_force_[i];
     for (size_t k = 0; k < nm_.struts.size(); ++k)
@@ -1049,9 +1065,86 @@ double NaturalSolver::actuationForce(const NaturalState& s, const ActuationValue
     for (size_t b = 0; b < model_.bodies.size(); ++b)
       if (nm_.node_of_body[b] == static_cast<int>(i))
         r += model_.bodies[b].mass * accel(static_cast<int>(i));
-    force += nd.direction.dot(r);
+    reaction_along_[i] = nd.direction.dot(r);
   }
-  return force;
+}
+
+EnergyPoint NaturalSolver::energyAt(const NaturalState& s, const ActuationValues& u)
+{
+  u_ = u;
+  EnergyPoint e;
+  const Vec3 g = model_.gravity_enabled ? model_.gravity : Vec3::Zero();
+  const auto position = [&](int node) { return naturalNodePosition(nm_, node, s.x, u); };
+  const auto velocity = [&](int node) { return naturalNodeVelocity(nm_, node, s.v, u); };
+  for (const NaturalStrut& st : nm_.struts)
+  {
+    const Body& b = model_.bodies[static_cast<size_t>(st.body)];
+    const Vec3 vc = 0.5 * (velocity(st.a) + velocity(st.b)), ud = velocity(st.b) - velocity(st.a);
+    e.kinetic += 0.5 * b.mass * vc.squaredNorm() + 0.5 * b.inertia.x() / (st.length * st.length) * ud.squaredNorm();
+    if (st.spin >= 0)
+      e.kinetic += 0.5 * b.inertia.z() * s.v(st.spin) * s.v(st.spin);
+    const Vec3 c = 0.5 * (position(st.a) + position(st.b));
+    const Vec3 c0 =
+        0.5 * (nm_.nodes[static_cast<size_t>(st.a)].position0 + nm_.nodes[static_cast<size_t>(st.b)].position0);
+    e.gravity -= b.mass * g.dot(c - c0);
+  }
+  for (size_t b = 0; b < model_.bodies.size(); ++b)
+  {
+    const int node = nm_.node_of_body[b];
+    if (node < 0)
+      continue;
+    const double m = model_.bodies[b].mass;
+    e.kinetic += 0.5 * m * velocity(node).squaredNorm();
+    e.gravity -= m * g.dot(position(node) - nm_.nodes[static_cast<size_t>(node)].position0);
+  }
+  for (const std::vector<NaturalLoad>* loads : { &nm_.loads, static_cast<const std::vector<NaturalLoad>*>(&external_) })
+    for (const NaturalLoad& l : *loads)
+      for (int i = 0; i < 2; ++i)
+        if (l.nodes[i] >= 0)
+          e.gravity -=
+              l.weights[i] * l.force.dot(position(l.nodes[i]) - nm_.nodes[static_cast<size_t>(l.nodes[i])].position0);
+  for (size_t k = 0; k < model_.cables.size(); ++k)
+  {
+    const Cable& c = model_.cables[k];
+    const std::vector<int>& nodes = nm_.cable_nodes[k];
+    double l = 0.0, rate = 0.0;
+    for (size_t i = 0; i + 1 < nodes.size(); ++i)
+    {
+      const Vec3 d = position(nodes[i + 1]) - position(nodes[i]);
+      const double li = d.norm();
+      l += li;
+      if (li > 0.0)
+        rate += d.dot(velocity(nodes[i + 1]) - velocity(nodes[i])) / li;
+    }
+    const CableState cs = cableLaw(c, l, rate, u, true);
+    e.elastic += cablePotentialEnergy(c, cs);
+    if (c.damping > 0.0 && !cs.slack)
+      e.damping_power += cs.damping_tension * cs.damping_tension / c.damping;
+    if (c.actuator >= 0 && c.actuator < static_cast<int>(u.size()))
+      e.actuator_power += (cablePullInForce(c, cs) + (cs.slack ? 0.0 : cs.damping_tension)) * u[c.actuator].rate;
+  }
+  for (const ContactPairState& st : contactsAt(s))
+  {
+    e.elastic += contactElasticEnergy(model_, st);
+    e.contact_power += (st.normal_force - contactElasticNormalForce(model_, st)) * st.penetration_rate +
+                       st.friction_force * st.slip_speed;
+  }
+  // the drives: a driven row's force -lambda along its direction at the rate s_dot; a driven node's reaction
+  const int struts = static_cast<int>(nm_.struts.size());
+  for (size_t k = 0; k < nm_.rows.size(); ++k)
+    if (nm_.rows[k].actuator >= 0)
+      e.actuator_power -= s.lambda(struts + static_cast<int>(k)) * u[nm_.rows[k].actuator].rate;
+  bool driven = false;
+  for (const NaturalNode& nd : nm_.nodes)
+    driven = driven || (nd.kind == NaturalNode::Kind::kDriven && u[nd.actuator].rate != 0.0);
+  if (driven)
+  {
+    drivenReactions(s, u);
+    for (size_t i = 0; i < nm_.nodes.size(); ++i)
+      if (nm_.nodes[i].kind == NaturalNode::Kind::kDriven)
+        e.actuator_power += reaction_along_[i] * u[nm_.nodes[i].actuator].rate;
+  }
+  return e;
 }
 
 void NaturalSolver::appliedForces(const Eigen::VectorXd& x, const Eigen::VectorXd& v, const ActuationValues& u,
@@ -1270,6 +1363,7 @@ Summary NaturalSolver::setExternalLoads(const std::vector<PointLoad>& loads, Nat
   for (const PointLoad& l : loads)
     converted.push_back(naturalLoad(nm_, l));
   external_ = std::move(converted);
+  start_energy_valid_ = false;
   history_count_ = 0;
   last_end_t_ = -1.0;
   return initialize(s, law);
@@ -1602,13 +1696,44 @@ Summary NaturalSolver::advanceTo(NaturalState& s, double t_end, const ActuationL
       h_next_ = std::max(options_.dt_min, h * std::clamp(kSafety * std::cbrt(1.0 / err), kMinShrink, kSafety));
       continue;
     }
+    // a step that gained energy no force accounts for did not resolve a stiff event (a contact or a cable going taut
+    // within it), one that lost it in contact damped an impact numerically: halved, as a failed step
+    const ActuationValues u_end = u_;  // (tryStep left the trial's end in u_)
+    if (!start_energy_valid_ || start_energy_t_ != s.t)
+    {
+      law(s.t, u_start_);
+      start_energy_ = energyAt(s, u_start_);
+      start_energy_t_ = s.t;
+      start_energy_valid_ = true;
+    }
+    const EnergyPoint end_energy = energyAt(trial_, u_end);
+    u_ = u_end;
+    double mass = 0.0;
+    for (const Body& b : model_.bodies)
+      mass += b.mass;
+    const double v_round = 2.0 * std::numeric_limits<double>::epsilon() * (1.0 + s.x.lpNorm<Eigen::Infinity>()) / h;
+    const StepEnergyCheck energy =
+        checkStepEnergy(start_energy_, end_energy, h, options_.energy_tolerance, 0.5 * mass * v_round * v_round,
+                        in_contact_ || !trial_.touching.empty());
+    if (!at_min && !energy.ok())
+    {
+      ++stats_.rejected_energy;
+      h_next_ = std::max(options_.dt_min, 0.5 * h);
+      energy_bound_ = kEnergyMargin * h;
+      continue;
+    }
     std::swap(s, trial_);
+    start_energy_ = end_energy;
+    start_energy_t_ = s.t;
+    in_contact_ = !s.touching.empty();
     if (on_step)
       on_step(s);
     double ratio = std::clamp(kSafety * std::cbrt(1.0 / std::max(err, 1e-12)), kMinShrink, kMaxGrowth);
     if (ratio >= 1.0 && ratio <= kKeepBand)
       ratio = 1.0;
-    const double proposal = std::clamp(h * ratio, options_.dt_min, options_.dt_max);
+    energy_bound_ *= kEnergyRelease;
+    const double proposal =
+        std::clamp(std::min(h * ratio, std::max(energy_bound_, h)), options_.dt_min, options_.dt_max);
     if (!clipped || proposal < h)
       h_next_ = proposal;
   }

@@ -2,11 +2,13 @@
 // matrix against the rigid strut's kinetic energy, agreement with the body coordinates through contact, refusals.
 #include <gtest/gtest.h>
 
+#include <cstdio>
 #include <random>
 #include <string>
 
 #include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/cable.h"
+#include "active_tensegrity/core/energy.h"
 #include "active_tensegrity/core/natural.h"
 #include "active_tensegrity/core/scene.h"
 #include "active_tensegrity/core/state.h"
@@ -363,6 +365,125 @@ TEST(Natural, ActuationForcesAgreeWithBodyCoordinatesAndTheDrivenBodysBalance)
     }
     EXPECT_GT(taut, 0) << "the pull cable is taut at some of the instants";
   }
+}
+
+namespace
+{
+// the energy account of a natural-coordinate run at fixed steps (or adaptive ones): actuator work, contact and damper
+// dissipation and the integrator's own, summed by the trapezoidal rule over the accepted steps
+struct NaturalAccount
+{
+  double work = 0.0, contact = 0.0, damping = 0.0, numerical = 0.0, most_gain = 0.0;
+  EnergyPoint start, end;
+  NaturalStats stats;
+};
+
+NaturalAccount naturalAccount(const Model& model, double t_end)
+{
+  const NaturalModel nm = buildNaturalModel(model);
+  NaturalSolver solver(nm, model.solver);
+  const ActuationLaw law = [&model](double t) { return scheduledActuation(model, t); };
+  NaturalState s = naturalInitialState(nm);
+  EXPECT_TRUE(solver.initialize(s, law).ok());
+  NaturalAccount a;
+  a.start = solver.energyAt(s, scheduledActuation(model, s.t));
+  EnergyPoint last = a.start;
+  double last_t = s.t;
+  const Summary r = solver.advanceTo(s, t_end, law,
+                                     [&](const NaturalState& e)
+                                     {
+                                       const EnergyPoint p = solver.energyAt(e, scheduledActuation(model, e.t));
+                                       const double h = e.t - last_t;
+                                       a.work += 0.5 * h * (last.actuator_power + p.actuator_power);
+                                       a.contact += 0.5 * h * (last.contact_power + p.contact_power);
+                                       a.damping += 0.5 * h * (last.damping_power + p.damping_power);
+                                       const double d = stepNumericalDissipation(last, p, h);
+                                       a.numerical += d;
+                                       a.most_gain = std::max(a.most_gain, -d);
+                                       last = p;
+                                       last_t = e.t;
+                                     });
+  EXPECT_TRUE(r.ok()) << r.message;
+  a.end = last;
+  a.stats = solver.stats();
+  return a;
+}
+}  // namespace
+
+TEST(Natural, EnergyAccountAgreesWithBodyCoordinatesAndCloses)
+{
+  // the linear-law quadruplex driven into contact (driven rows): at the start the prestress's elastic energy is the
+  // body coordinates'; over the run the actuators' work is the body coordinates' and the integrator's own share
+  // vanishes with the step (as EnergyAccount.ClosesAsTheStepShrinks has it for the body coordinates)
+  Model model = scene("quadruplex_linear_contact.yaml");
+  {
+    const State bs = initialState(model);
+    const System system(model);
+    const EnergyPoint body = energyPoint(system, bs, {});
+    const NaturalModel nm = buildNaturalModel(model);
+    NaturalSolver solver(nm, model.solver);
+    const NaturalState ns = naturalInitialState(nm);
+    const EnergyPoint natural = solver.energyAt(ns, scheduledActuation(model, 0.0));
+    ASSERT_GT(body.elastic, 1.0);
+    EXPECT_NEAR(natural.elastic, body.elastic, 1e-12 * body.elastic);
+    EXPECT_EQ(natural.kinetic, 0.0);
+    EXPECT_EQ(natural.gravity, 0.0);
+  }
+  double numerical[2], work[2];
+  const double steps[2] = { 1e-4, 2.5e-5 };
+  for (int i = 0; i < 2; ++i)
+  {
+    model.solver.dt = steps[i];
+    const NaturalAccount a = naturalAccount(model, model.analysis.duration);
+    numerical[i] = a.numerical;
+    work[i] = a.work;
+    EXPECT_GT(a.contact, 0.01 * a.work);
+    EXPECT_EQ(a.damping, 0.0);
+    std::printf("[ measured ] natural, dt %g s: actuator work %.6f J, contact %.6f J, numerical %.3e J\n", steps[i],
+                a.work, a.contact, a.numerical);
+  }
+  EXPECT_GT(work[0], 1000.0);
+  EXPECT_NEAR(work[0], work[1], 1e-3 * work[1]);
+  EXPECT_LT(std::abs(numerical[1]), 0.1 * std::abs(numerical[0]));
+  EXPECT_LT(std::abs(numerical[1]), 1e-6 * work[1]);
+  model.solver.dt = 1e-4;
+  const RunResult body = runAnalysis(model, [](const State&) {});
+  ASSERT_TRUE(body.summary.ok());
+  EXPECT_NEAR(work[0], body.energy.actuator_work, 1e-4 * body.energy.actuator_work);
+}
+
+TEST(Natural, DrivenBodiesWorkClosesTheTowersAccount)
+{
+  // the tower folded by its guided driven bodies (their reactions' power) at the trapezoidal rule: the drives' work,
+  // less what friction and the contacts take, is what the structure gains, to the integrator's share
+  const Model model = scene("tower.yaml", { { "analysis.type", "dynamic" },
+                                            { "solver.integrator", "newmark" },
+                                            { "solver.newmark.gamma", "0.5" },
+                                            { "solver.newmark.beta", "0.25" },
+                                            { "solver.dt", "1e-4" } });
+  const NaturalAccount a = naturalAccount(model, 2.5);
+  const double gained = a.end.total() - a.start.total();
+  std::printf("[ measured ] tower: drives' work %.4f J, contact %.4f J, gained %.4f J, numerical %.3e J\n", a.work,
+              a.contact, gained, a.numerical);
+  ASSERT_GT(std::abs(a.work), 1.0);
+  EXPECT_LT(std::abs(a.numerical), 5e-3 * std::abs(a.work)) << "a drive power of the wrong sign leaves twice the work";
+}
+
+TEST(Natural, AdaptiveStepsRefuseWhatGainsEnergy)
+{
+  // the linear-law quadruplex into contact with a loose error tolerance: the error control alone takes steps through
+  // the stiff contact that gain energy; the energy check halves them
+  Model model =
+      scene("quadruplex_linear_contact.yaml", { { "solver.adaptive", "true" }, { "solver.error_tolerance", "1e-2" } });
+  const NaturalAccount checked = naturalAccount(model, model.analysis.duration);
+  model.solver.energy_tolerance = 1e9;
+  const NaturalAccount unchecked = naturalAccount(model, model.analysis.duration);
+  std::printf("[ measured ] adaptive, tolerance 1e-2: refused for energy %ld, largest gain in a step %.3e J (without "
+              "the check %.3e J)\n",
+              checked.stats.rejected_energy, checked.most_gain, unchecked.most_gain);
+  EXPECT_GT(checked.stats.rejected_energy, 0);
+  EXPECT_EQ(unchecked.stats.rejected_energy, 0);
+  EXPECT_LT(checked.most_gain, unchecked.most_gain);
 }
 
 TEST(Natural, GeneralizedAlphaConvergesAtSecondOrder)

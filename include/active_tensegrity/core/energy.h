@@ -5,11 +5,18 @@
 
 #include <vector>
 
+#include "active_tensegrity/core/cable.h"
 #include "active_tensegrity/core/contact.h"
 #include "active_tensegrity/core/state.h"
 
 namespace active_tensegrity::core
 {
+/// The elastic part of a contact's normal force (N): what its elastic energy is the integral of.
+double contactElasticNormalForce(const Model& model, const ContactPairState& st);
+/// A cable's elastic energy's derivative with respect to the pull-in s at fixed positions (N): the tension's elastic
+/// part, plus, for a material cable (k = EA / l0, l0 shortening with s), (1/2) k stretch^2 / l0.
+double cablePullInForce(const Cable& cable, const CableState& s);
+
 /// The energy of one state (J) and the powers acting on it there (W).
 struct EnergyPoint
 {

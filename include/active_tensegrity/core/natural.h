@@ -18,11 +18,12 @@
 ///
 /// This is a second formulation measured against the body coordinates (state.h, dynamics.h) by
 /// `tensegrity_bench natural`: dynamics with the scene's point loads and forces from outside (on strut axes and point
-/// masses), with Newmark or generalized-alpha at fixed or adaptive steps (no energy check).
+/// masses), with Newmark or generalized-alpha at fixed or adaptive steps (error, onset and energy control).
 #pragma once
 
 #include <array>
 #include <functional>
+#include <limits>
 #include <vector>
 
 #include <Eigen/Core>
@@ -33,6 +34,7 @@
 #include "active_tensegrity/core/broad_phase.h"
 #include "active_tensegrity/core/contact.h"
 #include "active_tensegrity/core/dynamics.h"
+#include "active_tensegrity/core/energy.h"
 #include "active_tensegrity/core/model.h"
 #include "active_tensegrity/core/summary.h"
 
@@ -182,7 +184,7 @@ struct NaturalStats
   long factorizations = 0;
   long analyses = 0;             // orderings and symbolic analyses of a sparse Newton matrix (a new pattern)
   long contact_evaluations = 0;  // pair evaluations in contact (force, with or without tangents)
-  long rejected_error = 0, rejected_onset = 0, rejected_solver = 0;
+  long rejected_error = 0, rejected_onset = 0, rejected_solver = 0, rejected_energy = 0;
 };
 
 /// Index-3 Newmark or generalized-alpha in natural coordinates with modified Newton, by the body solver's rules
@@ -207,7 +209,7 @@ public:
   /// One step of h; on failure s is unchanged.
   Summary tryStep(NaturalState& s, double h, const ActuationLaw& law);
   /// Fixed steps of options.dt to t_end (a failed step is halved up to max_step_cuts times), or adaptive steps
-  /// when options.adaptive (error and onset control as AdaptiveStepper's, no energy check). on_step after each.
+  /// when options.adaptive (error, onset and energy control as AdaptiveStepper's). on_step after each.
   Summary advanceTo(NaturalState& s, double t_end, const ActuationLaw& law,
                     const std::function<void(const NaturalState&)>& on_step = {});
 
@@ -220,6 +222,12 @@ public:
   /// along its direction at each node it drives, the reaction that prescribes the node's motion, or a driven row's
   /// multiplier; plus the tension of each cable it pulls in.
   double actuationForce(const NaturalState& s, const ActuationValues& u, int actuator);
+
+  /// The energy of s and the powers acting on it (energy.h's account; s the state the last step ended in, or
+  /// initialized): translation and rotation of every strut (its spin included) and point mass, cables and contacts,
+  /// the weight and the point loads, the drives' power (pulled cables, driven rows and driven nodes), the dampers' and
+  /// contacts' dissipation.
+  EnergyPoint energyAt(const NaturalState& s, const ActuationValues& u);
 
   /// The touching contacts at s, the end of the last accepted step (those the solver keeps listed: all within its
   /// margin), with their impact speeds.
@@ -311,6 +319,17 @@ private:
   }
   std::vector<Vec3>* held_ = nullptr;  // forces() collects the fixed and driven nodes' forces here when set
   std::vector<Vec3> held_force_;
+  // the adaptive steps' energy check: the energy where the step starts, whether contacts touched there, the bound on
+  // the steps after a refusal
+  EnergyPoint start_energy_;
+  double start_energy_t_ = 0.0;
+  bool start_energy_valid_ = false;
+  bool in_contact_ = false;
+  double energy_bound_ = std::numeric_limits<double>::infinity();
+  ActuationValues u_start_;
+  std::vector<double> reaction_along_;  // per driven node: its reaction along its direction (drivenReactions)
+  /// The reactions of every driven node at s under u into reaction_along_.
+  void drivenReactions(const NaturalState& s, const ActuationValues& u);
   std::vector<Vec3> pos_, vel_;  // every node's position and velocity at the iterate (forces())
   Entries entries_;
   Eigen::SparseMatrix<double> sparse_;
