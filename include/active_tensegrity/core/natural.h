@@ -309,7 +309,7 @@ private:
   std::vector<NaturalLoad> external_;  // setExternalLoads
   Eigen::VectorXd f_;                  // applied forces at the iterate
   /// Adds f at node i: to f_ at a free node, to *held_ (when collecting) at a fixed or driven one.
-  void addNodeForce(int i, const Vec3& f)
+  __attribute__((always_inline)) void addNodeForce(int i, const Vec3& f)
   {
     const int col = nm_.nodes[static_cast<size_t>(i)].column;
     if (col >= 0)
