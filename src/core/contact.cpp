@@ -740,6 +740,13 @@ bool passedThrough(const Model& model, int pair, const Eigen::VectorXd& q0, cons
   const Body& bb = model.bodies[body_b];
   const StrutAxis a0 = strutAxis(ba, q0, nullptr), b0 = strutAxis(bb, q0, nullptr);
   const StrutAxis a1 = strutAxis(ba, q1, nullptr), b1 = strutAxis(bb, q1, nullptr);
+  return axesPassedThrough({ a0.centre, a0.axis }, { b0.centre, b0.axis }, { a1.centre, a1.axis },
+                           { b1.centre, b1.axis }, a0.half_length, b0.half_length);
+}
+
+bool axesPassedThrough(const AxisPose& a0, const AxisPose& b0, const AxisPose& a1, const AxisPose& b1, double half_a,
+                       double half_b)
+{
   const Vec3 m0 = a0.axis.cross(b0.axis), m1 = a1.axis.cross(b1.axis);
   if (m0.dot(m1) <= 0.0)
     return false;
@@ -758,8 +765,8 @@ bool passedThrough(const Model& model, int pair, const Eigen::VectorXd& q0, cons
   const Vec3 r = ca - cb;
   const double sa = (ab * db.dot(r) - bbn * da.dot(r)) / det;  // P_a = ca + sa da
   const double sb = (aa * db.dot(r) - ab * da.dot(r)) / det;   // P_b = cb + sb db
-  const double reach_a = a0.half_length / std::sqrt(aa);
-  const double reach_b = b0.half_length / std::sqrt(bbn);
+  const double reach_a = half_a / std::sqrt(aa);
+  const double reach_b = half_b / std::sqrt(bbn);
   return std::abs(sa) <= reach_a && std::abs(sb) <= reach_b;
 }
 

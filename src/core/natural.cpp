@@ -1219,6 +1219,32 @@ Eigen::VectorXd NaturalSolver::solve(const Eigen::VectorXd& rhs)
   return sparse_lu_.solve(rhs);
 }
 
+int NaturalSolver::firstPassedThrough() const
+{
+  // the near strut pairs' axes from the step's start (node_now_, as findNear left them) to the iterate x_
+  for (const int k : near_)
+  {
+    const NaturalContactSlot& c = listed_[k].c;
+    if (c.ground)
+      continue;
+    AxisPose start[2], end[2];
+    for (int i = 0; i < 2; ++i)
+    {
+      const Vec3 a0 = node_now_[static_cast<size_t>(c.nodes[2 * i])],
+                 b0 = node_now_[static_cast<size_t>(c.nodes[2 * i + 1])];
+      const Vec3 a1 = naturalNodePosition(nm_, c.nodes[2 * i], x_, u_);
+      const Vec3 b1 = naturalNodePosition(nm_, c.nodes[2 * i + 1], x_, u_);
+      start[i] = { 0.5 * (a0 + b0), (b0 - a0).normalized() };
+      end[i] = { 0.5 * (a1 + b1), (b1 - a1).normalized() };
+    }
+    const double half_a = 0.5 * nm_.struts[static_cast<size_t>(c.struts[0])].length;
+    const double half_b = 0.5 * nm_.struts[static_cast<size_t>(c.struts[1])].length;
+    if (axesPassedThrough(start[0], start[1], end[0], end[1], half_a, half_b))
+      return c.slot;
+  }
+  return -1;
+}
+
 double NaturalSolver::largestMotion(const Eigen::VectorXd& x0, const Eigen::VectorXd& x1) const
 {
   double most = 0.0;
@@ -1540,6 +1566,16 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
       {
         findNear(s, 2.0 * largestMotion(s.x, x_));
         continue;
+      }
+      // a step that jumps a strut through another is refused (and cut), never accepted silently
+      const int crossed = firstPassedThrough();
+      if (crossed >= 0)
+      {
+        const auto [body_a, body_b] = model_.pairBodies(crossed);
+        out.status = SolveStatus::kPassedThrough;
+        out.message = "struts '" + model_.bodies[body_a].name + "' and '" + model_.bodies[body_b].name +
+                      "' passed through each other";
+        return out;
       }
       // the local error and a new contact's depth
       error_ = 0.0;

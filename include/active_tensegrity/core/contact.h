@@ -126,5 +126,13 @@ const std::string& contactBodyName(const Model& model, int body);
 /// segments at q1 and the struts touched or overlapped at q0 or q1. A common normal a1 x a2 that turned
 /// by more than 90 degrees (motion through a parallel configuration) is not judged.
 bool passedThrough(const Model& model, int pair, const Eigen::VectorXd& q0, const Eigen::VectorXd& q1);
+/// A strut axis at an instant: its centre and unit direction.
+struct AxisPose
+{
+  Vec3 centre, axis;
+};
+/// passedThrough's test on two axes of half-lengths half_a and half_b, each moving linearly from (a0, b0) to (a1, b1).
+bool axesPassedThrough(const AxisPose& a0, const AxisPose& b0, const AxisPose& a1, const AxisPose& b1, double half_a,
+                       double half_b);
 
 }  // namespace active_tensegrity::core

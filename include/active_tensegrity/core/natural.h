@@ -359,6 +359,9 @@ private:
   /// The listed contacts whose gap at s is within 2 * motion (near_, indices into listed_), with the impact speed
   /// each uses in the step.
   void findNear(const NaturalState& s, double motion);
+  /// The slot of the first near strut pair whose axes passed through each other between the step's start and x_, or
+  /// -1.
+  int firstPassedThrough() const;
   /// The largest distance a node moved between x0 and x1.
   double largestMotion(const Eigen::VectorXd& x0, const Eigen::VectorXd& x1) const;
 
