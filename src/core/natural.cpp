@@ -519,7 +519,7 @@ NaturalModel buildNaturalModel(const Model& model, bool spin)
 NaturalState naturalInitialState(const NaturalModel& nm)
 {
   NaturalState s;
-  s.x.resize(nm.coordinates);
+  s.x.setZero(nm.coordinates);  // (a spin rate's entry integrates to the strut's spin angle, 0 at the start)
   for (const NaturalNode& n : nm.nodes)
     if (n.column >= 0)
       s.x.segment<3>(n.column) = n.position0;
@@ -1543,8 +1543,8 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
     // is about theta / (1 - theta) times the increment, theta the largest contraction rate seen with that matrix
     // (floored), and the iteration must contract (theta <= 0.5).
     // (the multipliers to the tolerance relative to their size, above the round-off of phi / (beta h^2))
-    const double lambda_floor =
-        10.0 * std::numeric_limits<double>::epsilon() * (1.0 + s.x.lpNorm<Eigen::Infinity>()) * mass_scale_ / bh2;
+    const double lambda_floor = 10.0 * std::numeric_limits<double>::epsilon() *
+                                (1.0 + s.x.head(nm_.positions).lpNorm<Eigen::Infinity>()) * mass_scale_ / bh2;
     const double lambda_part =
         m > 0 ? correction_.tail(m).lpNorm<Eigen::Infinity>() /
                     (options_.newton_tolerance * (1.0 + lambda_.lpNorm<Eigen::Infinity>()) + lambda_floor) :
@@ -1747,7 +1747,8 @@ Summary NaturalSolver::advanceTo(NaturalState& s, double t_end, const ActuationL
     double mass = 0.0;
     for (const Body& b : model_.bodies)
       mass += b.mass;
-    const double v_round = 2.0 * std::numeric_limits<double>::epsilon() * (1.0 + s.x.lpNorm<Eigen::Infinity>()) / h;
+    const double v_round =
+        2.0 * std::numeric_limits<double>::epsilon() * (1.0 + s.x.head(nm_.positions).lpNorm<Eigen::Infinity>()) / h;
     const StepEnergyCheck energy =
         checkStepEnergy(start_energy_, end_energy, h, options_.energy_tolerance, 0.5 * mass * v_round * v_round,
                         in_contact_ || !trial_.touching.empty());

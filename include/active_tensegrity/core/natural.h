@@ -133,9 +133,9 @@ struct NaturalTouch
 struct NaturalState
 {
   double t = 0.0;
-  Eigen::VectorXd x, v, a;             // free coordinates, velocities and algorithmic accelerations
-  Eigen::VectorXd qdd;                 // accelerations (equal to a with Newmark)
-  Eigen::VectorXd lambda;              // one multiplier per strut, then per NaturalModel::rows entry
+  Eigen::VectorXd x, v, a;  // free coordinates (then each spin rate's angle), velocities, algorithmic accelerations
+  Eigen::VectorXd qdd;      // accelerations (equal to a with Newmark)
+  Eigen::VectorXd lambda;   // one multiplier per strut, then per NaturalModel::rows entry
   std::vector<NaturalTouch> touching;  // the contacts touching, ascending by slot (the others remember nothing)
   /// The impact speed slot remembers (0: not touching).
   double contactSpeed(int slot) const;
