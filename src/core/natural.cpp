@@ -1330,6 +1330,182 @@ void NaturalSolver::findNear(const NaturalState& s, double motion)
   }
 }
 
+// ---- statics ----------------------------------------------------------------------------------------------
+
+Summary NaturalSolver::solveStatic(NaturalState& s, const ActuationValues& u, double reach)
+{
+  Summary out;
+  const int n = nm_.coordinates, m = static_cast<int>(nm_.struts.size() + nm_.rows.size());
+  u_ = u;
+  for (ActuationValue& a : u_)
+    a.rate = a.accel = 0.0;
+  zero_v_.setZero(n);
+  // the contacts within reach of the correction (no contact memory: statics has neither damping nor friction)
+  static_state_.x = s.x;
+  static_state_.v = zero_v_;
+  static_state_.t = std::numeric_limits<double>::quiet_NaN();
+  static_state_.touching.clear();
+  findNear(static_state_, std::max(kNearFloor, reach));
+  x_ = s.x;
+  lambda_ = s.lambda;
+  residual_.resize(n + m);
+  double previous = 0.0;
+  have_lu_ = false;  // (the dynamics' factorization is replaced)
+  for (int it = 0; it < options_.max_iterations; ++it)
+  {
+    // a new tangent at each load step's start (a kept one from the step before contracts slowly on a path that
+    // bends), kept for its iterations while they contract
+    const bool build = it == 0 || it >= 3 || !static_lu_valid_ || !options_.reuse_jacobian;
+    if (build)
+    {
+      entries_.clear(n + m, n + m <= kDenseMost);
+      entries_.k_weight = 1.0;
+      entries_.c_weight = 0.0;
+    }
+    forces(x_, zero_v_, build);
+    contactForces(x_, zero_v_, build);
+    residual_.head(n) = -f_;
+    constraintRows(x_, lambda_, 1.0, 1.0, build);
+    // (no spin in statics: its rows hold the spin entries still)
+    for (const NaturalStrut& st : nm_.struts)
+      if (st.spin >= 0)
+      {
+        residual_(st.spin) = 0.0;
+        if (build)
+          entries_.add(st.spin, st.spin, mass_scale_);
+      }
+    if (build)
+    {
+      if (!factorize(n + m))
+      {
+        static_lu_valid_ = false;
+        out.status = SolveStatus::kSingular;
+        out.message = "natural coordinates: a singular static tangent";
+        return out;
+      }
+      static_lu_valid_ = true;
+      theta_ = 0.0;
+      theta_known_ = false;
+      previous = 0.0;
+      ++stats_.factorizations;
+    }
+    correction_ = solve(-residual_);
+    ++out.iterations;
+    ++stats_.iterations;
+    if (!correction_.allFinite())
+    {
+      static_lu_valid_ = false;
+      out.status = SolveStatus::kNonFinite;
+      out.message = "natural coordinates: a non-finite static correction";
+      return out;
+    }
+    x_.head(nm_.positions) += correction_.head(nm_.positions);
+    lambda_ += correction_.tail(m);
+    const double norm = correction_.head(nm_.positions).lpNorm<Eigen::Infinity>();
+    // (the multipliers to the tolerance relative to their size)
+    const double lambda_part = m > 0 ? correction_.tail(m).lpNorm<Eigen::Infinity>() /
+                                           (options_.newton_tolerance * (1.0 + lambda_.lpNorm<Eigen::Infinity>())) :
+                                       0.0;
+    const double scaled = std::max(norm / options_.newton_tolerance, lambda_part);
+    out.residual = norm;
+    if (!build && previous > 0.0 && scaled > 1e-3)
+    {
+      theta_ = std::max(theta_, scaled / previous);
+      theta_known_ = true;
+    }
+    previous = scaled;
+    const double rate = std::max(theta_, kRateFloor);
+    const double left = build ? scaled : (theta_known_ ? rate / (1.0 - rate) : 1.0) * scaled;
+    if (left <= 1.0 && !(theta_ > 0.5))
+    {
+      // a node went further than the listed contacts allow for: again with the contacts it can reach
+      const double moved = largestMotion(s.x, x_);
+      if (moved > near_motion_)
+      {
+        static_state_.x = s.x;
+        findNear(static_state_, 2.0 * moved);
+        continue;
+      }
+      s.x = x_;
+      s.lambda = lambda_;
+      s.v.setZero(n);
+      s.a.setZero(n);
+      s.qdd.setZero(n);
+      return out;
+    }
+  }
+  static_lu_valid_ = false;
+  out.status = SolveStatus::kMaxIterations;
+  out.message = "natural coordinates: no static equilibrium within solver.max_iterations";
+  return out;
+}
+
+Summary NaturalSolver::followStaticPath(NaturalState& s, const ActuationValues& u0, const ActuationValues& u_end,
+                                        int steps, const std::function<void(const NaturalState&)>& on_step)
+{
+  Summary total;
+  static_lu_valid_ = false;
+  end_t_ = std::numeric_limits<double>::quiet_NaN();  // (no gaps cached from dynamics)
+  const auto at = [&](double w)
+  {
+    ActuationValues u = u0;
+    for (size_t i = 0; i < u.size(); ++i)
+      u[i].value = (1.0 - w) * u0[i].value + w * u_end[i].value;
+    return u;
+  };
+  const double nominal = 1.0 / steps;
+  double w = 0.0, dw = nominal, last_dw = 0.0;
+  Eigen::VectorXd x_last = s.x, lambda_last = s.lambda;
+  int cuts = 0;
+  s.t = 0.0;
+  while (w < 1.0 - 1e-12)
+  {
+    // (never past the next point of the load steps' grid: a cut increment's path comes back onto it)
+    const double next = std::min(1.0, (std::floor(w * steps + 1e-9) + 1.0) / steps);
+    dw = std::min(dw, next - w);
+    // secant predictor from the last two equilibria
+    NaturalState trial = s;
+    if (last_dw > 0.0)
+    {
+      const double f = dw / last_dw;
+      trial.x += f * (s.x - x_last);
+      trial.lambda += f * (s.lambda - lambda_last);
+    }
+    const double reach = 2.0 * largestMotion(s.x, trial.x);
+    const Summary r = solveStatic(trial, at(w + dw), reach);
+    total.iterations += r.iterations;
+    total.residual = r.residual;
+    if (!r.ok())
+    {
+      if (cuts >= options_.max_step_cuts)
+      {
+        total.status = r.status;
+        total.message = r.message + " at path parameter " + std::to_string(w + dw);
+        return total;
+      }
+      ++cuts;
+      ++total.step_cuts;
+      dw *= 0.5;
+      continue;
+    }
+    x_last = s.x;
+    lambda_last = s.lambda;
+    last_dw = dw;
+    w = std::abs(w + dw - next) <= 1e-12 ? next : w + dw;
+    s.x = trial.x;
+    s.lambda = trial.lambda;
+    s.v = trial.v;
+    s.a = trial.a;
+    s.qdd = trial.qdd;
+    s.t = w;
+    if (on_step)
+      on_step(s);
+    cuts = 0;
+    dw = std::min(nominal, 2.0 * dw);
+  }
+  return total;
+}
+
 Summary NaturalSolver::initialize(NaturalState& s, const ActuationLaw& law)
 {
   Summary out;
@@ -1369,6 +1545,7 @@ Summary NaturalSolver::initialize(NaturalState& s, const ActuationLaw& law)
   }
   factorize(n + m);
   have_lu_ = false;  // (not a Newton matrix)
+  static_lu_valid_ = false;
   const Eigen::VectorXd z = solve(rhs);
   if (!z.allFinite())
   {
@@ -1380,6 +1557,55 @@ Summary NaturalSolver::initialize(NaturalState& s, const ActuationLaw& law)
   s.qdd = s.a;
   s.lambda = z.tail(m);
   return out;
+}
+
+void NaturalSolver::constraintRows(const Eigen::VectorXd& x, const Eigen::VectorXd& lambda, double phi_divisor,
+                                   double hessian_weight, bool build)
+{
+  // rows n.. of residual_ get Phi / phi_divisor, its first n entries G^T lambda; with build, entries_ gets G, G^T and
+  // hessian_weight times the rows' second derivatives weighted by lambda (pos_ holds the nodes at x)
+  const int n = nm_.coordinates, m = static_cast<int>(nm_.struts.size() + nm_.rows.size());
+  const int struts = static_cast<int>(nm_.struts.size());
+  for (int k = struts; k < m; ++k)
+  {
+    const NaturalRow& row = nm_.rows[k - struts];
+    const int col = nm_.nodes[row.node].column;
+    residual_(n + k) =
+        (row.direction.dot(x.segment<3>(col)) - row.offset - (row.actuator >= 0 ? u_[row.actuator].value : 0.0)) /
+        phi_divisor;
+    residual_.segment<3>(col) += lambda(k) * row.direction;
+    if (build)
+      entries_.column(col, n + k, row.direction);
+  }
+  for (int k = 0; k < struts; ++k)
+  {
+    const NaturalStrut& st = nm_.struts[k];
+    const Vec3 d = pos_[st.b] - pos_[st.a];
+    residual_(n + k) = (d.squaredNorm() - st.length * st.length) / phi_divisor;
+    const int ca = nm_.nodes[st.a].column, cb = nm_.nodes[st.b].column;
+    const double l2 = 2.0 * lambda(k);
+    if (cb >= 0)
+      residual_.segment<3>(cb) += l2 * d;
+    if (ca >= 0)
+      residual_.segment<3>(ca) -= l2 * d;
+    if (!build)
+      continue;
+    if (cb >= 0)
+    {
+      entries_.column(cb, n + k, 2.0 * d);
+      entries_.diagonal(cb, cb, hessian_weight * l2);
+    }
+    if (ca >= 0)
+    {
+      entries_.column(ca, n + k, -2.0 * d);
+      entries_.diagonal(ca, ca, hessian_weight * l2);
+    }
+    if (ca >= 0 && cb >= 0)
+    {
+      entries_.diagonal(ca, cb, -hessian_weight * l2);
+      entries_.diagonal(cb, ca, -hessian_weight * l2);
+    }
+  }
 }
 
 Summary NaturalSolver::setExternalLoads(const std::vector<PointLoad>& loads, NaturalState& s, const ActuationLaw& law)
@@ -1464,47 +1690,7 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
     forces(x_, v_, build);
     contactForces(x_, v_, build);
     residual_.head(n).noalias() = nm_.mass * acc_ - f_;
-    const int struts = static_cast<int>(nm_.struts.size());
-    for (int k = struts; k < m; ++k)
-    {
-      const NaturalRow& row = nm_.rows[k - struts];
-      const int col = nm_.nodes[row.node].column;
-      residual_(n + k) =
-          (row.direction.dot(x_.segment<3>(col)) - row.offset - (row.actuator >= 0 ? u_[row.actuator].value : 0.0)) /
-          bh2;
-      residual_.segment<3>(col) += lambda_(k) * row.direction;
-      if (build)
-        entries_.column(col, n + k, row.direction);
-    }
-    for (int k = 0; k < struts; ++k)
-    {
-      const NaturalStrut& st = nm_.struts[k];
-      const Vec3 d = pos_[st.b] - pos_[st.a];
-      residual_(n + k) = (d.squaredNorm() - st.length * st.length) / bh2;
-      const int ca = nm_.nodes[st.a].column, cb = nm_.nodes[st.b].column;
-      const double l2 = 2.0 * lambda_(k);
-      if (cb >= 0)
-        residual_.segment<3>(cb) += l2 * d;
-      if (ca >= 0)
-        residual_.segment<3>(ca) -= l2 * d;
-      if (!build)
-        continue;
-      if (cb >= 0)
-      {
-        entries_.column(cb, n + k, 2.0 * d);
-        entries_.diagonal(cb, cb, bh2 * l2);
-      }
-      if (ca >= 0)
-      {
-        entries_.column(ca, n + k, -2.0 * d);
-        entries_.diagonal(ca, ca, bh2 * l2);
-      }
-      if (ca >= 0 && cb >= 0)
-      {
-        entries_.diagonal(ca, cb, -bh2 * l2);
-        entries_.diagonal(cb, ca, -bh2 * l2);
-      }
-    }
+    constraintRows(x_, lambda_, bh2, bh2, build);
     if (build)
     {
       if (!factorize(n + m))
@@ -1515,6 +1701,7 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
         return out;
       }
       have_lu_ = true;
+      static_lu_valid_ = false;
       lu_h_ = h;
       rebuild = false;
       built_this_step = true;

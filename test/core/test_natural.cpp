@@ -12,6 +12,7 @@
 #include "active_tensegrity/core/natural.h"
 #include "active_tensegrity/core/scene.h"
 #include "active_tensegrity/core/state.h"
+#include "active_tensegrity/core/statics.h"
 #include "test_models.h"
 
 using namespace active_tensegrity::core;
@@ -484,6 +485,67 @@ TEST(Natural, AdaptiveStepsRefuseWhatGainsEnergy)
   EXPECT_GT(checked.stats.rejected_energy, 0);
   EXPECT_EQ(unchecked.stats.rejected_energy, 0);
   EXPECT_LT(checked.most_gain, unchecked.most_gain);
+}
+
+TEST(Natural, StaticPathsAgreeWithBodyCoordinates)
+{
+  // the quadruplex compressed to its ultimate configuration (no contact) and the tower folded with contact: the path
+  // of equilibria in natural coordinates (no spin locks) against StaticSolver's. The quadruplex agrees at every load
+  // step, its actuation force too; the unprestressed tower starts as a mechanism (its first equilibria are not
+  // unique), and its fold ends where the body coordinates' does.
+  for (const char* name : { "quadruplex.yaml", "tower.yaml" })
+  {
+    const Model model = scene(name);
+    const int steps = model.analysis.steps;
+    StaticSolver body(model, model.solver);
+    State bs = initialState(model);
+    ASSERT_TRUE(body.solve(bs, bs.u).ok());
+    ActuationValues u_end = bs.u;
+    for (ActuationValue& v : u_end)
+      v.value = model.analysis.max_actuation;
+    std::vector<Eigen::VectorXd> body_path;
+    ASSERT_TRUE(
+        body.followPath(bs, u_end, steps, [&](const State& s, const Summary&) { body_path.push_back(s.q); }).ok());
+    const NaturalModel nm = buildNaturalModel(model);
+    NaturalSolver natural(nm, model.solver);
+    NaturalState ns = naturalInitialState(nm);
+    const ActuationValues u0 = initialState(model).u;
+    ASSERT_TRUE(natural.solveStatic(ns, u0).ok());
+    std::vector<Eigen::VectorXd> natural_path;
+    const auto at = [&](double w)
+    {
+      ActuationValues u = u0;
+      for (size_t i = 0; i < u.size(); ++i)
+        u[i].value = w * u_end[i].value + (1.0 - w) * u0[i].value;
+      return u;
+    };
+    const Summary r = natural.followStaticPath(ns, u0, u_end, steps,
+                                               [&](const NaturalState& s)
+                                               {
+                                                 const double k = s.t * steps;
+                                                 if (std::abs(k - std::round(k)) < 1e-9)
+                                                   natural_path.push_back(naturalToBodyCoordinates(nm, s.x, at(s.t)));
+                                               });
+    ASSERT_TRUE(r.ok()) << name << ": " << r.message;
+    ASSERT_EQ(natural_path.size(), body_path.size()) << name;
+    const auto difference = [&](size_t k)
+    {
+      double most = 0.0;
+      for (const Body& b : model.bodies)
+        most = std::max(most, (natural_path[k].segment<3>(b.offset) - body_path[k].segment<3>(b.offset)).norm());
+      return most;
+    };
+    if (std::string(name) == "quadruplex.yaml")
+    {
+      for (size_t k = 0; k < body_path.size(); ++k)
+        ASSERT_LT(difference(k), 1e-9) << "load step " << k + 1;
+      const double fb = actuationForce(model, bs, 0), fn = natural.actuationForce(ns, u_end, 0);
+      EXPECT_GT(std::abs(fb), 100.0);
+      EXPECT_NEAR(fn, fb, 1e-8 * std::abs(fb));
+    }
+    else
+      EXPECT_LT(difference(body_path.size() - 1), 1e-8) << name << " at the end of the fold";
+  }
 }
 
 TEST(Natural, GeneralizedAlphaConvergesAtSecondOrder)

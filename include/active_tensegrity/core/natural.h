@@ -18,7 +18,8 @@
 ///
 /// This is a second formulation measured against the body coordinates (state.h, dynamics.h) by
 /// `tensegrity_bench natural`: dynamics with the scene's point loads and forces from outside (on strut axes and point
-/// masses), with Newmark or generalized-alpha at fixed or adaptive steps (error, onset and energy control).
+/// masses), with Newmark or generalized-alpha at fixed or adaptive steps (error, onset and energy control); statics and
+/// paths of equilibria without spin locks.
 #pragma once
 
 #include <array>
@@ -213,6 +214,17 @@ public:
   Summary advanceTo(NaturalState& s, double t_end, const ActuationLaw& law,
                     const std::function<void(const NaturalState&)>& on_step = {});
 
+  /// Statics: Newton from s to the equilibrium -F(x, u) + G^T lambda = 0, Phi(x, u) = 0 under the actuation values of u
+  /// (velocities zero: contact without damping or friction, no spin), the contacts within `reach` (m) of s listed;
+  /// modified Newton keeps its factorization while it contracts. On failure s is unchanged.
+  Summary solveStatic(NaturalState& s, const ActuationValues& u, double reach = 0.0);
+  /// The path of equilibria from s (at u0) to u_end in `steps` equal steps of the path parameter w
+  /// (u = (1 - w) u0 + w u_end, s.t = w): a secant predictor from the last two equilibria, solveStatic as the
+  /// corrector, an increment halved (at most solver.max_step_cuts times in a row) when it fails and doubled back after.
+  /// on_step after each equilibrium.
+  Summary followStaticPath(NaturalState& s, const ActuationValues& u0, const ActuationValues& u_end, int steps,
+                           const std::function<void(const NaturalState&)>& on_step = {});
+
   /// The applied forces other than contact (weight, cables and springs, the spinning struts' gyroscopic couples) at
   /// (x, v) under u into `force`, and their tangents K = -dF/dx and C = -dF/dv (dense) when asked.
   void appliedForces(const Eigen::VectorXd& x, const Eigen::VectorXd& v, const ActuationValues& u,
@@ -340,7 +352,10 @@ private:
   bool dense_mode_ = true;
   Eigen::VectorXd residual_, correction_, acc_, lambda_, x_, v_;
   Eigen::VectorXd c0_, x_pred_, v_pred_, a_end_;  // a step's predictors and end accelerations (tryStep)
-  NaturalState trial_;                            // an adaptive step's trial (advanceTo)
+  NaturalState static_state_;                     // solveStatic's listing state (velocities zero, no contact memory)
+  Eigen::VectorXd zero_v_;
+  bool static_lu_valid_ = false;  // whether the factorization is a static tangent (solveStatic)
+  NaturalState trial_;            // an adaptive step's trial (advanceTo)
   struct History
   {
     double t = 0.0;
@@ -359,6 +374,10 @@ private:
   /// The listed contacts whose gap at s is within 2 * motion (near_, indices into listed_), with the impact speed
   /// each uses in the step.
   void findNear(const NaturalState& s, double motion);
+  /// The constraint rows at x (rows n.. of residual_: Phi / phi_divisor; its first n entries: G^T lambda) and, with
+  /// build, G, G^T and hessian_weight sum_k lambda_k Phi_k'' into entries_; pos_ must hold the nodes at x.
+  void constraintRows(const Eigen::VectorXd& x, const Eigen::VectorXd& lambda, double phi_divisor,
+                      double hessian_weight, bool build);
   /// The slot of the first near strut pair whose axes passed through each other between the step's start and x_, or
   /// -1.
   int firstPassedThrough() const;

@@ -19,6 +19,7 @@
 #include "active_tensegrity/core/natural.h"
 #include "active_tensegrity/core/scene.h"
 #include "active_tensegrity/core/state.h"
+#include "active_tensegrity/core/statics.h"
 #include "../cli.h"
 #include "bench.h"
 
@@ -266,6 +267,109 @@ double wallAtError(std::vector<std::pair<double, double>> pts, double e)
   }
   return std::numeric_limits<double>::quiet_NaN();
 }
+// The scene's static path (initial equilibrium, then analysis.steps load steps to analysis.max_actuation) in both
+// formulations: the least wall time of `repeat` runs each, and the largest strut-centre difference over the path.
+int naturalStatics(const std::string& scene, const at::Model& model, int repeat)
+{
+  if (model.analysis.arc_length || model.analysis.load_factor_start != model.analysis.load_factor_end)
+    throw std::invalid_argument("natural statics: arc-length paths and load paths are not compared");
+  const int steps = model.analysis.steps;
+  const auto body = [&](Path* path)
+  {
+    at::StaticSolver solver(model, model.solver);
+    at::State s = at::initialState(model);
+    at::Summary r = solver.solve(s, s.u);
+    if (r.ok())
+    {
+      at::ActuationValues u_end = s.u;
+      for (at::ActuationValue& v : u_end)
+        v.value = model.analysis.max_actuation;
+      r = solver.followPath(s, u_end, steps,
+                            [&](const at::State& st, const at::Summary&)
+                            {
+                              if (path)
+                                path->push_back(centres(model, st.q));
+                            });
+    }
+    return std::make_pair(r, solver.timings().newton_iterations);
+  };
+  const at::NaturalModel nm = at::buildNaturalModel(model);
+  long natural_iterations = 0, natural_factorizations = 0;
+  const auto natural = [&](Path* path)
+  {
+    at::NaturalSolver solver(nm, model.solver);
+    at::NaturalState s = at::naturalInitialState(nm);
+    const at::ActuationValues u0 = at::initialState(model).u;
+    at::Summary r = solver.solveStatic(s, u0);
+    if (r.ok())
+    {
+      at::ActuationValues u_end = u0;
+      for (at::ActuationValue& v : u_end)
+        v.value = model.analysis.max_actuation;
+      r = solver.followStaticPath(s, u0, u_end, steps,
+                                  [&](const at::NaturalState& st)
+                                  {
+                                    // (the equilibria on the load steps' grid: a cut increment adds others)
+                                    const double k = st.t * steps;
+                                    if (!path || std::abs(k - std::round(k)) > 1e-9)
+                                      return;
+                                    at::ActuationValues u = u0;
+                                    for (size_t i = 0; i < u.size(); ++i)
+                                      u[i].value = st.t * u_end[i].value + (1.0 - st.t) * u0[i].value;
+                                    path->push_back(centres(model, at::naturalToBodyCoordinates(nm, st.x, u)));
+                                  });
+    }
+    natural_iterations = solver.stats().iterations;
+    natural_factorizations = solver.stats().factorizations;
+    return std::make_pair(r, natural_iterations);
+  };
+  Path body_path, natural_path;
+  const auto [body_result, body_iterations] = body(&body_path);
+  const auto [natural_result, natural_its] = natural(&natural_path);
+  std::printf("# %s: %s, %s\n", scene.c_str(), cpuModel().c_str(), cpuVectorFlags().c_str());
+  std::printf("# static path, %d load steps to actuation %g: body %s (%zu equilibria), natural %s (%zu equilibria)\n",
+              steps, model.analysis.max_actuation, at::toString(body_result.status), body_path.size(),
+              at::toString(natural_result.status), natural_path.size());
+  if (!body_result.ok() || !natural_result.ok())
+  {
+    std::printf("# body: %s\n# natural: %s\n", body_result.message.c_str(), natural_result.message.c_str());
+    return 3;
+  }
+  double most = 0.0;
+  size_t most_at = 0;
+  for (size_t k = 0; k < std::min(body_path.size(), natural_path.size()); ++k)
+    for (size_t i = 0; i < body_path[k].size(); ++i)
+    {
+      const double d = (body_path[k][i] - natural_path[k][i]).norm();
+      if (d > most)
+      {
+        most = d;
+        most_at = k + 1;
+      }
+    }
+  double body_wall = 1e300, natural_wall = 1e300;
+  for (int r = 0; r < repeat; ++r)
+  {
+    Clock::time_point t0 = Clock::now();
+    body(nullptr);
+    body_wall = std::min(body_wall, seconds(t0, Clock::now()));
+    t0 = Clock::now();
+    natural(nullptr);
+    natural_wall = std::min(natural_wall, seconds(t0, Clock::now()));
+  }
+  std::printf("%-8s %8s %8s %10s %12s\n", "model", "it/step", "fac/step", "wall s", "us/step");
+  std::printf("%-8s %8.2f %8s %10.4f %12.1f\n", "body", double(body_iterations) / steps, "-", body_wall,
+              1e6 * body_wall / steps);
+  std::printf("%-8s %8.2f %8.3f %10.4f %12.1f\n", "natural", double(natural_its) / steps,
+              double(natural_factorizations) / steps, natural_wall, 1e6 * natural_wall / steps);
+  double end = 0.0;
+  if (!body_path.empty() && body_path.size() == natural_path.size())
+    for (size_t i = 0; i < body_path.back().size(); ++i)
+      end = std::max(end, (body_path.back()[i] - natural_path.back()[i]).norm());
+  std::printf("# largest strut-centre difference over the path: %.3e m, at load step %zu; at the end %.3e m\n", most,
+              most_at, end);
+  return 0;
+}
 }  // namespace
 
 int natural(const std::string& scene, const std::vector<std::string>& args)
@@ -302,8 +406,10 @@ int natural(const std::string& scene, const std::vector<std::string>& args)
       throw std::invalid_argument("unknown argument '" + a + "'");
   }
   at::Model base = at::loadScene(scene, overrides);
+  if (base.analysis.type == at::AnalysisType::kStatic)
+    return naturalStatics(scene, base, repeat);
   if (base.analysis.type != at::AnalysisType::kDynamic)
-    throw std::invalid_argument("natural needs a dynamic analysis (--set analysis.type=dynamic)");
+    throw std::invalid_argument("natural compares dynamic and static analyses");
   if (!(base.analysis.output_interval > 0.0))
     base.analysis.output_interval = 0.01;
   at::buildNaturalModel(base);  // (refuses what the natural coordinates do not cover, before any run)
