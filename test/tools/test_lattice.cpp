@@ -316,12 +316,30 @@ TEST(BenchCommand, RefusesBadArgumentsByNameAndValue)
          { "steps config/scenes/prism.yaml --repeat 0", "--repeat: expected a positive integer, got '0'" },
          { "contact-pair --repeat 5x", "'5x'" },
          { "broad-phase --repeat abc", "'abc'" },
-         { "broad-phase --bogus", "'--bogus'" } })
+         { "broad-phase --bogus", "'--bogus'" },
+         { "natural config/scenes/prism.yaml --dts 0", "'0'" },
+         { "natural config/scenes/prism.yaml --tols 1e-5,x", "'x'" },
+         { "natural config/scenes/prism.yaml --bogus", "'--bogus'" },
+         { "natural config/scenes/prism.yaml --set analysis.type=modal", "dynamic and static analyses" },
+         { "natural", "no scene" } })
   {
     const auto [status, out] = bench(args);
     EXPECT_EQ(status, 2) << args << ": " << out;
     EXPECT_NE(out.find(text), std::string::npos) << args << ": " << out;
   }
+}
+
+TEST(NaturalCommand, ComparesAStaticPathAtEveryLoadStep)
+{
+  // the quadruplex's compression in 43 load steps: both formulations' paths, which agree
+  const auto [status, out] = bench("natural config/scenes/quadruplex.yaml --set analysis.steps=43 --repeat 1");
+  ASSERT_EQ(status, 0) << out;
+  EXPECT_NE(out.find("body converged (43 equilibria), natural converged (43 equilibria)"), std::string::npos) << out;
+  const size_t at = out.find("largest strut-centre difference over the path: ");
+  ASSERT_NE(at, std::string::npos) << out;
+  const double difference =
+      std::stod(out.substr(at + std::string("largest strut-centre difference over the path: ").size()));
+  EXPECT_LT(difference, 1e-8) << out;
 }
 
 TEST(LatticeCommand, PrintsARowPerSizeAndTheExponent)

@@ -64,7 +64,8 @@ const Section kSections[] = {
     "  4e-4,2e-4,1e-4 s) and adaptive (tolerances 1e-4,1e-5,1e-6 m), against a fine reference of each at R\n"
     "  (default 2.5e-5 s): steps, Newton iterations, least wall time of N (default 3), errors, and the time\n"
     "  ratio at equal error; --no-spin: the natural coordinates without the struts' spin rates;\n"
-    "  --fixed-only: no adaptive runs.\n" },
+    "  --fixed-only: no adaptive runs. A static scene: its path of equilibria in both, the least wall time\n"
+    "  of N and the largest strut-centre difference over the path.\n" },
   { "stress", "       tensegrity_bench stress [--quick] [--case TEXT]... [--skip TEXT]...\n"
               "  The stability stress cases (docs/benchmarks.md): one row per case; --quick runs the short ones;\n"
               "  --case runs only the cases whose name contains one of the TEXTs, --skip leaves out those that do.\n" },

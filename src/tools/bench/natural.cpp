@@ -5,7 +5,8 @@
 // with the scene's integrator and Newton settings. Each run is compared with a fine reference of
 // the body coordinates (generalized-alpha at R, tolerance 1e-10) on the output grid: the largest error of a strut
 // centre or point mass; the natural coordinates' own fine reference (trapezoidal at R) gives the two models'
-// difference. Wall time is the least of N repeats of the bare stepping loop (no outputs formed in it).
+// difference. Wall time is the least of N repeats of the bare stepping loop (no outputs formed in it). A static scene's
+// path of equilibria is followed in both and compared at every load step.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -403,13 +404,13 @@ int natural(const std::string& scene, const std::vector<std::string>& args)
     else if (a == "--fixed-only")
       tols.clear();
     else
-      throw std::invalid_argument("unknown argument '" + a + "'");
+      throw BadArgument("unknown argument '" + a + "'");
   }
   at::Model base = at::loadScene(scene, overrides);
   if (base.analysis.type == at::AnalysisType::kStatic)
     return naturalStatics(scene, base, repeat);
   if (base.analysis.type != at::AnalysisType::kDynamic)
-    throw std::invalid_argument("natural compares dynamic and static analyses");
+    throw BadArgument("natural compares dynamic and static analyses (analysis.type), not a modal one");
   if (!(base.analysis.output_interval > 0.0))
     base.analysis.output_interval = 0.01;
   at::buildNaturalModel(base);  // (refuses what the natural coordinates do not cover, before any run)

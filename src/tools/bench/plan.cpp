@@ -141,7 +141,7 @@ int plan(const std::string& scene, const std::vector<std::string>& args)
       for (const std::string& v : splitList(next()))
         start_values.push_back(std::stod(v));
     else
-      throw std::invalid_argument("unknown argument '" + a + "'");
+      throw BadArgument("unknown argument '" + a + "'");
   }
   const at::Model model = at::loadScene(scene, overrides);
   at::State start = at::initialState(model);

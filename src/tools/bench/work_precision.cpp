@@ -274,7 +274,7 @@ int workPrecision(const std::string& scene, const std::vector<std::string>& args
     else if (a == "--mujoco-contact-force")
       mujoco_force = tools::parsePositive<double>(a, next());
     else
-      throw std::invalid_argument("unknown argument '" + a + "'");
+      throw BadArgument("unknown argument '" + a + "'");
   }
   std::vector<Scheme> schemes;
   for (const Scheme& sc : workPrecisionSchemes())
