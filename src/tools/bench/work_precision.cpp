@@ -5,7 +5,8 @@
 // (generalized-alpha at R, tolerance 1e-10): largest body-position and layer-height errors, largest
 // actuation-force error (relative to the reference's largest force), error of the peak contact force,
 // of its time and of the contact impulse (time integral of the summed normal forces); with the wall time
-// of the run (callbacks excluded). One CSV row per run.
+// of the run (callbacks excluded). One CSV row per run. The schemes natural_generalized_alpha and
+// adaptive_natural_generalized_alpha (the same in natural coordinates, core/natural.h) run only when named.
 // --mujoco-dts a,b,.. then runs the scene translated into MuJoCo (mujoco_peer.h) over that ladder with each of
 // --mujoco-integrators (default euler,implicit,rk4), rows named mujoco_<integrator>, measured the same way;
 // --mujoco-contact-force F sets its contact stiffness scale (default: the reference's peak contact force).
@@ -13,6 +14,7 @@
 // reference's rows first).
 // (Only when built with MuJoCo, ACTIVE_TENSEGRITY_HAVE_MUJOCO; without it these options exit with status 2.)
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
@@ -22,6 +24,7 @@
 
 #include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/contact.h"
+#include "active_tensegrity/core/natural.h"
 #include "active_tensegrity/core/scene.h"
 #include "active_tensegrity/core/structure_check.h"
 #include "active_tensegrity/core/text.h"
@@ -91,13 +94,86 @@ Trace traceRun(const at::Model& model)
   return tr;
 }
 
-/// One integrator of the work-precision benchmark; adaptive ones run over the tolerance ladder.
+/// traceRun's trace of the same analysis in natural coordinates (core/natural.h): the body coordinates of its
+/// nodes at every output, the first actuator's force, the heights; the contacts' peak and impulse over every step.
+Trace traceNatural(const at::Model& model)
+{
+  Trace tr;
+  const at::NaturalModel nm = at::buildNaturalModel(model);
+  at::NaturalSolver solver(nm, model.solver);
+  const at::ActuationLaw law =
+      at::ActuationLaw::writing([&model](double t, at::ActuationValues& u) { at::scheduledActuation(model, t, u); });
+  at::NaturalState s = at::naturalInitialState(nm);
+  double last_t = 0.0, last_sum = 0.0, callbacks = 0.0;
+  const auto t0 = std::chrono::steady_clock::now();
+  const auto output = [&](const at::NaturalState& st)
+  {
+    const at::ActuationValues u = at::scheduledActuation(model, st.t);
+    const Eigen::VectorXd q = at::naturalToBodyCoordinates(nm, st.x, u);
+    tr.t.push_back(st.t);
+    tr.force.push_back(model.actuators.empty() ? 0.0 : solver.actuationForce(st, u, 0));
+    std::vector<double> h;
+    for (const at::OutputLayer& layer : model.layers)
+      h.push_back(at::nodesHeight(model, layer.nodes, q));
+    if (h.empty())
+      h.push_back(at::structureHeight(model, q));
+    tr.heights.push_back(h);
+    tr.q.push_back(q);
+  };
+  const std::function<void(const at::NaturalState&)> each = [&](const at::NaturalState& st)
+  {
+    const auto c0 = std::chrono::steady_clock::now();
+    double sum = 0.0;
+    for (const at::ContactPairState& c : solver.contactsAt(st))
+    {
+      sum += c.normal_force;
+      if (c.normal_force > tr.peak)
+      {
+        tr.peak = c.normal_force;
+        tr.peak_t = st.t;
+      }
+    }
+    tr.impulse += 0.5 * (sum + last_sum) * (st.t - last_t);
+    last_t = st.t;
+    last_sum = sum;
+    callbacks += std::chrono::duration<double>(std::chrono::steady_clock::now() - c0).count();
+  };
+  at::Summary r = solver.initialize(s, law);
+  if (r.ok())
+    output(s);
+  const double interval = model.analysis.output_interval;
+  const int outputs = static_cast<int>(std::llround(model.analysis.duration / interval));
+  for (int k = 1; k <= outputs && r.ok(); ++k)
+  {
+    const at::Summary step = solver.advanceTo(s, std::min(model.analysis.duration, k * interval), law, each);
+    r.iterations += step.iterations;
+    r.step_cuts += step.step_cuts;
+    if (!step.ok())
+    {
+      r.status = step.status;
+      r.message = step.message;
+      break;
+    }
+    const auto c0 = std::chrono::steady_clock::now();
+    output(s);
+    callbacks += std::chrono::duration<double>(std::chrono::steady_clock::now() - c0).count();
+  }
+  tr.result.summary = r;
+  tr.result.wall_time = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  tr.result.callback_time = callbacks;
+  tr.result.solver_steps = static_cast<int>(solver.stats().steps);
+  return tr;
+}
+
+/// One integrator of the work-precision benchmark; adaptive ones run over the tolerance ladder; `natural` ones in
+/// natural coordinates (core/natural.h, modified Newton).
 struct Scheme
 {
   const char* name;
   at::Integrator integrator;
   double gamma, beta, rho;
   bool reuse, adaptive;
+  bool natural = false;
 };
 
 const std::vector<Scheme>& workPrecisionSchemes()
@@ -109,6 +185,8 @@ const std::vector<Scheme>& workPrecisionSchemes()
     { "newmark_paper_modified_newton", at::Integrator::kNewmark, 0.6, 0.3025, 0.8, true, false },
     { "adaptive_newmark_paper", at::Integrator::kNewmark, 0.6, 0.3025, 0.8, true, true },
     { "adaptive_generalized_alpha", at::Integrator::kGeneralizedAlpha, 0.5, 0.25, 0.8, true, true },
+    { "natural_generalized_alpha", at::Integrator::kGeneralizedAlpha, 0.5, 0.25, 0.8, true, false, true },
+    { "adaptive_natural_generalized_alpha", at::Integrator::kGeneralizedAlpha, 0.5, 0.25, 0.8, true, true, true },
   };
   return schemes;
 }
@@ -278,7 +356,7 @@ int workPrecision(const std::string& scene, const std::vector<std::string>& args
   }
   std::vector<Scheme> schemes;
   for (const Scheme& sc : workPrecisionSchemes())
-    if (names.empty() || std::find(names.begin(), names.end(), sc.name) != names.end())
+    if ((names.empty() && !sc.natural) || std::find(names.begin(), names.end(), sc.name) != names.end())
       schemes.push_back(sc);
   for (const std::string& n : names)
     if (std::none_of(schemes.begin(), schemes.end(), [&](const Scheme& sc) { return n == sc.name; }))
@@ -347,7 +425,8 @@ int workPrecision(const std::string& scene, const std::vector<std::string>& args
     for (double x : sc.adaptive ? tols : dts)
     {
       // adaptive runs start from the scene's dt; dt in the table is then their mean step
-      const Trace tr = traceRun(configure(sc, sc.adaptive ? base.solver.dt : x, tol, x));
+      const at::Model m = configure(sc, sc.adaptive ? base.solver.dt : x, tol, x);
+      const Trace tr = sc.natural ? traceNatural(m) : traceRun(m);
       const Errors e = compare(base, tr, ref);
       const double wall = tr.result.wall_time - tr.result.callback_time;
       const double dt = sc.adaptive ? base.analysis.duration / std::max(1, tr.result.solver_steps) : x;
