@@ -342,6 +342,22 @@ TEST(NaturalCommand, ComparesAStaticPathAtEveryLoadStep)
   EXPECT_LT(difference, 1e-8) << out;
 }
 
+TEST(NaturalCommand, WorkPrecisionRunsTheNaturalSchemesWhenNamed)
+{
+  // 0.35 s of the linear-law quadruplex (its first touch at 0.29 s): a row per step and tolerance, converged; the
+  // natural schemes are not run unless named
+  const std::string scene = "config/scenes/quadruplex_linear_contact.yaml --set analysis.duration=0.35 --ref-dt 1e-4";
+  const auto [status, out] = bench("work-precision " + scene +
+                                   " --schemes natural_generalized_alpha,adaptive_natural_generalized_alpha --dts "
+                                   "1e-3 --tols 1e-5");
+  ASSERT_EQ(status, 0) << out;
+  for (const char* row : { "natural_generalized_alpha,0.001,0,converged,", "adaptive_natural_generalized_alpha," })
+    EXPECT_NE(out.find(row), std::string::npos) << row << "\n" << out;
+  const auto [plain_status, plain] = bench("work-precision " + scene + " --schemes generalized_alpha --dts 1e-3");
+  ASSERT_EQ(plain_status, 0) << plain;
+  EXPECT_EQ(plain.find("natural"), std::string::npos) << plain;
+}
+
 TEST(LatticeCommand, PrintsARowPerSizeAndTheExponent)
 {
   const auto [status, out] = bench("lattice --struts 4,8 --duration 0.005 --repeat 1 --pairs near");
