@@ -1353,8 +1353,8 @@ Summary NaturalSolver::solveStatic(NaturalState& s, const ActuationValues& u, do
   have_lu_ = false;  // (the dynamics' factorization is replaced)
   for (int it = 0; it < options_.max_iterations; ++it)
   {
-    // a new tangent at each load step's start (a kept one from the step before contracts slowly on a path that
-    // bends), kept for its iterations while they contract
+    // a new tangent at each load step's first iteration (a kept one from the step before contracts slowly on a path
+    // that bends), kept for the next two while they contract
     const bool build = it == 0 || it >= 3 || !static_lu_valid_ || !options_.reuse_jacobian;
     if (build)
     {

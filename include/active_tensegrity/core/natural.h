@@ -17,9 +17,9 @@
 /// automatic differentiation of the same kernels (natural.cpp).
 ///
 /// This is a second formulation measured against the body coordinates (state.h, dynamics.h) by
-/// `tensegrity_bench natural`: dynamics with the scene's point loads and forces from outside (on strut axes and point
-/// masses), with Newmark or generalized-alpha at fixed or adaptive steps (error, onset and energy control); statics and
-/// paths of equilibria without spin locks.
+/// `tensegrity_bench natural` and `work-precision`: dynamics with the scene's point loads and forces from outside (on
+/// strut axes and point masses), with Newmark or generalized-alpha at fixed or adaptive steps (error, onset and energy
+/// control); statics and paths of equilibria without spin locks.
 #pragma once
 
 #include <array>
