@@ -1330,6 +1330,29 @@ void NaturalSolver::findNear(const NaturalState& s, double motion)
   }
 }
 
+double NaturalSolver::errorLeft(double scaled, bool kept, bool fresh, double& previous)
+{
+  // A Newton step's increment (a matrix built for it) is its error; with an older matrix the error left is about
+  // theta / (1 - theta) times the increment, theta the largest contraction rate seen with that matrix (floored), and
+  // the iteration must contract (contracting()).
+  if (kept && previous > 0.0 && scaled > 1e-3)
+  {
+    theta_ = std::max(theta_, scaled / previous);
+    theta_known_ = true;
+  }
+  previous = scaled;
+  const double rate = std::max(theta_, kRateFloor);
+  return fresh ? scaled : (theta_known_ ? rate / (1.0 - rate) : 1.0) * scaled;
+}
+
+void NaturalSolver::freshMatrix(double& previous)
+{
+  theta_ = 0.0;
+  theta_known_ = false;
+  previous = 0.0;
+  ++stats_.factorizations;
+}
+
 // ---- statics ----------------------------------------------------------------------------------------------
 
 Summary NaturalSolver::solveStatic(NaturalState& s, const ActuationValues& u, double reach)
@@ -1384,10 +1407,7 @@ Summary NaturalSolver::solveStatic(NaturalState& s, const ActuationValues& u, do
         return out;
       }
       static_lu_valid_ = true;
-      theta_ = 0.0;
-      theta_known_ = false;
-      previous = 0.0;
-      ++stats_.factorizations;
+      freshMatrix(previous);
     }
     correction_ = solve(-residual_);
     ++out.iterations;
@@ -1408,15 +1428,7 @@ Summary NaturalSolver::solveStatic(NaturalState& s, const ActuationValues& u, do
                                        0.0;
     const double scaled = std::max(norm / options_.newton_tolerance, lambda_part);
     out.residual = norm;
-    if (!build && previous > 0.0 && scaled > 1e-3)
-    {
-      theta_ = std::max(theta_, scaled / previous);
-      theta_known_ = true;
-    }
-    previous = scaled;
-    const double rate = std::max(theta_, kRateFloor);
-    const double left = build ? scaled : (theta_known_ ? rate / (1.0 - rate) : 1.0) * scaled;
-    if (left <= 1.0 && !(theta_ > 0.5))
+    if (errorLeft(scaled, !build, build, previous) <= 1.0 && contracting())
     {
       // a node went further than the listed contacts allow for: again with the contacts it can reach
       const double moved = largestMotion(s.x, x_);
@@ -1707,10 +1719,7 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
       built_this_step = true;
       factor_age_ = 0;
       factor_contacts_ = touching_;
-      theta_ = 0.0;
-      theta_known_ = false;
-      previous = 0.0;
-      ++stats_.factorizations;
+      freshMatrix(previous);
     }
     correction_ = solve(-residual_);
     ++out.iterations;
@@ -1726,9 +1735,6 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
     lambda_ += correction_.tail(m);
     const double norm = bh2 * correction_.head(n).lpNorm<Eigen::Infinity>();
     out.residual = norm;
-    // A Newton step's increment (a matrix built in this step) is its error; with an older matrix the error left
-    // is about theta / (1 - theta) times the increment, theta the largest contraction rate seen with that matrix
-    // (floored), and the iteration must contract (theta <= 0.5).
     // (the multipliers to the tolerance relative to their size, above the round-off of phi / (beta h^2))
     const double lambda_floor = 10.0 * std::numeric_limits<double>::epsilon() *
                                 (1.0 + s.x.head(nm_.positions).lpNorm<Eigen::Infinity>()) * mass_scale_ / bh2;
@@ -1737,15 +1743,7 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
                     (options_.newton_tolerance * (1.0 + lambda_.lpNorm<Eigen::Infinity>()) + lambda_floor) :
                 0.0;
     const double scaled = std::max(norm / options_.newton_tolerance, lambda_part);
-    if (!build && previous > 0.0 && scaled > 1e-3)
-    {
-      theta_ = std::max(theta_, scaled / previous);
-      theta_known_ = true;
-    }
-    previous = scaled;
-    const double rate = std::max(theta_, kRateFloor);
-    const double left = built_this_step ? scaled : (theta_known_ ? rate / (1.0 - rate) : 1.0) * scaled;
-    if (left <= 1.0 && !(theta_ > 0.5))
+    if (errorLeft(scaled, !build, built_this_step, previous) <= 1.0 && contracting())
     {
       x_ = x_pred_ + bh2 * acc_;
       // a node went further than the near pairs allow for: again with the pairs it can reach

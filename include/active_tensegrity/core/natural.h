@@ -374,6 +374,17 @@ private:
   /// The listed contacts whose gap at s is within 2 * motion (near_, indices into listed_), with the impact speed
   /// each uses in the step.
   void findNear(const NaturalState& s, double motion);
+  /// Modified Newton's acceptance: the increment `scaled` (in tolerances), made with a kept matrix (`kept`: it updates
+  /// the largest contraction rate seen with it) or with one built for this step (`fresh`); the error it leaves, in
+  /// tolerances. `previous`: the last increment with the same matrix.
+  double errorLeft(double scaled, bool kept, bool fresh, double& previous);
+  /// Whether the iteration contracts (the largest rate seen with the matrix at most 0.5).
+  bool contracting() const
+  {
+    return !(theta_ > 0.5);
+  }
+  /// A new factorization: its contraction rate unknown.
+  void freshMatrix(double& previous);
   /// The constraint rows at x (rows n.. of residual_: Phi / phi_divisor; its first n entries: G^T lambda) and, with
   /// build, G, G^T and hessian_weight sum_k lambda_k Phi_k'' into entries_; pos_ must hold the nodes at x.
   void constraintRows(const Eigen::VectorXd& x, const Eigen::VectorXd& lambda, double phi_divisor,
