@@ -281,6 +281,12 @@ TEST(LatticeSizes, LadderComesCloseToTheTargets)
 #ifdef TENSEGRITY_BENCH_PATH
 namespace
 {
+// a shipped scene's path (the tests run from anywhere)
+std::string scenePath(const std::string& name)
+{
+  return std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) + "/config/scenes/" + name;
+}
+
 // exit status and output (stdout and stderr) of tensegrity_bench with the arguments
 std::pair<int, std::string> bench(const std::string& args)
 {
@@ -317,10 +323,10 @@ TEST(BenchCommand, RefusesBadArgumentsByNameAndValue)
          { "contact-pair --repeat 5x", "'5x'" },
          { "broad-phase --repeat abc", "'abc'" },
          { "broad-phase --bogus", "'--bogus'" },
-         { "natural config/scenes/prism.yaml --dts 0", "'0'" },
-         { "natural config/scenes/prism.yaml --tols 1e-5,x", "'x'" },
-         { "natural config/scenes/prism.yaml --bogus", "'--bogus'" },
-         { "natural config/scenes/prism.yaml --set analysis.type=modal", "dynamic and static analyses" },
+         { "natural " + scenePath("prism.yaml") + " --dts 0", "'0'" },
+         { "natural " + scenePath("prism.yaml") + " --tols 1e-5,x", "'x'" },
+         { "natural " + scenePath("prism.yaml") + " --bogus", "'--bogus'" },
+         { "natural " + scenePath("prism.yaml") + " --set analysis.type=modal", "dynamic and static analyses" },
          { "natural", "no scene" } })
   {
     const auto [status, out] = bench(args);
@@ -332,7 +338,7 @@ TEST(BenchCommand, RefusesBadArgumentsByNameAndValue)
 TEST(NaturalCommand, ComparesAStaticPathAtEveryLoadStep)
 {
   // the quadruplex's compression in 43 load steps: both formulations' paths, which agree
-  const auto [status, out] = bench("natural config/scenes/quadruplex.yaml --set analysis.steps=43 --repeat 1");
+  const auto [status, out] = bench("natural " + scenePath("quadruplex.yaml") + " --set analysis.steps=43 --repeat 1");
   ASSERT_EQ(status, 0) << out;
   EXPECT_NE(out.find("body converged (43 equilibria), natural converged (43 equilibria)"), std::string::npos) << out;
   const size_t at = out.find("largest strut-centre difference over the path: ");
@@ -346,7 +352,7 @@ TEST(NaturalCommand, WorkPrecisionRunsTheNaturalSchemesWhenNamed)
 {
   // 0.35 s of the linear-law quadruplex (its first touch at 0.29 s): a row per step and tolerance, converged; the
   // natural schemes are not run unless named
-  const std::string scene = "config/scenes/quadruplex_linear_contact.yaml --set analysis.duration=0.35 --ref-dt 1e-4";
+  const std::string scene = scenePath("quadruplex_linear_contact.yaml") + " --set analysis.duration=0.35 --ref-dt 1e-4";
   const auto [status, out] = bench("work-precision " + scene +
                                    " --schemes natural_generalized_alpha,adaptive_natural_generalized_alpha --dts "
                                    "1e-3 --tols 1e-5");
