@@ -21,10 +21,72 @@ constexpr double kEnergyMargin = 0.9;
 constexpr double kEnergyRelease = 1.01;
 }  // namespace
 
+StepSizeControl::StepSizeControl(const SolverOptions& options)
+  : options_(options), h_(std::clamp(options.dt, options.dt_min, options.dt_max))
+{
+}
+
+StepSizeControl::Trial StepSizeControl::next(double remaining) const
+{
+  // land on the end without a sliver of a step: the last one or two steps share what is left
+  Trial t;
+  t.h = std::min(h_, options_.dt_max);
+  // (what is left is never split into pieces below dt_min: the callers' stops are dt_min apart at least)
+  const bool indivisible = 0.5 * remaining < options_.dt_min;
+  if (remaining <= 1.05 * t.h || indivisible)
+  {
+    t.clipped = remaining < t.h;
+    t.h = remaining;
+  }
+  else if (remaining < 2.0 * t.h)
+  {
+    t.h = 0.5 * remaining;
+    t.clipped = true;
+  }
+  t.at_min = t.h <= options_.dt_min * (1.0 + 1e-9) || (indivisible && t.h == remaining);
+  return t;
+}
+
+void StepSizeControl::failed(double h)
+{
+  h_ = std::max(options_.dt_min, 0.5 * h);
+}
+
+void StepSizeControl::tooDeep(double h, double onset_gap, double onset_depth)
+{
+  // the gap closed from onset_gap to -onset_depth: aim at half the allowed depth
+  const double fraction = (onset_gap + 0.5 * options_.onset_depth) / (onset_gap + onset_depth);
+  h_ = std::max(options_.dt_min, h * std::clamp(fraction, 0.02, 0.9));
+}
+
+void StepSizeControl::tooLarge(double h, double err)
+{
+  h_ = std::max(options_.dt_min, h * std::clamp(kSafety * std::cbrt(1.0 / err), kMinShrink, kSafety));
+}
+
+void StepSizeControl::energyRefused(double h)
+{
+  h_ = std::max(options_.dt_min, 0.5 * h);
+  energy_bound_ = kEnergyMargin * h;
+}
+
+void StepSizeControl::accepted(const Trial& t, double err)
+{
+  double ratio = std::clamp(kSafety * std::cbrt(1.0 / std::max(err, 1e-12)), kMinShrink, kMaxGrowth);
+  if (ratio >= 1.0 && ratio <= kKeepBand)
+    ratio = 1.0;
+  energy_bound_ *= kEnergyRelease;
+  const double proposal =
+      std::clamp(std::min(t.h * ratio, std::max(energy_bound_, t.h)), options_.dt_min, options_.dt_max);
+  // a step shortened to land on the end says little about the longer one: only shrink from it
+  if (!t.clipped || proposal < t.h)
+    h_ = proposal;
+}
+
 AdaptiveStepper::AdaptiveStepper(DynamicsSolver& solver, const SolverOptions& options)
   : solver_(solver)
   , options_(options)
-  , h_(std::clamp(options.dt, options.dt_min, options.dt_max))
+  , control_(options)
   , energy_meter_(solver.system())
   , contacts_(std::make_unique<ContactScan>(solver.system().model()))
 {
@@ -59,23 +121,9 @@ Summary AdaptiveStepper::advanceTo(State& s, double t_end, const ActuationLaw& l
   const double eps = 1e-12 * std::max(1.0, std::abs(t_end));
   while (t_end - s.t > eps)
   {
-    // land on t_end without a sliver of a step: the last one or two steps share what is left
-    const double remaining = t_end - s.t;
-    double h = std::min(h_, options_.dt_max);
-    bool clipped = false;
-    // (what is left is never split into pieces below dt_min: the callers' stops are dt_min apart at least)
-    const bool indivisible = 0.5 * remaining < options_.dt_min;
-    if (remaining <= 1.05 * h || indivisible)
-    {
-      clipped = remaining < h;
-      h = remaining;
-    }
-    else if (remaining < 2.0 * h)
-    {
-      h = 0.5 * remaining;
-      clipped = true;
-    }
-    const bool at_min = h <= options_.dt_min * (1.0 + 1e-9) || (indivisible && h == remaining);
+    const StepSizeControl::Trial step = control_.next(t_end - s.t);
+    const double h = step.h;
+    const bool at_min = step.at_min;
     trial_ = s;
     const Summary r = solver_.tryStep(trial_, h, law);
     total.iterations += r.iterations;
@@ -94,25 +142,23 @@ Summary AdaptiveStepper::advanceTo(State& s, double t_end, const ActuationLaw& l
         total.message = msg.str();
         return total;
       }
-      h_ = std::max(options_.dt_min, 0.5 * h);
+      control_.failed(h);
       continue;
     }
     const StepEstimate& e = solver_.estimate();
     const double err = e.error / options_.error_tolerance;
     if (!at_min && e.onset_depth > options_.onset_depth)
     {
-      // the gap closed from onset_gap to -onset_depth: aim at half the allowed depth
       ++stats_.rejected_onset;
       solver_.stepRefused();
-      const double fraction = (e.onset_gap + 0.5 * options_.onset_depth) / (e.onset_gap + e.onset_depth);
-      h_ = std::max(options_.dt_min, h * std::clamp(fraction, 0.02, 0.9));
+      control_.tooDeep(h, e.onset_gap, e.onset_depth);
       continue;
     }
     if (!at_min && err > 1.0)
     {
       ++stats_.rejected_error;
       solver_.stepRefused();
-      h_ = std::max(options_.dt_min, h * std::clamp(kSafety * std::cbrt(1.0 / err), kMinShrink, kSafety));
+      control_.tooLarge(h, err);
       continue;
     }
     // a step that gained energy no force accounts for did not resolve a stiff event (a contact or a cable going taut
@@ -128,8 +174,7 @@ Summary AdaptiveStepper::advanceTo(State& s, double t_end, const ActuationLaw& l
     {
       ++stats_.rejected_energy;
       solver_.stepRefused();
-      h_ = std::max(options_.dt_min, 0.5 * h);
-      energy_bound_ = kEnergyMargin * h;
+      control_.energyRefused(h);
       continue;
     }
     if (at_min && (err > 1.0 || e.onset_depth > options_.onset_depth || !energy.ok()))
@@ -147,15 +192,7 @@ Summary AdaptiveStepper::advanceTo(State& s, double t_end, const ActuationLaw& l
     stats_.h_max = std::max(stats_.h_max, h);
     if (on_step)
       on_step(s);
-    double ratio = std::clamp(kSafety * std::cbrt(1.0 / std::max(err, 1e-12)), kMinShrink, kMaxGrowth);
-    if (ratio >= 1.0 && ratio <= kKeepBand)
-      ratio = 1.0;
-    energy_bound_ *= kEnergyRelease;
-    const double proposal =
-        std::clamp(std::min(h * ratio, std::max(energy_bound_, h)), options_.dt_min, options_.dt_max);
-    // a step shortened to land on t_end says little about the longer one: only shrink from it
-    if (!clipped || proposal < h)
-      h_ = proposal;
+    control_.accepted(step, err);
   }
   s.t = t_end;  // no drift from summing steps
   if (start_energy_valid_)

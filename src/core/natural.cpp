@@ -742,16 +742,12 @@ constexpr int kDenseMost = 160;            // Newton matrices up to this size ar
 constexpr int kDirectPairsMost = 64;       // up to this many strut pairs are checked without the broad phase
 constexpr double kListMarginLeast = 2e-3;  // m: the least margin of the listed contacts
 constexpr double kListMarginSteps = 8.0;   // the margin in steps' motions
-constexpr double kSafety = 0.9, kMaxGrowth = 2.0, kMinShrink = 0.1, kKeepBand = 1.2;
-// after a step refused for its energy, the steps stay below kEnergyMargin times the refused one, a bound that grows by
-// kEnergyRelease per accepted step (the event that made it may pass)
-constexpr double kEnergyMargin = 0.9, kEnergyRelease = 1.01;
 }  // namespace
 
 // ---- the solver ----------------------------------------------------------------------------------------
 
 NaturalSolver::NaturalSolver(const NaturalModel& nm, const SolverOptions& options)
-  : nm_(nm), model_(*nm.model), options_(options), broad_phase_(*nm.model)
+  : nm_(nm), model_(*nm.model), options_(options), broad_phase_(*nm.model), control_(options)
 {
   // a few pairs are cheaper to check directly than to box
   if (model_.contact.enabled)
@@ -774,7 +770,6 @@ NaturalSolver::NaturalSolver(const NaturalModel& nm, const SolverOptions& option
     beta_ = options.newmark_beta;
     gamma_ = options.newmark_gamma;
   }
-  h_next_ = options.dt;
   mass_scale_ = nm.mass.coeffs().size() > 0 ? nm.mass.coeffs().cwiseAbs().maxCoeff() : 1.0;
 }
 
@@ -1862,39 +1857,33 @@ Summary NaturalSolver::advanceTo(NaturalState& s, double t_end, const ActuationL
         on_step(s);
       continue;
     }
-    double h = std::min(h_next_, options_.dt_max);
-    bool clipped = false;
-    if (remaining <= 1.05 * h)
-    {
-      clipped = remaining < h;
-      h = remaining;
-    }
-    else if (remaining < 2.0 * h)
-    {
-      h = 0.5 * remaining;
-      clipped = true;
-    }
-    const bool at_min = h <= options_.dt_min * (1.0 + 1e-9);
+    const StepSizeControl::Trial step = control_.next(remaining);
+    const double h = step.h;
+    const bool at_min = step.at_min;
     trial_ = s;  // (a member: assigned into its buffers, no allocation once they have their size)
     const Summary r = tryStep(trial_, h, law);
     total.iterations += r.iterations;
+    total.residual = r.residual;
     if (!r.ok())
     {
       ++stats_.rejected_solver;
       ++total.step_cuts;
+      if (r.status == SolveStatus::kPassedThrough)
+        ++total.crossings_refused;
       if (at_min)
       {
         total.status = r.status;
-        total.message = r.message;
+        total.message = r.message + " at t = " + std::to_string(s.t) + " s with the step at its minimum " +
+                        std::to_string(h) + " s";
         return total;
       }
-      h_next_ = std::max(options_.dt_min, 0.5 * h);
+      control_.failed(h);
       continue;
     }
     const double err = error_ / options_.error_tolerance;
     if (!at_min && onset_depth_ > options_.onset_depth)
     {
-      // aim at half the allowed depth from the pair's gap at the start
+      // the new contact's gap at the start
       double gap_start = 0.0;
       for (const NaturalTouch& c : trial_.touching)
         if (!(s.contactSpeed(c.slot) > 0.0))
@@ -1907,14 +1896,13 @@ Summary NaturalSolver::advanceTo(NaturalState& s, double t_end, const ActuationL
               naturalContact(nm_, cs, naturalContactInput(nm_, cs, s.x, s.v, u0), 0.0, nullptr, nullptr, nullptr).gap);
         }
       ++stats_.rejected_onset;
-      const double fraction = (gap_start + 0.5 * options_.onset_depth) / (gap_start + onset_depth_);
-      h_next_ = std::max(options_.dt_min, h * std::clamp(fraction, 0.02, 0.9));
+      control_.tooDeep(h, gap_start, onset_depth_);
       continue;
     }
     if (!at_min && err > 1.0)
     {
       ++stats_.rejected_error;
-      h_next_ = std::max(options_.dt_min, h * std::clamp(kSafety * std::cbrt(1.0 / err), kMinShrink, kSafety));
+      control_.tooLarge(h, err);
       continue;
     }
     // a step that gained energy no force accounts for did not resolve a stiff event (a contact or a cable going taut
@@ -1940,8 +1928,7 @@ Summary NaturalSolver::advanceTo(NaturalState& s, double t_end, const ActuationL
     if (!at_min && !energy.ok())
     {
       ++stats_.rejected_energy;
-      h_next_ = std::max(options_.dt_min, 0.5 * h);
-      energy_bound_ = kEnergyMargin * h;
+      control_.energyRefused(h);
       continue;
     }
     std::swap(s, trial_);
@@ -1950,14 +1937,7 @@ Summary NaturalSolver::advanceTo(NaturalState& s, double t_end, const ActuationL
     in_contact_ = !s.touching.empty();
     if (on_step)
       on_step(s);
-    double ratio = std::clamp(kSafety * std::cbrt(1.0 / std::max(err, 1e-12)), kMinShrink, kMaxGrowth);
-    if (ratio >= 1.0 && ratio <= kKeepBand)
-      ratio = 1.0;
-    energy_bound_ *= kEnergyRelease;
-    const double proposal =
-        std::clamp(std::min(h * ratio, std::max(energy_bound_, h)), options_.dt_min, options_.dt_max);
-    if (!clipped || proposal < h)
-      h_next_ = proposal;
+    control_.accepted(step, err);
   }
   s.t = t_end;
   return total;

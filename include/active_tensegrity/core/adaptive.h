@@ -28,6 +28,47 @@ struct AdaptiveStats
   double h_max = 0.0;
 };
 
+/// The step-size rules of adaptive stepping, shared by AdaptiveStepper and NaturalSolver::advanceTo: which step to try
+/// next, and how a refusal or an acceptance changes it.
+class StepSizeControl
+{
+public:
+  /// The first step is options.dt (clamped to [dt_min, dt_max]).
+  explicit StepSizeControl(const SolverOptions& options);
+
+  struct Trial
+  {
+    double h = 0.0;
+    bool clipped = false;  // shortened to land on the end (says little about a longer step)
+    bool at_min = false;   // at dt_min, or what is left cannot be split: accepted whatever its checks say
+  };
+  /// The step to try with `remaining` (s) left to the end: the last one or two steps share what is left, never in
+  /// pieces below dt_min.
+  Trial next(double remaining) const;
+
+  /// A step of h that failed (Newton, a pass-through): halved.
+  void failed(double h);
+  /// A step of h that brought a pair from gap `onset_gap` to depth `onset_depth` beyond solver.onset_depth: aimed at
+  /// half the allowed depth.
+  void tooDeep(double h, double onset_gap, double onset_depth);
+  /// A step of h whose error was err (in tolerances, > 1).
+  void tooLarge(double h, double err);
+  /// A step of h refused for its energy: halved, and the steps after it kept below it for a while.
+  void energyRefused(double h);
+  /// A step of h accepted with error err (in tolerances): the next one follows the error, within the energy bound.
+  void accepted(const Trial& t, double err);
+
+  double nextStep() const
+  {
+    return h_;
+  }
+
+private:
+  SolverOptions options_;
+  double h_;
+  double energy_bound_ = std::numeric_limits<double>::infinity();  // steps gaining energy were refused above it (s)
+};
+
 class ContactScan;
 
 class AdaptiveStepper
@@ -57,7 +98,7 @@ public:
   /// The step the controller will try next (s).
   double nextStep() const
   {
-    return h_;
+    return control_.nextStep();
   }
   const AdaptiveStats& stats() const
   {
@@ -70,7 +111,7 @@ private:
 
   DynamicsSolver& solver_;
   SolverOptions options_;
-  double h_;
+  StepSizeControl control_;
   State trial_;
   AdaptiveStats stats_;
   EnergyPoint start_energy_;
@@ -82,7 +123,6 @@ private:
   bool in_contact_ = false;  // contacts active at the last accepted step's end
   EnergyMeter energy_meter_;
   std::unique_ptr<ContactScan> contacts_;  // the contacts of a state the solver did not end a step in (analysis.h)
-  double energy_bound_ = std::numeric_limits<double>::infinity();  // steps gaining energy were refused above it (s)
 };
 
 }  // namespace active_tensegrity::core

@@ -32,6 +32,7 @@
 #include <Eigen/SparseCore>
 #include <Eigen/SparseLU>
 
+#include "active_tensegrity/core/adaptive.h"
 #include "active_tensegrity/core/broad_phase.h"
 #include "active_tensegrity/core/contact.h"
 #include "active_tensegrity/core/dynamics.h"
@@ -331,13 +332,11 @@ private:
   }
   std::vector<Vec3>* held_ = nullptr;  // forces() collects the fixed and driven nodes' forces here when set
   std::vector<Vec3> held_force_;
-  // the adaptive steps' energy check: the energy where the step starts, whether contacts touched there, the bound on
-  // the steps after a refusal
+  // the adaptive steps' energy check: the energy where the step starts, whether contacts touched there
   EnergyPoint start_energy_;
   double start_energy_t_ = 0.0;
   bool start_energy_valid_ = false;
   bool in_contact_ = false;
-  double energy_bound_ = std::numeric_limits<double>::infinity();
   ActuationValues u_start_;
   std::vector<double> reaction_along_;  // per driven node: its reaction along its direction (drivenReactions)
   /// The reactions of every driven node at s under u into reaction_along_.
@@ -420,7 +419,7 @@ private:
   std::vector<Vec3> points_;
   double error_ = 0.0;
   double onset_depth_ = 0.0;
-  double h_next_ = 0.0;
+  StepSizeControl control_;  // the adaptive steps' sizes (advanceTo)
   NaturalStats stats_;
 };
 
