@@ -8,7 +8,6 @@ import shutil
 import signal
 import subprocess
 import tempfile
-import time
 import unittest
 
 import rosbag
@@ -94,11 +93,15 @@ class TestLaunchPaths(unittest.TestCase):
                                                  "rviz:=false", "real_time_factor:=0", "record:=rec.bag"))
         try:
             started = wait_for(lambda: statuses and (os.path.exists(bag + ".active") or os.path.exists(bag)), 90, 0.1)
-            time.sleep(1.0)
+            # two more of the node's once-a-second statuses: the recorder has been subscribed for a full period at
+            # least, on a loaded machine too (a fixed second was not always enough for its subscriptions)
+            seen = len(statuses)
+            recorded = started and wait_for(lambda: len(statuses) >= seen + 2, 30, 0.1)
         finally:
             sub.unregister()
             out = stop(proc)
         self.assertTrue(started, out)
+        self.assertTrue(recorded, out)
         self.assertTrue(wait_for(lambda: os.path.exists(bag), 10, 0.1), out)
         self.assertGreater(os.path.getsize(bag), 0)
         # the node's data topics, ~struts among them (sim.launch recorded every one but that)
