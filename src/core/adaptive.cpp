@@ -83,7 +83,7 @@ void StepSizeControl::accepted(const Trial& t, double err)
     h_ = proposal;
 }
 
-AdaptiveStepper::AdaptiveStepper(DynamicsSolver& solver, const SolverOptions& options)
+BodyAdaptiveStepper::BodyAdaptiveStepper(BodyDynamicsSolver& solver, const SolverOptions& options)
   : solver_(solver)
   , options_(options)
   , control_(options)
@@ -93,9 +93,9 @@ AdaptiveStepper::AdaptiveStepper(DynamicsSolver& solver, const SolverOptions& op
   solver_.setVariableSteps(true);
 }
 
-AdaptiveStepper::~AdaptiveStepper() = default;
+BodyAdaptiveStepper::~BodyAdaptiveStepper() = default;
 
-const EnergyPoint& AdaptiveStepper::startEnergy(const State& s)
+const EnergyPoint& BodyAdaptiveStepper::startEnergy(const State& s)
 {
   // (kept only for the very state it was formed at: a caller may put another state in, as the node's reset does)
   if (!start_energy_valid_ || start_energy_t_ != s.t || start_energy_q_ != s.q ||
@@ -114,7 +114,7 @@ const EnergyPoint& AdaptiveStepper::startEnergy(const State& s)
   return start_energy_;
 }
 
-Summary AdaptiveStepper::advanceTo(State& s, double t_end, const ActuationLaw& law,
+Summary BodyAdaptiveStepper::advanceTo(State& s, double t_end, const ActuationLaw& law,
                                    const std::function<void(const State&)>& on_step)
 {
   Summary total;
@@ -169,7 +169,7 @@ Summary AdaptiveStepper::advanceTo(State& s, double t_end, const ActuationLaw& l
     const EnergyPoint end_energy = energy_meter_.at(trial_, *contacts);
     const StepEnergyCheck energy =
         checkStepEnergy(startEnergy(s), end_energy, h, options_.energy_tolerance,
-                        stepEnergyRoundoff(solver_.system(), s.q, h), in_contact_ || !contacts->empty());
+                        stepEnergyRoundoff(solver_.system().model(), s.q, h), in_contact_ || !contacts->empty());
     if (!at_min && !energy.ok())
     {
       ++stats_.rejected_energy;

@@ -19,6 +19,8 @@ namespace active_tensegrity::core
 {
 double actuationForce(const Model& model, const State& state, int actuator)
 {
+  if (state.natural.x.size() > 0 && state.natural.actuator_force.size() == model.actuators.size())
+    return state.natural.actuator_force[static_cast<size_t>(actuator)];
   double force = 0.0;
   for (int c : model.actuators[actuator].constraints)
   {
@@ -426,6 +428,18 @@ std::vector<double> strutAxialForces(const Model& model, const State& state, std
 {
   const size_t n_bodies = model.bodies.size();
   std::vector<double> force(n_bodies, 0.0), net(n_bodies, 0.0);
+  if (state.natural.x.size() > 0)
+  {
+    // the dynamics' natural coordinates: the strut's length row carries its axial force, 2 L lambda, and nothing else
+    // acts along it at its ends
+    Eigen::Index k = 0;
+    for (size_t b = 0; b < n_bodies; ++b)
+      if (model.bodies[b].kind == BodyKind::kStrut && k < state.natural.lambda.size())
+        force[b] = 2.0 * model.bodies[b].length * state.natural.lambda(k++);
+    if (end_imbalance)
+      *end_imbalance = net;
+    return force;
+  }
   std::vector<Vec3> axis(n_bodies, Vec3::Zero());
   for (size_t b = 0; b < n_bodies; ++b)
     if (model.bodies[b].kind == BodyKind::kStrut)
@@ -915,7 +929,6 @@ RunResult run(const Model& model, const std::function<void(const State&)>& user_
   else
   {
     DynamicsSolver solver(model, model.solver);
-    solver.setContactsEveryStep(contacts_wanted);
     const ActuationLaw law =
         ActuationLaw::writing([&model](double t, ActuationValues& u) { scheduledActuation(model, t, u); });
     result.summary = solver.initialize(state, law);
@@ -928,10 +941,8 @@ RunResult run(const Model& model, const std::function<void(const State&)>& user_
     watch(state);
     on_output(state);
     ++result.steps;
-    result.energy.begin(energyPoint(solver.system(), state, activeContacts(model, state)));
-    // after each step: the yield watch, and the caller's on_step with the step's contacts, whose forces the solver
-    // forms in its pass over the step's end for such an on_step alone (setContactsEveryStep above; without one
-    // nothing forms them)
+    result.energy.begin(solver.energyAt(state));
+    // after each step: the yield watch, and the caller's on_step with the step's contacts (formed when asked)
     const auto after_step = [&](const State& s) { step_hook(s, contacts_wanted ? solver.contactsAt(s) : nullptr); };
     if (model.solver.adaptive)
       runAdaptive(model, solver, law, state, result, on_output, on_progress, after_step);
@@ -949,8 +960,6 @@ RunResult run(const Model& model, const std::function<void(const State&)>& user_
       long next_row = 1;
       double step_start = state.t;
       bool touched = false;  // contacts active at the last step's end
-      std::vector<ContactPairState> found_contacts;
-      EnergyMeter energy(solver.system());
       for (long k = 1; k <= n_steps; ++k)
       {
         const double t_target = k == n_steps ? an.duration : std::min(an.duration, k * dt);
@@ -970,18 +979,12 @@ RunResult run(const Model& model, const std::function<void(const State&)>& user_
         step_start = t_target;
         state.t = t_target;  // no drift from summing steps
         {
-          const std::vector<ContactPairState>* contacts = solver.contactsAt(state);
-          if (!contacts)
-          {
-            found_contacts = activeContacts(model, state);
-            contacts = &found_contacts;
-          }
-          const EnergyPoint end = energy.at(state, *contacts);
-          const bool in_contact = touched || !contacts->empty();
+          const EnergyPoint end = solver.energyAt(state);
+          const bool touching = !state.natural.touching.empty();
           result.energy.add(end, h, state.t,
                             checkStepEnergy(result.energy.now, end, h, model.solver.energy_tolerance,
-                                            stepEnergyRoundoff(solver.system(), state.q, h), in_contact));
-          touched = !contacts->empty();
+                                            stepEnergyRoundoff(model, state.natural.x, h), touched || touching));
+          touched = touching;
         }
         const auto callbacks = std::chrono::steady_clock::now();
         after_step(state);

@@ -104,10 +104,10 @@ double stepNumericalDissipation(const EnergyPoint& a, const EnergyPoint& b, doub
   return a.total() + supplied - taken - b.total();
 }
 
-double stepEnergyRoundoff(const System& system, const Eigen::VectorXd& q, double h)
+double stepEnergyRoundoff(const Model& model, const Eigen::VectorXd& q, double h)
 {
   double mass = 0.0;
-  for (const Body& b : system.model().bodies)
+  for (const Body& b : model.bodies)
     mass += b.mass;
   const double v = 2.0 * std::numeric_limits<double>::epsilon() * (1.0 + q.lpNorm<Eigen::Infinity>()) / h;
   return 0.5 * mass * v * v;

@@ -527,6 +527,7 @@ NaturalState naturalInitialState(const NaturalModel& nm)
   s.a.setZero(nm.coordinates);
   s.qdd.setZero(nm.coordinates);
   s.lambda.setZero(static_cast<int>(nm.struts.size() + nm.rows.size()));
+  s.frame_spin.setZero(static_cast<Eigen::Index>(nm.struts.size()));
   return s;
 }
 
@@ -977,39 +978,46 @@ void NaturalSolver::contactForces(const Eigen::VectorXd& /*x: forces() cached th
 
 double NaturalSolver::actuationForce(const NaturalState& s, const ActuationValues& u, int actuator)
 {
-  const Actuator& act = model_.actuators[static_cast<size_t>(actuator)];
-  double force = 0.0;
+  std::vector<double> all;
+  actuationForces(s, u, all);
+  return all[static_cast<size_t>(actuator)];
+}
+
+void NaturalSolver::actuationForces(const NaturalState& s, const ActuationValues& u, std::vector<double>& out)
+{
+  out.assign(model_.actuators.size(), 0.0);
   // driven rows: the force on the node is -lambda along the row
   const int struts = static_cast<int>(nm_.struts.size());
   for (size_t k = 0; k < nm_.rows.size(); ++k)
-    if (nm_.rows[k].actuator == actuator)
-      force -= s.lambda(struts + static_cast<int>(k));
-  // the cables it pulls in: their tension
-  for (const int c : act.cables)
-  {
-    const std::vector<int>& nodes = nm_.cable_nodes[static_cast<size_t>(c)];
-    double l = 0.0, rate = 0.0;
-    for (size_t i = 0; i + 1 < nodes.size(); ++i)
+    if (nm_.rows[k].actuator >= 0)
+      out[static_cast<size_t>(nm_.rows[k].actuator)] -= s.lambda(struts + static_cast<int>(k));
+  // the cables each pulls in: their tension
+  for (size_t a = 0; a < model_.actuators.size(); ++a)
+    for (const int c : model_.actuators[a].cables)
     {
-      const Vec3 d = naturalNodePosition(nm_, nodes[i + 1], s.x, u) - naturalNodePosition(nm_, nodes[i], s.x, u);
-      const double li = d.norm();
-      l += li;
-      if (li > 0.0)
-        rate += d.dot(naturalNodeVelocity(nm_, nodes[i + 1], s.v, u) - naturalNodeVelocity(nm_, nodes[i], s.v, u)) / li;
+      const std::vector<int>& nodes = nm_.cable_nodes[static_cast<size_t>(c)];
+      double l = 0.0, rate = 0.0;
+      for (size_t i = 0; i + 1 < nodes.size(); ++i)
+      {
+        const Vec3 d = naturalNodePosition(nm_, nodes[i + 1], s.x, u) - naturalNodePosition(nm_, nodes[i], s.x, u);
+        const double li = d.norm();
+        l += li;
+        if (li > 0.0)
+          rate +=
+              d.dot(naturalNodeVelocity(nm_, nodes[i + 1], s.v, u) - naturalNodeVelocity(nm_, nodes[i], s.v, u)) / li;
+      }
+      out[a] += cableLaw(model_.cables[static_cast<size_t>(c)], l, rate, u, model_.damping_enabled).tension;
     }
-    force += cableLaw(model_.cables[static_cast<size_t>(c)], l, rate, u, model_.damping_enabled).tension;
-  }
-  // the nodes it drives: the reaction that prescribes each one's motion, along the direction
+  // the nodes each drives: the reaction that prescribes each one's motion, along the direction
   bool drives = false;
   for (const NaturalNode& nd : nm_.nodes)
-    drives = drives || (nd.kind == NaturalNode::Kind::kDriven && nd.actuator == actuator);
+    drives = drives || nd.kind == NaturalNode::Kind::kDriven;
   if (!drives)
-    return force;
+    return;
   drivenReactions(s, u);
   for (size_t i = 0; i < nm_.nodes.size(); ++i)
-    if (nm_.nodes[i].kind == NaturalNode::Kind::kDriven && nm_.nodes[i].actuator == actuator)
-      force += reaction_along_[i];
-  return force;
+    if (nm_.nodes[i].kind == NaturalNode::Kind::kDriven)
+      out[static_cast<size_t>(nm_.nodes[i].actuator)] += reaction_along_[i];
 }
 
 void NaturalSolver::drivenReactions(const NaturalState& s, const ActuationValues& u)
@@ -1566,6 +1574,91 @@ Summary NaturalSolver::initialize(NaturalState& s, const ActuationLaw& law)
   return out;
 }
 
+Summary NaturalSolver::project(NaturalState& s, const ActuationValues& u)
+{
+  Summary out;
+  const int n = nm_.coordinates, m = static_cast<int>(nm_.struts.size() + nm_.rows.size());
+  const int struts = static_cast<int>(nm_.struts.size());
+  u_ = u;
+  pos_.resize(nm_.nodes.size());
+  const Eigen::VectorXd no_lambda = Eigen::VectorXd::Zero(m);
+  Eigen::VectorXd rhs = Eigen::VectorXd::Zero(n + m);
+  const auto build = [&]()
+  {
+    for (size_t i = 0; i < nm_.nodes.size(); ++i)
+      pos_[i] = naturalNodePosition(nm_, static_cast<int>(i), s.x, u_);
+    residual_.setZero(n + m);
+    entries_.clear(n + m, n + m <= kDenseMost);
+    entries_.addMatrix(nm_.mass);
+    constraintRows(s.x, no_lambda, 1.0, 0.0, true);
+    return factorize(n + m);
+  };
+  // [M G^T; G 0] [dx; mu] = [0; -Phi]: the least change of x in the mass metric that zeroes Phi to first order
+  const double tolerance = 1e-12 * (1.0 + s.x.head(nm_.positions).lpNorm<Eigen::Infinity>());
+  for (int it = 0;; ++it)
+  {
+    if (!build())
+    {
+      out.status = SolveStatus::kSingular;
+      out.message = "natural coordinates: the constraint rows are singular at the state to project";
+      return out;
+    }
+    rhs.head(n).setZero();
+    rhs.tail(m) = -residual_.tail(m);
+    const Eigen::VectorXd z = solve(rhs);
+    if (!z.allFinite())
+    {
+      out.status = SolveStatus::kNonFinite;
+      out.message = "natural coordinates: the projection onto the constraints is not finite";
+      return out;
+    }
+    s.x.head(nm_.positions) += z.head(nm_.positions);
+    ++out.iterations;
+    out.residual = z.head(nm_.positions).lpNorm<Eigen::Infinity>();
+    if (out.residual <= tolerance)
+      break;
+    if (it + 1 >= options_.max_iterations)
+    {
+      out.status = SolveStatus::kMaxIterations;
+      out.message = "natural coordinates: the positions do not meet the constraints within " +
+                    std::to_string(options_.max_iterations) + " iterations (last correction " +
+                    std::to_string(out.residual) + " m)";
+      return out;
+    }
+  }
+  // the velocity rows at the projected positions: d/dt Phi = G v + (the driven nodes' and rows' rates) = 0
+  if (!build())
+  {
+    out.status = SolveStatus::kSingular;
+    out.message = "natural coordinates: the constraint rows are singular at the projected state";
+    return out;
+  }
+  rhs.setZero();
+  for (int k = 0; k < struts; ++k)
+  {
+    const NaturalStrut& st = nm_.struts[k];
+    const Vec3 d = pos_[st.b] - pos_[st.a];
+    rhs(n + k) = -2.0 * d.dot(naturalNodeVelocity(nm_, st.b, s.v, u_) - naturalNodeVelocity(nm_, st.a, s.v, u_));
+  }
+  for (int k = struts; k < m; ++k)
+  {
+    const NaturalRow& row = nm_.rows[k - struts];
+    rhs(n + k) = -(row.direction.dot(s.v.segment<3>(nm_.nodes[row.node].column)) -
+                   (row.actuator >= 0 ? u_[row.actuator].rate : 0.0));
+  }
+  const Eigen::VectorXd z = solve(rhs);
+  if (!z.allFinite())
+  {
+    out.status = SolveStatus::kNonFinite;
+    out.message = "natural coordinates: the projection of the velocities is not finite";
+    return out;
+  }
+  s.v.head(nm_.positions) += z.head(nm_.positions);
+  have_lu_ = false;  // (not a Newton matrix)
+  static_lu_valid_ = false;
+  return out;
+}
+
 void NaturalSolver::constraintRows(const Eigen::VectorXd& x, const Eigen::VectorXd& lambda, double phi_divisor,
                                    double hessian_weight, bool build)
 {
@@ -1831,15 +1924,26 @@ Summary NaturalSolver::stepOnce(NaturalState& s, double h, const ActuationLaw& l
   return second;
 }
 
-Summary NaturalSolver::advanceTo(NaturalState& s, double t_end, const ActuationLaw& law,
-                                 const std::function<void(const NaturalState&)>& on_step)
+void NaturalSolver::setAdaptiveOptions(const SolverOptions& o)
+{
+  options_.dt = o.dt;
+  options_.dt_min = o.dt_min;
+  options_.dt_max = o.dt_max;
+  options_.error_tolerance = o.error_tolerance;
+  options_.onset_depth = o.onset_depth;
+  options_.energy_tolerance = o.energy_tolerance;
+  control_ = StepSizeControl(options_);
+}
+
+Summary NaturalSolver::advance(NaturalState& s, double t_end, const ActuationLaw& law,
+                               const std::function<void(const NaturalState&)>& on_step, bool adaptive)
 {
   Summary total;
   const double eps = 1e-12 * std::max(1.0, std::abs(t_end));
   while (t_end - s.t > eps)
   {
     const double remaining = t_end - s.t;
-    if (!options_.adaptive)
+    if (!adaptive)
     {
       const double h = remaining <= 1.05 * options_.dt ? remaining : options_.dt;
       const double t1 = s.t + h;
@@ -1931,6 +2035,12 @@ Summary NaturalSolver::advanceTo(NaturalState& s, double t_end, const ActuationL
       control_.energyRefused(h);
       continue;
     }
+    last_check_ = energy;
+    ++stats_.accepted;
+    if (at_min && (err > 1.0 || onset_depth_ > options_.onset_depth || !energy.ok()))
+      ++stats_.at_min_step;
+    stats_.h_min = stats_.accepted == 1 ? h : std::min(stats_.h_min, h);
+    stats_.h_max = std::max(stats_.h_max, h);
     std::swap(s, trial_);
     start_energy_ = end_energy;
     start_energy_t_ = s.t;

@@ -147,6 +147,7 @@ void StaticSolver::assemble(const Eigen::VectorXd& q, const Eigen::VectorXd& lam
 
 Summary StaticSolver::solve(State& s, const ActuationValues& u)
 {
+  s.natural = NaturalState();  // (the dynamics' coordinates, which the equilibrium does not keep)
   if (s.lambda.size() != system_.nLambda())
     s.lambda.conservativeResizeLike(Eigen::VectorXd::Zero(system_.nLambda()));
   unspin(system_.model(), s.q);
@@ -748,6 +749,7 @@ Summary StaticSolver::followPath(State& s, const ActuationValues& u_end, int ste
   const ScopeTimer total_timer(timings_.total);
   Summary total;
   critical_points_.clear();
+  s.natural = NaturalState();  // (the dynamics' coordinates, which the path does not keep)
   sign_ = 0;
   path_u_start_ = s.u;
   path_u_end_ = u_end;

@@ -1,4 +1,4 @@
-/// Variable time steps for DynamicsSolver (solver.adaptive): the step follows a local error estimate
+/// Variable time steps for BodyDynamicsSolver (solver.adaptive): the step follows a local error estimate
 /// (StepEstimate::error against solver.error_tolerance), a step that brings a pair into contact deeper
 /// than solver.onset_depth is refused and retried at the interpolated onset time, a step that gains energy
 /// no force accounts for, or loses it in contact, beyond solver.energy_tolerance (energy.h) is refused and halved, and
@@ -9,13 +9,13 @@
 #include <limits>
 #include <memory>
 
-#include "active_tensegrity/core/dynamics.h"
+#include "active_tensegrity/core/body_dynamics.h"
 #include "active_tensegrity/core/energy.h"
 #include "active_tensegrity/core/summary.h"
 
 namespace active_tensegrity::core
 {
-/// Counts of what an AdaptiveStepper did.
+/// Counts of what an BodyAdaptiveStepper did.
 struct AdaptiveStats
 {
   long accepted = 0;
@@ -28,7 +28,7 @@ struct AdaptiveStats
   double h_max = 0.0;
 };
 
-/// The step-size rules of adaptive stepping, shared by AdaptiveStepper and NaturalSolver::advanceTo: which step to try
+/// The step-size rules of adaptive stepping, shared by BodyAdaptiveStepper and NaturalSolver::advanceTo: which step to try
 /// next, and how a refusal or an acceptance changes it.
 class StepSizeControl
 {
@@ -71,12 +71,12 @@ private:
 
 class ContactScan;
 
-class AdaptiveStepper
+class BodyAdaptiveStepper
 {
 public:
   /// The first step is options.dt (clamped to [dt_min, dt_max]).
-  AdaptiveStepper(DynamicsSolver& solver, const SolverOptions& options);
-  ~AdaptiveStepper();
+  BodyAdaptiveStepper(BodyDynamicsSolver& solver, const SolverOptions& options);
+  ~BodyAdaptiveStepper();
 
   /// Advances `state` to t_end exactly (the last step is shortened to land on it) with the steps the
   /// error control allows; calls on_step after every accepted step. On failure (a step below dt_min
@@ -109,7 +109,7 @@ private:
   /// The energy of `s` (the start of the next step): kept from the last accepted step's end when s is that state.
   const EnergyPoint& startEnergy(const State& s);
 
-  DynamicsSolver& solver_;
+  BodyDynamicsSolver& solver_;
   SolverOptions options_;
   StepSizeControl control_;
   State trial_;

@@ -88,7 +88,8 @@ std::vector<CableState> cableStates(const Model& model, const State& state);
 /// lambda, from state.lambda) and the point loads there. Forces along the strut (contact, gravity,
 /// inertia) are not end forces: with none and at rest both ends give the same force. `end_imbalance`
 /// (when given) receives F_top . u + F_bottom . u per strut: the net axial force of the ends, which the
-/// forces along the strut balance (0 in a static state without them).
+/// forces along the strut balance (0 in a static state without them). A state the dynamics solver made
+/// (State::natural) gives each strut's length-row force, 2 L lambda, which its two ends share (net 0).
 std::vector<double> strutAxialForces(const Model& model, const State& state,
                                      std::vector<double>* end_imbalance = nullptr);
 

@@ -1,282 +1,118 @@
-/// Index-3 DAE time integration (paper Sec. 5): Newton-Raphson on [qdd_{n+1}; lambda_{n+1}] with the
-/// full analytic Jacobian (Eq. 68) and the constraint rows scaled by 1 / (beta h^2) (Bottasso et al.
-/// 2007). Integrators: Newmark (gamma, beta) and generalized-alpha (Arnold & Bruls 2007, from
-/// rho_infinity). A step whose Newton iteration fails is halved (up to max_step_cuts times).
+/// Index-3 DAE time integration of a scene (paper Sec. 5) in natural coordinates (natural.h): Newmark or
+/// generalized-alpha on the free nodes' positions and the struts' spin rates, with the strut lengths and the scene's
+/// rows as constraints, modified Newton with exact tangents, fixed steps halved on failure or adaptive steps
+/// (AdaptiveStepper). A State carries the natural coordinates (State::natural) and their body poses (State::q, qd) for
+/// everything that reads a pose: a strut's frame follows its axis without twist and turns about it by the spin its
+/// spin rate integrates.
 #pragma once
 
 #include <functional>
-#include <type_traits>
-#include <utility>
+#include <memory>
+#include <vector>
 
+#include "active_tensegrity/core/actuation_law.h"
+#include "active_tensegrity/core/adaptive.h"
 #include "active_tensegrity/core/contact.h"
-#include "active_tensegrity/core/reduced_linear_solver.h"
-#include "active_tensegrity/core/sparse_linear_solver.h"
+#include "active_tensegrity/core/energy.h"
 #include "active_tensegrity/core/state.h"
 #include "active_tensegrity/core/summary.h"
 
 namespace active_tensegrity::core
 {
-/// s(t) for every actuator, written into a vector the caller keeps: the solver keeps that vector, so a law made with
-/// ActuationLaw::writing costs no heap allocation per step once the vector has its size. A callable that returns
-/// the values converts too (a lambda at a call site) and costs one allocation per call (its result).
-class ActuationLaw
-{
-public:
-  using Writing = std::function<void(double t, ActuationValues& u)>;
-
-  ActuationLaw() = default;
-  /// From any callable that returns the values at t (a lambda, a std::function).
-  template <class F, std::enable_if_t<std::is_invocable_r_v<ActuationValues, const F&, double> &&
-                                          !std::is_same_v<std::decay_t<F>, ActuationLaw>,
-                                      int> = 0>
-  ActuationLaw(F f)  // NOLINT(google-explicit-constructor): a law is written as a lambda at every call site
-    : write_([f = std::move(f)](double t, ActuationValues& u) { u = f(t); })
-  {
-  }
-  /// From a callable that writes the values at t into its second argument (resizing it as needed).
-  static ActuationLaw writing(Writing w)
-  {
-    ActuationLaw law;
-    law.write_ = std::move(w);
-    return law;
-  }
-
-  /// The values at t into u.
-  void operator()(double t, ActuationValues& u) const
-  {
-    write_(t, u);
-  }
-  /// The values at t.
-  ActuationValues operator()(double t) const
-  {
-    ActuationValues u;
-    write_(t, u);
-    return u;
-  }
-
-private:
-  Writing write_;
-};
-
-/// What an accepted step tells a step-size controller (AdaptiveStepper).
-struct StepEstimate
-{
-  /// Local error of the strut ends' positions (m): h^2 (|beta - 1/6| + |gamma - 1/2|) |a_{n+1} - a_n|
-  /// per body, translation plus length times the quaternion part, largest over bodies (docs/physics.md).
-  double error = 0.0;
-  /// Pairs that touch at the end of the step but did not at its start: the deepest penetration among
-  /// them (m, 0 when none), that pair's gap at the start (m) and its contact slot (contact.h).
-  double onset_depth = 0.0;
-  double onset_gap = 0.0;
-  int onset_pair = -1;
-};
+class NaturalSolver;
+struct NaturalModel;
 
 class DynamicsSolver
 {
 public:
+  /// Throws std::invalid_argument naming what the natural coordinates do not cover (buildNaturalModel).
   DynamicsSolver(const Model& model, const SolverOptions& options);
+  ~DynamicsSolver();
+  DynamicsSolver(DynamicsSolver&&) noexcept;
+  DynamicsSolver& operator=(DynamicsSolver&&) noexcept;
 
-  /// Makes `state` consistent with the constraints at state.t: positions and velocities projected
-  /// onto them in the mass metric (positions by Newton to |Phi| <= 1e-12 (1 + |q|)), accelerations and
-  /// multipliers solved.
+  /// Makes `state` consistent at state.t: natural coordinates formed from q and qd when the state does not carry
+  /// its own, positions and velocities projected onto the constraints in the mass metric, accelerations and
+  /// multipliers solved, the body poses written back.
   Summary initialize(State& state, const ActuationLaw& law);
   /// Advances by h (halving it on failure); on failure `state` is left at the last good instant.
   Summary step(State& state, double h, const ActuationLaw& law);
-  /// One attempt at a step of h, never cut: on success `state` is advanced and estimate() describes
-  /// the step; on failure `state` is unchanged.
+  /// One attempt at a step of h, never cut: on success `state` is advanced; on failure it is unchanged.
   Summary tryStep(State& state, double h, const ActuationLaw& law);
-  /// Says whether the steps will vary (AdaptiveStepper sets it): the body blocks then solve every body
-  /// alone (BodyBlockSolver::allowGroups), as their groups would follow the step size, and body blocks that
-  /// stop contracting in the step that built them are distrusted even when they contracted at first and the
-  /// iterate moved far since.
-  void setVariableSteps(bool variable)
-  {
-    variable_steps_ = variable;
-    linear_.allowBodyGroups(!variable);
-  }
-  /// Says whether contactsAt will be asked at every step's end (runAnalysis with a per-step consumer of the
-  /// contacts): each accepted step then forms its touching slots' forces in the one pass that evaluates its end's
-  /// near slots (the same values contactsAt forms on demand, without evaluating those slots' motion twice).
-  void setContactsEveryStep(bool every)
-  {
-    contacts_every_step_ = every;
-  }
-  /// The error estimate and contact onset of the last accepted step.
-  const StepEstimate& estimate() const
-  {
-    return estimate_;
-  }
+  /// Forces from outside the scene from `s` on (on strut axes and point masses; each checked before any is
+  /// applied). The forces jump there, so the integration restarts from s: its accelerations and multipliers are made
+  /// consistent with them. Throws std::invalid_argument naming a load the natural coordinates cannot take.
+  Summary setExternalLoads(const std::vector<PointLoad>& loads, State& s);
 
-  const System& system() const
-  {
-    return system_;
-  }
-  /// Forces from outside the scene (System::setExternalLoads) from `s` on: constant over each step (a caller
-  /// that switches them at a time steps onto it). The forces jump there, so the integration restarts from s as
-  /// from an initial state: its accelerations and multipliers are made consistent with them
-  /// (restartAccelerations; a trapezoidal step then gives a constant force's impulse exactly).
-  Summary setExternalLoads(std::vector<PointLoad> loads, State& s)
-  {
-    system_.setExternalLoads(std::move(loads));
-    return restartAccelerations(s);
-  }
-  /// The accelerations and multipliers consistent with the forces at s.q, s.qd (as initialize() makes them),
-  /// after a jump of the applied forces; positions and velocities are kept.
-  Summary restartAccelerations(State& s);
-
-  /// The active contacts of `state` (as activeContacts(model, state) gives them, ordered by contact slot)
-  /// when it is the state the last accepted step ended in, evaluated with that step's contact memory; else
-  /// null. Every step evaluates its end's near slots (gaps and approach rates: the step after it starts from
-  /// them); the first call at that end adds the touching ones' forces, so per-step consumers (peaks, messages)
-  /// need no contact pass of their own and a step no one asks about pays for no forces. (Not thread-safe: call
-  /// it from the thread that steps.)
+  /// The touching contacts of `state` with their forces, by contact slot, when it is the state the last accepted
+  /// step ended in (or initialize made); else null.
   const std::vector<ContactPairState>* contactsAt(const State& state) const;
+  /// The force actuator `actuator` exerts at s (N): a driven node's reaction along its direction, a driven row's
+  /// multiplier, plus the tension of each cable it pulls in (as every step and initialize leave it in
+  /// State::natural.actuator_force; a state without them is initialized first, at its actuation values).
+  double actuationForce(State& s, int actuator);
+  /// The energy of s and the powers acting on it (energy.h's account).
+  EnergyPoint energyAt(const State& s);
+  /// The last step's local error estimate (m): largest over the nodes.
+  double lastError() const;
 
-  const StepTimings& timings() const
-  {
-    return timings_;
-  }
-  void resetTimings()
-  {
-    timings_ = StepTimings();
-    most_touching_before_ = 0;
-  }
-  /// The step control refused the step that tryStep just accepted (on its error estimate or a contact onset):
-  /// the figures of that step's end (StepTimings::most_touching) are taken back. Its work stays counted.
-  void stepRefused()
-  {
-    timings_.most_touching = most_touching_before_;
-  }
+  /// Counts of the solver's work since construction or resetTimings (StepTimings: iterations, factorizations,
+  /// analyses, the most contacts touching at an accepted step's end, the time in step calls).
+  const StepTimings& timings() const;
+  void resetTimings();
 
-  /// Effective Newmark coefficients and the generalized-alpha weights.
   struct Coefficients
   {
     double gamma, beta, alpha_m, alpha_f;
   };
-  Coefficients coefficients() const
-  {
-    return coef_;
-  }
+  Coefficients coefficients() const;
 
-  /// The Newton residual and Jacobian of one step at the unknowns (qdd_new, lambda_new); exposed for
-  /// the finite-difference test of the full Jacobian.
-  void residualAndJacobian(const State& start, double h, const ActuationValues& u, const Eigen::VectorXd& qdd_new,
-                           const Eigen::VectorXd& lambda_new, Eigen::VectorXd& r, BlockSparseMatrix* jac);
+  const Model& model() const;
+  const NaturalModel& naturalModel() const;
+  NaturalSolver& natural();
+
+  /// Gives `state` natural coordinates formed from its q and qd (projected onto the constraints, accelerations and
+  /// multipliers solved) unless it carries its own; no-op for a state a step or initialize made.
+  Summary prepare(State& state, const ActuationLaw& law);
+  /// Writes the body poses and rates of state.natural into state.q, state.qd (state.u at state.natural.t).
+  void writeBody(State& state) const;
 
 private:
-  /// M qdd + Phi_q^T lambda = F - Qv, Phi_q qdd = gamma at s.q, s.qd into s.qdd, s.acc, s.lambda, with `exact`
-  /// holding the factorization of [M Phi_q^T; Phi_q 0] there.
-  Summary consistentAccelerations(State& s, SparseLinearSolver& exact);
-  /// Impact speeds v_0 the next step from `start` uses per checked pair (into step_speeds_): the
-  /// remembered one of a live contact, else the approach rate at `start` (floored at min_impact_speed)
-  /// for pairs close enough to touch within h.
-  void prepareContact(const State& start, double h);
-  void residual(const State& start, double h, const ActuationValues& u, const Eigen::VectorXd& qdd_new,
-                const Eigen::VectorXd& lambda_new, Eigen::VectorXd& r, BlockSparseMatrix* jac);
-  /// After a converged step from positions q_start: remember v_0 of pairs in contact at `end`, forget
-  /// separated ones; records the contact onsets in estimate_.
-  void updateContactMemory(State& end, const Eigen::VectorXd& q_start);
-  /// The contact slots of `start` within 2 motion (m) of touching into near_ (the only ones a step in which no
-  /// body point moves further than `motion` evaluates), with their impact speeds into step_speeds_.
-  void findNearContacts(const State& start, double motion);
-  /// The local error estimate of a step of h from algorithmic accelerations a0 to a1 (StepEstimate).
-  double errorEstimate(const Eigen::VectorXd& a0, const Eigen::VectorXd& a1, double h) const;
-  /// One Newton solve of a step of h (modified Newton as options allow, or full Newton).
-  Summary attempt(State& state, double h, const ActuationLaw& law, bool full_newton);
-  /// attempt(), and when modified Newton fails (no convergence, or a matrix built at a diverged iterate that is
-  /// singular), the same step again in full Newton (an exact factorization per iteration) before the caller cuts
-  /// it: a kept matrix can diverge where Newton's own converges (friction as the six-bar robot lands on a face:
-  /// 2689 step cuts on its roll without the retry, 6 with it).
-  Summary attemptOrFullNewton(State& state, double h, const ActuationLaw& law);
-  /// A step of h, halved on failure (a loop over the pieces, at most max_step_cuts levels deep, never
-  /// below dt_min).
-  Summary advance(State& state, double h, const ActuationLaw& law);
-  void predict(const State& start, double h, const Eigen::VectorXd& qdd_new, Eigen::VectorXd& q, Eigen::VectorXd& qd,
-               Eigen::VectorXd& acc) const;
+  friend class AdaptiveStepper;
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
 
-  System system_;
-  SolverOptions options_;
-  Coefficients coef_;
-  BlockSparseMatrix jac_;
-  /// The Newton matrix's factorizations: linear_ (body blocks when they serve; every method on large systems),
-  /// and on systems of at most kReducedMost unknowns the exact ones in reduced_, the one-body rows eliminated
-  /// (docs/physics.md, "Linear solves").
-  SparseLinearSolver linear_;
-  ReducedLinearSolver reduced_;
-  bool use_reduced_ = false;      // whether the exact factorizations go to reduced_
-  bool reduced_current_ = false;  // whether the last factorization is reduced_'s
-  /// Factorizes jac_ (as above); false when it is singular.
-  bool factorizeNewtonMatrix();
-  void solveNewtonMatrix(const Eigen::VectorXd& b, Eigen::VectorXd& x) const
+/// Variable time steps (solver.adaptive): the step follows the local error estimate against solver.error_tolerance, a
+/// step that brings a pair into contact deeper than solver.onset_depth is refused and retried at the interpolated
+/// onset time, a step that gains energy no force accounts for, or loses it in contact, beyond solver.energy_tolerance
+/// (energy.h) is refused and halved, and the step grows again after (docs/physics.md, "Adaptive time steps").
+class AdaptiveStepper
+{
+public:
+  /// The first step is options.dt (clamped to [dt_min, dt_max]); the adaptive settings of `options` apply to the
+  /// solver's adaptive steps from now on.
+  AdaptiveStepper(DynamicsSolver& solver, const SolverOptions& options);
+
+  /// Advances `state` to t_end exactly (the last step is shortened to land on it) with the steps the control allows;
+  /// calls on_step after every accepted step. On failure (a step at dt_min that still does not converge) the state
+  /// stays at the last good instant and the summary says why.
+  Summary advanceTo(State& state, double t_end, const ActuationLaw& law,
+                    const std::function<void(const State&)>& on_step = {});
+
+  /// The energy at the last accepted step's end (energy.h), and that step's energy check (failed only for a step
+  /// accepted at dt_min).
+  const EnergyPoint& lastEnergy() const;
+  const StepEnergyCheck& lastEnergyCheck() const;
+  /// What it did since it was made.
+  const AdaptiveStats& stats() const
   {
-    if (reduced_current_)
-      reduced_.solve(b, x);
-    else
-      linear_.solve(b, x);
+    return stats_;
   }
-  /// Whether the last factorization solves to round-off (false: body blocks, static pivots).
-  bool factorizationExact() const
-  {
-    return reduced_current_ || linear_.exact();
-  }
-  Eigen::VectorXd q_, qd_, acc_, inertial_, applied_, cforce_, phi_, r_, dx_, qdd_iter_, lambda_iter_;
-  ActuationValues u_iter_;    // the law's values at the attempted step's end
-  SlotValues step_speeds_;    // v_0 per contact slot for the step being solved (the near slots set)
-  std::vector<int> near_;     // the step's contact slots within reach (findNearContacts)
-  double near_motion_ = 0.0;  // the motion near_ allows for (m)
-  /// The least motion near_ allows for (m): a body at rest still moves a little in its first step.
-  static constexpr double kNearFloor = 1e-4;
-  bool start_at_end_ = false;          // the step being solved starts where the last accepted one ended (atEnd)
-  std::vector<double> near_previous_;  // contact memory at the start of the step being accepted, per near_ slot
-  // the near slots evaluated where the last accepted step ended (end_q_, end_qd_; end_slots_ with their
-  // contact memory end_memory_ (the step's impact speed where touching, else 0), every other slot apart there): their
-  // approach rates and gaps (per slot, NaN: not evaluated) for the next step's impact speeds and near slots, and
-  // the active contacts with their forces, formed when contactsAt first asks (no copy of the whole memory: a
-  // lattice of 2000 struts has 2 million slots)
-  bool end_valid_ = false;
-  Eigen::VectorXd end_q_, end_qd_;
-  std::vector<int> end_slots_;
-  std::vector<double> end_memory_;
-  SlotValues end_rate_;
-  SlotValues end_gap_;
-  mutable std::vector<ContactPairState> end_contacts_;
-  mutable bool end_contacts_ready_ = false;
-  /// Whether `s` is the state the last accepted step ended in (end_*).
-  bool atEnd(const State& s) const;
-  StepTimings timings_;
-  long most_touching_before_ = 0;  // timings_.most_touching before the last accepted step's end (stepRefused)
-  StepEstimate estimate_;
-  // modified Newton (options_.reuse_jacobian): the factorization in linear_ and what it was built for
-  bool factor_valid_ = false;
-  double factor_h_ = 0.0;
-  int factor_age_ = 0;                // steps taken with it
-  std::vector<int> factor_contacts_;  // slots touching when it was built (ascending)
-  std::vector<int> touching_;         // slots touching at the start of the step being solved (ascending)
-  double theta_ = 0.0;                // largest contraction rate seen with it
-  bool variable_steps_ = false;       // setVariableSteps
-  bool contacts_every_step_ = false;  // setContactsEveryStep
-  bool theta_known_ = false;          // whether theta_ was measured (two increments above round-off)
-  // after a kept matrix diverged (theta > 0.5): steps still to start with a new matrix, and how many the next
-  // divergence orders (doubling while kept matrices keep failing, back to the least once one serves a step)
-  int fresh_starts_ = 0;
-  int fresh_streak_ = 0;
-  double mass_scale_ = 0.0;  // largest body mass (kg): the multipliers' round-off scale
-  // the first guess of a step: accelerations and multipliers extrapolated by the polynomial through the
-  // ends of the last accepted steps; history_[0] is where the last step started, history_[1] where the one
-  // before started; history_count_ of them belong to the chain ending at last_end_ (0: no extrapolation)
-  struct Sample
-  {
-    double t = 0.0;
-    Eigen::VectorXd qdd, lambda;
-  };
-  /// Whether `s` is where the last accepted step ended (the history extends to it).
-  bool continuesHistory(const State& s) const;
-  void firstGuess(const State& s, double h, Eigen::VectorXd& qdd, Eigen::VectorXd& lambda) const;
-  void rememberStep(const State& start, double t_end, const Eigen::VectorXd& qdd_end);
-  Sample history_[2];
-  int history_count_ = 0;
-  double last_end_t_ = 0.0;
-  Eigen::VectorXd last_end_qdd_;
+
+private:
+  DynamicsSolver& solver_;
+  AdaptiveStats stats_;
 };
 
 }  // namespace active_tensegrity::core

@@ -64,7 +64,7 @@ double stepNumericalDissipation(const EnergyPoint& a, const EnergyPoint& b, doub
 
 /// The kinetic energy a step of h can create by round-off alone (J): the index-3 multipliers are known to
 /// eps |q| m / (beta h^2), which gives the bodies velocities of about 2 eps (1 + |q|) / h.
-double stepEnergyRoundoff(const System& system, const Eigen::VectorXd& q, double h);
+double stepEnergyRoundoff(const Model& model, const Eigen::VectorXd& q, double h);
 
 /// What a step of h from a to b did to the energy, against solver.energy_tolerance (relative to the kinetic and
 /// elastic energy at either end; round-off, the energies' own and `roundoff` (stepEnergyRoundoff), allowed on top).

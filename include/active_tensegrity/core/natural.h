@@ -35,7 +35,7 @@
 #include "active_tensegrity/core/adaptive.h"
 #include "active_tensegrity/core/broad_phase.h"
 #include "active_tensegrity/core/contact.h"
-#include "active_tensegrity/core/dynamics.h"
+#include "active_tensegrity/core/actuation_law.h"
 #include "active_tensegrity/core/energy.h"
 #include "active_tensegrity/core/model.h"
 #include "active_tensegrity/core/summary.h"
@@ -125,24 +125,6 @@ struct NaturalModel
 /// With `spin` false no strut has a spin rate (friction then cannot turn a strut about its axis).
 NaturalModel buildNaturalModel(const Model& model, bool spin = true);
 
-/// A contact touching at a state's instant: its slot and the impact speed it remembers (m/s).
-struct NaturalTouch
-{
-  int slot = -1;
-  double speed = 0.0;
-};
-
-struct NaturalState
-{
-  double t = 0.0;
-  Eigen::VectorXd x, v, a;  // free coordinates (then each spin rate's angle), velocities, algorithmic accelerations
-  Eigen::VectorXd qdd;      // accelerations (equal to a with Newmark)
-  Eigen::VectorXd lambda;   // one multiplier per strut, then per NaturalModel::rows entry
-  std::vector<NaturalTouch> touching;  // the contacts touching, ascending by slot (the others remember nothing)
-  /// The impact speed slot remembers (0: not touching).
-  double contactSpeed(int slot) const;
-};
-
 /// `load` as the natural coordinates apply it. Throws std::invalid_argument naming the load when its point is off a
 /// strut's axis (its moment about the axis would be lost) or away from a point mass. A load on the ground is no load.
 NaturalLoad naturalLoad(const NaturalModel& nm, const PointLoad& load);
@@ -187,6 +169,9 @@ struct NaturalStats
   long analyses = 0;             // orderings and symbolic analyses of a sparse Newton matrix (a new pattern)
   long contact_evaluations = 0;  // pair evaluations in contact (force, with or without tangents)
   long rejected_error = 0, rejected_onset = 0, rejected_solver = 0, rejected_energy = 0;
+  // adaptive steps (advanceTo): accepted, of them at dt_min with their checks still failing, the smallest and largest
+  long accepted = 0, at_min_step = 0;
+  double h_min = 0.0, h_max = 0.0;
 };
 
 /// Index-3 Newmark or generalized-alpha in natural coordinates with modified Newton, by the body solver's rules
@@ -210,10 +195,58 @@ public:
 
   /// One step of h; on failure s is unchanged.
   Summary tryStep(NaturalState& s, double h, const ActuationLaw& law);
+  /// One step of h, halved on failure (at most options.max_step_cuts times); on failure s is at the last good instant.
+  Summary step(NaturalState& s, double h, const ActuationLaw& law)
+  {
+    return stepOnce(s, h, law, 0);
+  }
+  /// Positions and velocities of s moved onto the constraints under u by the least change in the mass metric (Newton on
+  /// the positions to a correction of at most 1e-12 (1 + |x|), then the velocity rows), for a state formed from
+  /// elsewhere (body poses, a caller's positions).
+  Summary project(NaturalState& s, const ActuationValues& u);
+  /// The adaptive steps start afresh: the next one options.dt, no step-size history.
+  void restartStepControl()
+  {
+    control_ = StepSizeControl(options_);
+  }
+  /// The energy where the last accepted adaptive step ended, and that step's energy check (advanceTo).
+  const EnergyPoint& lastEnergy() const
+  {
+    return start_energy_;
+  }
+  const StepEnergyCheck& lastEnergyCheck() const
+  {
+    return last_check_;
+  }
+  const SolverOptions& options() const
+  {
+    return options_;
+  }
+  /// The integrator's effective Newmark coefficients and generalized-alpha weights (0 with Newmark).
+  struct Coefficients
+  {
+    double gamma, beta, alpha_m, alpha_f;
+  };
+  Coefficients coefficients() const
+  {
+    return { gamma_, beta_, alpha_m_, alpha_f_ };
+  }
   /// Fixed steps of options.dt to t_end (a failed step is halved up to max_step_cuts times), or adaptive steps
   /// when options.adaptive (error, onset and energy control as AdaptiveStepper's). on_step after each.
   Summary advanceTo(NaturalState& s, double t_end, const ActuationLaw& law,
-                    const std::function<void(const NaturalState&)>& on_step = {});
+                    const std::function<void(const NaturalState&)>& on_step = {})
+  {
+    return advance(s, t_end, law, on_step, options_.adaptive);
+  }
+  /// advanceTo with adaptive steps whatever options.adaptive says.
+  Summary advanceAdaptive(NaturalState& s, double t_end, const ActuationLaw& law,
+                          const std::function<void(const NaturalState&)>& on_step = {})
+  {
+    return advance(s, t_end, law, on_step, true);
+  }
+  /// The adaptive steps' settings (dt, dt_min, dt_max, error_tolerance, onset_depth, energy_tolerance) from `o`, and
+  /// a fresh step-size history.
+  void setAdaptiveOptions(const SolverOptions& o);
 
   /// Statics: Newton from s to the equilibrium -F(x, u) + G^T lambda = 0, Phi(x, u) = 0 under the actuation values of u
   /// (velocities zero: contact without damping or friction, no spin), the contacts within `reach` (m) of s listed;
@@ -235,6 +268,8 @@ public:
   /// along its direction at each node it drives, the reaction that prescribes the node's motion, or a driven row's
   /// multiplier; plus the tension of each cable it pulls in.
   double actuationForce(const NaturalState& s, const ActuationValues& u, int actuator);
+  /// Every actuator's force at s under u into `out` (Model::actuators order).
+  void actuationForces(const NaturalState& s, const ActuationValues& u, std::vector<double>& out);
 
   /// The energy of s and the powers acting on it (energy.h's account; s the state the last step ended in, or
   /// initialized): translation and rotation of every strut (its spin included) and point mass, cables and contacts,
@@ -257,6 +292,8 @@ public:
   }
 
 private:
+  Summary advance(NaturalState& s, double t_end, const ActuationLaw& law,
+                  const std::function<void(const NaturalState&)>& on_step, bool adaptive);
   void forces(const Eigen::VectorXd& x, const Eigen::VectorXd& v, bool tangents);
   void contactForces(const Eigen::VectorXd& x, const Eigen::VectorXd& v, bool tangents);
   Summary stepOnce(NaturalState& s, double h, const ActuationLaw& law, int depth);
@@ -420,6 +457,7 @@ private:
   double error_ = 0.0;
   double onset_depth_ = 0.0;
   StepSizeControl control_;  // the adaptive steps' sizes (advanceTo)
+  StepEnergyCheck last_check_;
   NaturalStats stats_;
 };
 

@@ -12,6 +12,26 @@
 
 namespace active_tensegrity::core
 {
+/// A contact touching at a state's instant: its slot and the impact speed it remembers (m/s).
+struct NaturalTouch
+{
+  int slot = -1;
+  double speed = 0.0;
+};
+
+struct NaturalState
+{
+  double t = 0.0;
+  Eigen::VectorXd x, v, a;  // free coordinates (then each spin rate's angle), velocities, algorithmic accelerations
+  Eigen::VectorXd qdd;      // accelerations (equal to a with Newmark)
+  Eigen::VectorXd lambda;   // one multiplier per strut, then per NaturalModel::rows entry
+  std::vector<NaturalTouch> touching;  // the contacts touching, ascending by slot (the others remember nothing)
+  Eigen::VectorXd frame_spin;          // per strut: the spin angle its body frame (State::q) carries (rad)
+  std::vector<double> actuator_force;  // per actuator: the force it exerts (N; DynamicsSolver::actuationForce)
+  /// The impact speed slot remembers (0: not touching).
+  double contactSpeed(int slot) const;
+};
+
 struct State
 {
   double t = 0.0;          // s (dynamics) or load parameter (statics)
@@ -24,6 +44,17 @@ struct State
   /// Contact memory per contact slot (strut pairs, then ground contacts): the impact speed v_0 (m/s) of a
   /// live contact, 0 when apart. Set at contact onset, forgotten at separation (dynamics).
   SlotValues contact_speed;
+  /// The coordinates the dynamics solver integrates (natural.h): the free nodes' positions, velocities and
+  /// accelerations, the strut-length and row multipliers, the touching contacts. q and qd above are their body
+  /// poses and rates when the dynamics solver made the state; a state made otherwise (statics, a caller's q) has
+  /// none (x empty), and the dynamics solver forms them from q and qd.
+  NaturalState natural;
+  /// The impact speed slot remembers (0: not touching): the natural coordinates' when the state has them, else
+  /// contact_speed's.
+  double contactSpeed(int slot) const
+  {
+    return natural.x.size() > 0 ? natural.contactSpeed(slot) : contact_speed[slot];
+  }
 };
 
 /// A state at rest in the model's initial configuration.

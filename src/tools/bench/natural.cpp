@@ -109,7 +109,7 @@ Run runBody(const at::Model& model)
 {
   Run run;
   const Stops stops = stopsOf(model);
-  at::DynamicsSolver solver(model, model.solver);
+  at::BodyDynamicsSolver solver(model, model.solver);
   const at::ActuationLaw law =
       at::ActuationLaw::writing([&model](double t, at::ActuationValues& u) { at::scheduledActuation(model, t, u); });
   at::State s = at::initialState(model);
@@ -122,7 +122,7 @@ Run runBody(const at::Model& model)
     run.status = at::toString(first.status);
     return run;
   }
-  at::AdaptiveStepper stepper(solver, model.solver);
+  at::BodyAdaptiveStepper stepper(solver, model.solver);
   ContactAccount account{ run };
   const std::function<void(const at::State&)> each = [&](const at::State& st)
   {
