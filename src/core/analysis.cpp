@@ -391,7 +391,7 @@ void appendActiveContacts(const Model& model, const std::vector<int>& slots, con
   const ContactMode mode = model.analysis.type == AnalysisType::kStatic ? ContactMode::kStatic : ContactMode::kDynamic;
   for (int i : slots)
   {
-    const double v0 = i < state.contact_speed.size() ? state.contact_speed[i] : 0.0;
+    const double v0 = state.contactSpeed(i);
     const ContactPairState st = evaluateContact(model, i, state.q, state.qd, v0, mode, nullptr);
     if (st.active)
       out.push_back(st);

@@ -21,7 +21,8 @@ struct DynamicsSolver::Impl
   NaturalStats stats_at_reset;
   // the state the last accepted step (or initialize) ended in: its time and positions, and its contacts when asked
   double end_t = std::numeric_limits<double>::quiet_NaN();
-  Eigen::VectorXd end_x;
+  Eigen::VectorXd end_x, end_v;
+  std::vector<NaturalTouch> end_touching;
   mutable std::vector<ContactPairState> end_contacts;
   mutable bool end_contacts_ready = false;
   ActuationValues u;  // scratch: the law's values
@@ -41,25 +42,46 @@ struct DynamicsSolver::Impl
       solver.actuationForces(s.natural, s.u, s.natural.actuator_force);
     end_t = s.natural.t;
     end_x = s.natural.x;
+    end_v = s.natural.v;
+    end_touching = s.natural.touching;
     end_contacts_ready = false;
     timings.most_touching = std::max(timings.most_touching, static_cast<long>(s.natural.touching.size()));
   }
+  /// Whether s is the state the last accepted step ended in, untouched since (its time up to callers' rounding).
   bool atEnd(const State& s) const
   {
-    return s.natural.t == end_t && s.natural.x.size() == end_x.size() && s.natural.x == end_x;
+    if (!(s.natural.t == end_t) || s.natural.x.size() != end_x.size() || s.natural.x != end_x ||
+        s.natural.v != end_v || s.natural.touching.size() != end_touching.size() || !carriesOwn(s))
+      return false;
+    for (size_t i = 0; i < end_touching.size(); ++i)
+      if (s.natural.touching[i].slot != end_touching[i].slot || s.natural.touching[i].speed != end_touching[i].speed)
+        return false;
+    return true;
   }
-  /// Whether the body poses in q, qd are the ones s.natural gives (a state a step made, untouched since).
+  /// Whether s carries natural coordinates of this model whose body poses are q, qd (a state a step made, untouched
+  /// since), at its time up to callers' rounding (sameTime).
   bool carriesOwn(const State& s) const;
+  static bool sameTime(double a, double b)
+  {
+    return std::abs(a - b) <= 1e-8 * std::max(1.0, std::abs(a));
+  }
   void fromBody(State& s) const;
   void writeBody(State& s) const;
 };
 
 namespace
 {
-/// The unit quaternion (scalar first) that takes the unit vector a onto the unit vector b along the shortest arc.
+/// The unit quaternion (scalar first) that takes the unit vector a onto the unit vector b along the shortest arc:
+/// (1 + a.b, a x b) normalized, or a half turn about an axis normal to a when b is -a.
 Vec4 shortestArc(const Vec3& a, const Vec3& b)
 {
-  return fromEigenQuaternion(Eigen::Quaterniond::FromTwoVectors(a, b));
+  const double c = 1.0 + a.dot(b);
+  if (c < 1e-8)
+    return fromEigenQuaternion(Eigen::Quaterniond::FromTwoVectors(a, b));
+  Vec4 r;
+  r(0) = c;
+  r.tail<3>() = a.cross(b);
+  return r / r.norm();
 }
 
 Vec4 multiply(const Vec4& p, const Vec4& q)
@@ -73,7 +95,7 @@ Vec4 multiply(const Vec4& p, const Vec4& q)
 
 bool DynamicsSolver::Impl::carriesOwn(const State& s) const
 {
-  if (s.natural.x.size() != nm.coordinates || s.natural.v.size() != nm.coordinates || s.natural.t != s.t ||
+  if (s.natural.x.size() != nm.coordinates || s.natural.v.size() != nm.coordinates || !sameTime(s.natural.t, s.t) ||
       s.q.size() != model.nq || s.qd.size() != model.nq ||
       s.natural.frame_spin.size() != static_cast<Eigen::Index>(nm.struts.size()))
     return false;
@@ -158,12 +180,11 @@ void DynamicsSolver::Impl::writeBody(State& s) const
     const Vec3 e = (rb - ra).normalized();
     out.q.segment<3>(off) = 0.5 * (ra + rb);
     out.qd.segment<3>(off) = 0.5 * (va + vb);
-    // the frame: carried from its last pose along the shortest arc onto the new axis, then turned about it by the
-    // spin angle integrated since
+    // the frame: turned about its last axis by the spin angle integrated since, then carried along the shortest arc
+    // onto the new axis (the same as carrying it first and turning it about the new axis)
     Vec4 theta = out.q.segment<4>(off + 3);
     const double norm = theta.norm();
     theta = norm > 0.0 ? Vec4(theta / norm) : thetaFromZAxis(e);
-    theta = multiply(shortestArc(bodyZAxis(theta).normalized(), e), theta);
     double spin = 0.0;
     if (st.spin >= 0)
     {
@@ -172,13 +193,13 @@ void DynamicsSolver::Impl::writeBody(State& s) const
       {
         Vec4 r;
         r(0) = std::cos(0.5 * turned);
-        r.tail<3>() = std::sin(0.5 * turned) * e;
+        r.tail<3>() = std::sin(0.5 * turned) * bodyZAxis(theta);
         theta = multiply(r, theta);
       }
       spin = n.v(st.spin);
     }
-    // the axis exactly e (the products' round-off taken out)
-    theta = multiply(shortestArc(bodyZAxis(theta).normalized(), e), theta).normalized();
+    theta = multiply(shortestArc(bodyZAxis(theta).normalized(), e), theta);
+    theta /= theta.norm();
     out.q.segment<4>(off + 3) = theta;
     // Theta_dot = 1/2 L(Theta)^T omega_bar, omega_bar = A(Theta)^T omega, omega = e x e_dot + spin e
     const Vec3 e_dot = (vb - va) / st.length;
@@ -263,15 +284,17 @@ Summary DynamicsSolver::tryStep(State& s, double h, const ActuationLaw& law)
     if (!init.ok())
       return init;
   }
+  // (from the natural coordinates' own time, which the caller's may differ from by its rounding: the step lands on
+  // s.t + h)
+  const double t1 = s.t + h;
   Summary out;
   {
     ScopeTimer timer(m.timings.total);
-    out = m.solver.tryStep(s.natural, h, law);
+    out = m.solver.tryStep(s.natural, t1 - s.natural.t, law);
   }
   m.countTimings();
   if (!out.ok())
     return out;
-  s.natural.t = s.t + h;
   law(s.natural.t, s.u);
   m.writeBody(s);
   m.ended(s);
@@ -291,11 +314,9 @@ Summary DynamicsSolver::step(State& s, double h, const ActuationLaw& law)
   Summary out;
   {
     ScopeTimer timer(m.timings.total);
-    out = m.solver.step(s.natural, h, law);
+    out = m.solver.step(s.natural, t1 - s.natural.t, law);
   }
   m.countTimings();
-  if (out.ok())
-    s.natural.t = t1;
   law(s.natural.t, s.u);
   m.writeBody(s);
   m.ended(s);

@@ -12,7 +12,7 @@
 
 #include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/body_block_solver.h"
-#include "active_tensegrity/core/dynamics.h"
+#include "active_tensegrity/core/body_dynamics.h"
 #include "active_tensegrity/core/scene.h"
 #include "active_tensegrity/core/sparse_linear_solver.h"
 #include "tower_fold.h"
@@ -512,7 +512,7 @@ TEST(BodyBlocks, TheTowersNewtonMatrixIsCloseToItsBodyBlocks)
   // iteration with A0 (couplings between bodies dropped) contracts fast. The spectral radius of I - A0^-1 A at
   // three instants of the fold, the last two with struts in contact (measured: 3.2e-6, 0.016, 0.016).
   int touching = 0;
-  const TowerVisit check = [&touching](const Model& m, DynamicsSolver& solver, const State& s, const ActuationLaw& law)
+  const TowerVisit check = [&touching](const Model& m, BodyDynamicsSolver& solver, const State& s, const ActuationLaw& law)
   {
     const double h = m.solver.dt;
     touching = static_cast<int>(activeContacts(m, s).size());

@@ -93,7 +93,7 @@ ImpactRecord simulateImpact(const Model& m, double dt, double duration, const Ve
   s.qd.segment<3>(7) = velocity_b;
   ImpactRecord rec;
   rec.ok = solver.initialize(s, noActuation()).ok();
-  const System& sys = solver.system();
+  const System sys(m);
   rec.energy_start = sys.kineticEnergy(s.q, s.qd) + sys.potentialEnergy(s.q);
   rec.momentum_start = momentum(m, s);
   const double v_in = (s.qd.segment<3>(0) - s.qd.segment<3>(7)).dot(contactGeometry(m, 0, s.q).normal);
@@ -238,9 +238,9 @@ TEST(ContactEnergy, FrictionNeverAddsEnergy)
 
 TEST(ContactNewton, FullJacobianWithContactMatchesFiniteDifferences)
 {
-  // one step inside the contact with friction sliding: the Newton matrix over [qdd; lambda]
+  // one step inside the contact with friction sliding: the body coordinates' Newton matrix over [qdd; lambda]
   const Model m = crossedCylinders(0.8, 0.3, 60.0, 0.2);
-  DynamicsSolver solver(m, options(1e-4));
+  BodyDynamicsSolver solver(m, options(1e-4));
   State s = initialState(m);
   s.qd.segment<3>(7) = Vec3(0.3, -0.2, -kSpeed);
   ASSERT_TRUE(solver.initialize(s, noActuation()).ok());
@@ -253,7 +253,7 @@ TEST(ContactNewton, FullJacobianWithContactMatchesFiniteDifferences)
   std::mt19937 rng(5);
   const Eigen::VectorXd qdd = s.qdd + randomVector(m.nq, 1.0, rng);
   const Eigen::VectorXd lambda = s.lambda;
-  const System& sys = solver.system();
+  const System sys(m);
   BlockSparseMatrix jac = sys.makeMatrix();
   Eigen::VectorXd r;
   solver.residualAndJacobian(s, h, u, qdd, lambda, r, &jac);

@@ -8,7 +8,7 @@
 #include <gtest/gtest.h>
 
 #include "active_tensegrity/core/analysis.h"
-#include "active_tensegrity/core/dynamics.h"
+#include "active_tensegrity/core/body_dynamics.h"
 #include "active_tensegrity/core/reduced_linear_solver.h"
 #include "active_tensegrity/core/scene.h"
 #include "active_tensegrity/core/statics.h"
@@ -133,7 +133,7 @@ TEST(ReducedLinearSolver, SolvesTheTowersDynamicNewtonMatricesThroughContact)
   // matrix is, with every strut's norm and pin and every driven point's rows eliminated.
   std::mt19937 rng(11);
   int touching = 0;
-  const TowerVisit check = [&](const Model& m, DynamicsSolver& solver, const State& s, const ActuationLaw& law)
+  const TowerVisit check = [&](const Model& m, BodyDynamicsSolver& solver, const State& s, const ActuationLaw& law)
   {
     const double h = m.solver.dt;
     touching = static_cast<int>(activeContacts(m, s).size());

@@ -1,4 +1,5 @@
-// The tower's dynamic fold at the paper's step, walked to given instants: for the tests of its Newton matrices.
+// The tower's dynamic fold at the paper's step in body coordinates, walked to given instants: for the tests of the
+// body solver's Newton matrices.
 #pragma once
 
 #include <functional>
@@ -8,7 +9,7 @@
 #include <gtest/gtest.h>
 
 #include "active_tensegrity/core/analysis.h"
-#include "active_tensegrity/core/dynamics.h"
+#include "active_tensegrity/core/body_dynamics.h"
 #include "active_tensegrity/core/scene.h"
 
 namespace active_tensegrity::test
@@ -16,7 +17,7 @@ namespace active_tensegrity::test
 /// What walkTowerFold() shows at each instant: the model, its solver (residualAndJacobian) and state, the
 /// actuation law.
 using TowerVisit =
-    std::function<void(const core::Model&, core::DynamicsSolver&, const core::State&, const core::ActuationLaw&)>;
+    std::function<void(const core::Model&, core::BodyDynamicsSolver&, const core::State&, const core::ActuationLaw&)>;
 
 /// Steps config/scenes/tower.yaml's dynamic fold (V = its scene's speed) at its dt to each of `times`
 /// (ascending, s) and calls `visit` there; a step that fails fails the test.
@@ -25,7 +26,7 @@ inline void walkTowerFold(const std::vector<double>& times, const TowerVisit& vi
   using namespace active_tensegrity::core;
   const Model m = loadScene(std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) + "/config/scenes/tower.yaml",
                             { parseOverride("analysis.type=dynamic") });
-  DynamicsSolver solver(m, m.solver);
+  BodyDynamicsSolver solver(m, m.solver);
   State s = initialState(m);
   const ActuationLaw law = [&m](double t) { return scheduledActuation(m, t); };
   ASSERT_TRUE(solver.initialize(s, law).ok());

@@ -198,7 +198,7 @@ public:
   /// One step of h, halved on failure (at most options.max_step_cuts times); on failure s is at the last good instant.
   Summary step(NaturalState& s, double h, const ActuationLaw& law)
   {
-    return stepOnce(s, h, law, 0);
+    return stepOnce(s, h, law);
   }
   /// Positions and velocities of s moved onto the constraints under u by the least change in the mass metric (Newton on
   /// the positions to a correction of at most 1e-12 (1 + |x|), then the velocity rows), for a state formed from
@@ -296,7 +296,7 @@ private:
                   const std::function<void(const NaturalState&)>& on_step, bool adaptive);
   void forces(const Eigen::VectorXd& x, const Eigen::VectorXd& v, bool tangents);
   void contactForces(const Eigen::VectorXd& x, const Eigen::VectorXd& v, bool tangents);
-  Summary stepOnce(NaturalState& s, double h, const ActuationLaw& law, int depth);
+  Summary stepOnce(NaturalState& s, double h, const ActuationLaw& law);
 
   const NaturalModel& nm_;
   const Model& model_;

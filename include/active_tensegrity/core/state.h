@@ -53,7 +53,7 @@ struct State
   /// contact_speed's.
   double contactSpeed(int slot) const
   {
-    return natural.x.size() > 0 ? natural.contactSpeed(slot) : contact_speed[slot];
+    return natural.x.size() > 0 ? natural.contactSpeed(slot) : slot < contact_speed.size() ? contact_speed[slot] : 0.0;
   }
 };
 
