@@ -404,6 +404,8 @@ std::vector<ContactPairState> activeContacts(const Model& model, const State& st
   std::vector<ContactPairState> out;
   if (!model.anyContact())
     return out;
+  if (state.natural.x.size() > 0)
+    return state.natural.contacts;  // (the dynamics solver's, as its step formed them)
   std::vector<int> candidates;
   contactCandidates(model, BroadPhase(model), state.q, 0.0, candidates);
   appendActiveContacts(model, candidates, state, out);
@@ -590,6 +592,11 @@ const std::vector<ContactPairState>& ContactScan::active(const State& state)
   contacts_.clear();
   if (!model_.anyContact())
     return contacts_;
+  if (state.natural.x.size() > 0)
+  {
+    contacts_ = state.natural.contacts;  // (the dynamics solver's, as its step formed them)
+    return contacts_;
+  }
   const bool near_reference = have_reference_ && reference_q_.size() == state.q.size() &&
                               largestMotion(model_, reference_q_, state.q) <= reach_;
   if (!near_reference)

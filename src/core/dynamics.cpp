@@ -23,8 +23,6 @@ struct DynamicsSolver::Impl
   double end_t = std::numeric_limits<double>::quiet_NaN();
   Eigen::VectorXd end_x, end_v;
   std::vector<NaturalTouch> end_touching;
-  mutable std::vector<ContactPairState> end_contacts;
-  mutable bool end_contacts_ready = false;
   ActuationValues u;  // scratch: the law's values
 
   void countTimings()
@@ -44,7 +42,6 @@ struct DynamicsSolver::Impl
     end_x = s.natural.x;
     end_v = s.natural.v;
     end_touching = s.natural.touching;
-    end_contacts_ready = false;
     timings.most_touching = std::max(timings.most_touching, static_cast<long>(s.natural.touching.size()));
   }
   /// Whether s is the state the last accepted step ended in, untouched since (its time up to callers' rounding).
@@ -310,13 +307,15 @@ Summary DynamicsSolver::step(State& s, double h, const ActuationLaw& law)
     if (!init.ok())
       return init;
   }
-  const double t1 = s.t + h;
+  const double t1 = s.t + h, t0 = s.natural.t;
   Summary out;
   {
     ScopeTimer timer(m.timings.total);
     out = m.solver.step(s.natural, t1 - s.natural.t, law);
   }
   m.countTimings();
+  if (s.natural.t == t0)
+    return out;  // (nothing taken: the state is as it was)
   law(s.natural.t, s.u);
   m.writeBody(s);
   m.ended(s);
@@ -345,12 +344,7 @@ const std::vector<ContactPairState>* DynamicsSolver::contactsAt(const State& s) 
   const Impl& m = *impl_;
   if (!m.atEnd(s))
     return nullptr;
-  if (!m.end_contacts_ready)
-  {
-    m.end_contacts = m.solver.contactsAt(s.natural);
-    m.end_contacts_ready = true;
-  }
-  return &m.end_contacts;
+  return &s.natural.contacts;
 }
 
 double DynamicsSolver::actuationForce(State& s, int actuator)

@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <sstream>
+#include <cstdio>
+#include <cstdlib>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -102,6 +104,9 @@ struct PairConstants
   double scale = 0.0;  // (L1 + L2) / 2
 };
 
+// the penetration below which a contact is not touching, relative to the struts' size or the sphere's height
+constexpr double kPenetrationRoundoff = 64.0 * std::numeric_limits<double>::epsilon();
+
 // One pair's contact on its four nodes (a, b of strut 1, then of strut 2), generic in the scalar so that the
 // tangents are its forward-mode derivatives. Fills F (when `force`) and the pair's state (values).
 template <typename T>
@@ -158,7 +163,9 @@ void pairKernel(const Model& model, const PairConstants& pc, const V3<T> r[4], c
   st.normal = valueOf(n);
   st.gap = -valueOf(zeta);
   st.penetration = valueOf(zeta);
-  st.active = st.penetration > 0.0;
+  // (a penetration within the round-off of the axes' distance is none: a contact that begins exactly where a step
+  // ends would otherwise switch on and off between Newton's iterates)
+  st.active = st.penetration > kPenetrationRoundoff * pc.scale;
   st.point_a = valueOf(V3<T>(p1 - r1 * n));
   st.point_b = valueOf(V3<T>(p2 + r2 * n));
   st.penetration_rate = valueOf(rate);
@@ -260,7 +267,7 @@ void groundKernel(const Model& model, const GroundConstants& gc, const V3<T> r[4
   st.normal = Vec3::UnitZ();
   st.gap = -valueOf(zeta);
   st.penetration = valueOf(zeta);
-  st.active = st.penetration > 0.0;
+  st.active = st.penetration > kPenetrationRoundoff * (gc.radius + std::abs(valueOf(c.z())));
   st.point_a = valueOf(c) - gc.radius * Vec3::UnitZ();
   st.point_b = Vec3(valueOf(c.x()), valueOf(c.y()), ground.height);
   st.penetration_rate = valueOf(rate);
@@ -1530,6 +1537,7 @@ Summary NaturalSolver::initialize(NaturalState& s, const ActuationLaw& law)
   findNear(s, kNearFloor);
   forces(s.x, s.v, false);
   contactForces(s.x, s.v, false);
+  s.contacts = contactsAt(s);
   // [M G^T; G 0] [a; lambda] = [F; -2 |u_dot|^2 - 2 u . (driven accelerations)]
   entries_.clear(n + m, n + m <= kDenseMost);
   entries_.addMatrix(nm_.mass);
@@ -1832,6 +1840,8 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
                     (options_.newton_tolerance * (1.0 + lambda_.lpNorm<Eigen::Infinity>()) + lambda_floor) :
                 0.0;
     const double scaled = std::max(norm / options_.newton_tolerance, lambda_part);
+    if (std::getenv("AT_DEBUG"))
+      fprintf(stderr, "t %.9g h %.3g it %d build %d norm %.3e lambda_part %.3e theta %.3f touching %zu\n", s.t, h, it, (int)build, norm / options_.newton_tolerance, lambda_part, theta_, touching_.size());
     if (errorLeft(scaled, !build, built_this_step, previous) <= 1.0 && contracting())
     {
       x_ = x_pred_ + bh2 * acc_;
@@ -1872,12 +1882,19 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
       end_list_version_ = list_version_;
       // (near_ ascends by slot, as listed_ does)
       s.touching.clear();
+      s.contacts.clear();
       for (const int k : near_)
       {
         const Listed& l = listed_[k];
         if (!(l.end_gap < 0.0))
           continue;
+        Vec14 f;
+        const ContactPairState st =
+            naturalContact(nm_, l.c, naturalContactInput(nm_, l.c, x_, v_, u_), l.step_speed, &f, nullptr, nullptr);
+        if (!st.active)
+          continue;
         s.touching.push_back({ l.c.slot, l.step_speed });
+        s.contacts.push_back(st);
         if (-l.end_gap > onset_depth_ && !std::binary_search(touching_.begin(), touching_.end(), l.c.slot))
           onset_depth_ = -l.end_gap;
       }

@@ -1,13 +1,11 @@
-// Contacts compared: bit for bit, a scan's shortcuts against a full search; to a tolerance, the dynamics solver's
-// contacts against a search over the body poses it writes.
+// Contacts compared bit for bit: a scan's shortcuts or the dynamics solver's near list against a full search.
 #pragma once
 
-#include <algorithm>
-#include <cmath>
 #include <vector>
 
 #include <gtest/gtest.h>
 
+#include "active_tensegrity/core/natural.h"
 #include "active_tensegrity/core/contact.h"
 
 namespace active_tensegrity::test
@@ -30,25 +28,29 @@ inline void expectSameContacts(const std::vector<core::ContactPairState>& a,
   }
 }
 
-/// The same contacts in the same order, every field a consumer reads within `rel` of the larger (forces, rates) or
-/// of the struts' size `length` (depths, points): the dynamics solver's contacts, formed from its natural
-/// coordinates, against a search over the body poses it writes.
-inline void expectAgreeingContacts(const std::vector<core::ContactPairState>& a,
-                                   const std::vector<core::ContactPairState>& b, double t, double rel, double length)
+/// The contacts touching in a state the dynamics solver made, found by evaluating every checked strut pair and every
+/// ground contact from its natural coordinates with the impact speeds it remembers: what the solver's near list
+/// (State::natural.contacts) must equal, bit for bit.
+inline std::vector<core::ContactPairState> searchEverySlot(const core::Model& model, const core::State& s)
 {
-  ASSERT_EQ(a.size(), b.size()) << "t = " << t;
-  const auto near = [rel](double x, double y, double scale)
-  { return std::abs(x - y) <= rel * std::max({ std::abs(x), std::abs(y), scale }); };
-  for (size_t i = 0; i < a.size(); ++i)
+  const core::NaturalModel nm = core::buildNaturalModel(model);
+  std::vector<int> slots;
+  if (model.contact.enabled)
+    model.checkedPairList(&slots);
+  for (size_t i = 0; i < model.ground_contacts.size(); ++i)
+    slots.push_back(model.pairSlots() + static_cast<int>(i));
+  std::vector<core::ContactPairState> out;
+  for (const int slot : slots)
   {
-    EXPECT_EQ(a[i].pair, b[i].pair) << "t = " << t;
-    const double force = std::max(a[i].normal_force, b[i].normal_force);
-    EXPECT_TRUE(near(a[i].normal_force, b[i].normal_force, 0.0)) << "t = " << t << ": " << a[i].normal_force << " against " << b[i].normal_force;
-    EXPECT_TRUE(near(a[i].friction_force, b[i].friction_force, force)) << "t = " << t << ": " << a[i].friction_force << " against " << b[i].friction_force;
-    EXPECT_TRUE(near(a[i].penetration, b[i].penetration, 0.0)) << "t = " << t << ": " << a[i].penetration << " against " << b[i].penetration;
-    EXPECT_TRUE(near(a[i].penetration_rate, b[i].penetration_rate, 1e-3)) << "t = " << t << ": " << a[i].penetration_rate << " against " << b[i].penetration_rate;
-    EXPECT_LE((a[i].force_on_a - b[i].force_on_a).norm(), rel * force) << "t = " << t;
-    EXPECT_LE((a[i].point_a - b[i].point_a).norm(), rel * length) << "t = " << t;
+    const core::NaturalContactSlot c = core::naturalContactSlot(nm, slot);
+    Eigen::Matrix<double, 14, 1> f;
+    const core::ContactPairState st =
+        core::naturalContact(nm, c, core::naturalContactInput(nm, c, s.natural.x, s.natural.v, s.u),
+                             s.contactSpeed(slot), &f, nullptr, nullptr);
+    if (st.active)
+      out.push_back(st);
   }
+  return out;
 }
+
 }  // namespace active_tensegrity::test

@@ -400,11 +400,11 @@ TEST(Dynamics, InitializationProjectsPositionsOntoTheConstraints)
   Quadruplex quad;
   DynamicsSolver solver(quad.model, options(Integrator::kNewmark, 1e-3));
   const ActuationLaw law = constantLaw(1);
-  // a consistent start is left as it is
+  // a consistent start is left where it is (to the round-off of forming its nodes)
   State s = quad.start(0.0, 9);
   const Eigen::VectorXd q0 = s.q;
   ASSERT_TRUE(solver.initialize(s, law).ok());
-  EXPECT_EQ(s.q, q0);
+  EXPECT_LT((s.q - q0).lpNorm<Eigen::Infinity>(), 1e-15);
   // a strut moved off its joints by 1 mm and a quaternion off the unit sphere: brought back, nearby
   State bad = quad.start(0.0, 9);
   const Body& b = quad.model.bodies[0];
@@ -496,8 +496,8 @@ TEST(Dynamics, ModifiedNewtonReusesTheMatrixAndItsErrorFollowsTheTolerance)
   {
     // within a small multiple of the tolerance over 3000 steps
     EXPECT_LT(run.distance, 10.0 * tol) << "tolerance " << tol;
-    // the matrix is rebuilt rarely (slack/taut changes, age), every other iteration reuses it
-    EXPECT_LT(run.timings.factorizations, run.timings.newton_iterations / 20) << "tolerance " << tol;
+    // the matrix is rebuilt rarely (slack/taut changes, age, a fourth iteration), most iterations reuse it
+    EXPECT_LT(run.timings.factorizations, run.timings.newton_iterations / 10) << "tolerance " << tol;
   }
   EXPECT_LT(mid.distance, 0.1 * loose.distance);
   EXPECT_LT(fine.distance, 0.1 * mid.distance);

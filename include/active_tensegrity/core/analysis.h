@@ -65,7 +65,8 @@ std::vector<CableStrutGap> cableStrutCrossings(const Model& model, const Eigen::
 
 /// The contacts in a state: touching strut pairs, then spheres touching the ground (body_b = -1), evaluated as the
 /// analysis does (Hertz in statics; Lankarani-Nikravesh and friction with the state's impact speeds in dynamics).
-/// Empty when neither strut contact nor the ground is on.
+/// Empty when neither strut contact nor the ground is on. A state the dynamics solver made carries them
+/// (State::natural.contacts, from its natural coordinates) and they are returned as they are.
 std::vector<ContactPairState> activeContacts(const Model& model, const State& state);
 
 /// Highest z of the given nodes above the ground level (m).
