@@ -292,7 +292,7 @@ Summary DynamicsSolver::tryStep(State& s, double h, const ActuationLaw& law)
   m.countTimings();
   if (!out.ok())
     return out;
-  law(s.natural.t, s.u);
+  s.u = m.solver.actuation();  // (the step's end: the law is not asked again)
   m.writeBody(s);
   m.ended(s);
   return out;
@@ -316,7 +316,10 @@ Summary DynamicsSolver::step(State& s, double h, const ActuationLaw& law)
   m.countTimings();
   if (s.natural.t == t0)
     return out;  // (nothing taken: the state is as it was)
-  law(s.natural.t, s.u);
+  if (out.ok())
+    s.u = m.solver.actuation();  // (the step's end: the law is not asked again)
+  else
+    law(s.natural.t, s.u);
   m.writeBody(s);
   m.ended(s);
   return out;
@@ -392,6 +395,20 @@ DynamicsSolver::Coefficients DynamicsSolver::coefficients() const
 AdaptiveStepper::AdaptiveStepper(DynamicsSolver& solver, const SolverOptions& options) : solver_(solver)
 {
   solver_.natural().setAdaptiveOptions(options);
+  each_ = [this](const NaturalState& n)
+  {
+    DynamicsSolver::Impl& m = *solver_.impl_;
+    State& s = *state_;
+    const double h = n.t - last_t_;
+    last_t_ = n.t;
+    stats_.h_min = stats_.h_max == 0.0 ? h : std::min(stats_.h_min, h);
+    stats_.h_max = std::max(stats_.h_max, h);
+    s.u = m.solver.actuation();  // (the step's end: the law is not asked again)
+    m.writeBody(s);
+    m.ended(s);
+    if (*on_step_)
+      (*on_step_)(s);
+  };
 }
 
 Summary AdaptiveStepper::advanceTo(State& s, double t_end, const ActuationLaw& law,
@@ -406,22 +423,12 @@ Summary AdaptiveStepper::advanceTo(State& s, double t_end, const ActuationLaw& l
   }
   const NaturalStats before = m.solver.stats();
   Summary out;
-  double last_t = s.t;
+  state_ = &s;
+  on_step_ = &on_step;
+  last_t_ = s.t;
   {
     ScopeTimer timer(m.timings.total);
-    out = m.solver.advanceAdaptive(s.natural, t_end, law,
-                                   [&](const NaturalState& n)
-                                   {
-                                     const double h = n.t - last_t;
-                                     last_t = n.t;
-                                     stats_.h_min = stats_.h_max == 0.0 ? h : std::min(stats_.h_min, h);
-                                     stats_.h_max = std::max(stats_.h_max, h);
-                                     law(n.t, s.u);
-                                     m.writeBody(s);
-                                     m.ended(s);
-                                     if (on_step)
-                                       on_step(s);
-                                   });
+    out = m.solver.advanceAdaptive(s.natural, t_end, law, each_);
   }
   m.countTimings();
   const NaturalStats& after = m.solver.stats();
@@ -431,7 +438,8 @@ Summary AdaptiveStepper::advanceTo(State& s, double t_end, const ActuationLaw& l
   stats_.rejected_energy += after.rejected_energy - before.rejected_energy;
   stats_.rejected_solver += after.rejected_solver - before.rejected_solver;
   stats_.at_min_step += after.at_min_step - before.at_min_step;
-  law(s.natural.t, s.u);
+  if (!out.ok())
+    law(s.natural.t, s.u);
   m.writeBody(s);
   m.ended(s);
   return out;

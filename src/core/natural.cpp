@@ -1134,7 +1134,7 @@ EnergyPoint NaturalSolver::energyAt(const NaturalState& s, const ActuationValues
     if (c.actuator >= 0 && c.actuator < static_cast<int>(u.size()))
       e.actuator_power += (cablePullInForce(c, cs) + (cs.slack ? 0.0 : cs.damping_tension)) * u[c.actuator].rate;
   }
-  for (const ContactPairState& st : contactsAt(s))
+  for (const ContactPairState& st : s.contacts)  // (as the step that made s formed them)
   {
     e.elastic += contactElasticEnergy(model_, st);
     e.contact_power += (st.normal_force - contactElasticNormalForce(model_, st)) * st.penetration_rate +
@@ -1179,6 +1179,13 @@ void NaturalSolver::appliedForces(const Eigen::VectorXd& x, const Eigen::VectorX
 std::vector<ContactPairState> NaturalSolver::contactsAt(const NaturalState& s) const
 {
   std::vector<ContactPairState> out;
+  contactsAt(s, out);
+  return out;
+}
+
+void NaturalSolver::contactsAt(const NaturalState& s, std::vector<ContactPairState>& out) const
+{
+  out.clear();
   for (const Listed& l : listed_)
   {
     Vec14 f;
@@ -1187,7 +1194,6 @@ std::vector<ContactPairState> NaturalSolver::contactsAt(const NaturalState& s) c
     if (st.active)
       out.push_back(st);
   }
-  return out;
 }
 
 bool NaturalSolver::factorize(int size)
@@ -1225,9 +1231,17 @@ bool NaturalSolver::factorize(int size)
 
 Eigen::VectorXd NaturalSolver::solve(const Eigen::VectorXd& rhs)
 {
+  Eigen::VectorXd out;
+  solve(rhs, out);
+  return out;
+}
+
+void NaturalSolver::solve(const Eigen::VectorXd& rhs, Eigen::VectorXd& out)
+{
   if (dense_mode_)
-    return dense_lu_.solve(rhs);
-  return sparse_lu_.solve(rhs);
+    out = dense_lu_.solve(rhs);
+  else
+    out = sparse_lu_.solve(rhs);
 }
 
 int NaturalSolver::firstPassedThrough() const
@@ -1270,7 +1284,7 @@ void NaturalSolver::findNear(const NaturalState& s, double motion)
   near_motion_ = motion;
   if (!model_.contact.enabled && nm_.ground_contacts.empty())
     return;
-  ActuationValues u = u_;  // (u_ holds the step's end; the start's driven nodes move by less than `motion`)
+  const ActuationValues& u = u_;  // (the step's end: the start's driven nodes move by less than `motion`)
   // The contacts within a margin V, kept while no node has moved by D since they were listed with 2 D + 2 motion < V:
   // a pair's gap falls by at most the largest motion of each strut's nodes, so a contact left out (gap > V then) is
   // still more than 2 motion apart.
@@ -1420,7 +1434,8 @@ Summary NaturalSolver::solveStatic(NaturalState& s, const ActuationValues& u, do
       static_lu_valid_ = true;
       freshMatrix(previous);
     }
-    correction_ = solve(-residual_);
+    rhs_ = -residual_;
+    solve(rhs_, correction_);
     ++out.iterations;
     ++stats_.iterations;
     if (!correction_.allFinite())
@@ -1537,7 +1552,7 @@ Summary NaturalSolver::initialize(NaturalState& s, const ActuationLaw& law)
   findNear(s, kNearFloor);
   forces(s.x, s.v, false);
   contactForces(s.x, s.v, false);
-  s.contacts = contactsAt(s);
+  contactsAt(s, s.contacts);
   // [M G^T; G 0] [a; lambda] = [F; -2 |u_dot|^2 - 2 u . (driven accelerations)]
   entries_.clear(n + m, n + m <= kDenseMost);
   entries_.addMatrix(nm_.mass);
@@ -1798,7 +1813,8 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
     }
     forces(x_, v_, build);
     contactForces(x_, v_, build);
-    residual_.head(n).noalias() = nm_.mass * acc_ - f_;
+    residual_.head(n) = -f_;
+    residual_.head(n).noalias() += nm_.mass * acc_;  // (no temporary for the product)
     constraintRows(x_, lambda_, bh2, bh2, build);
     if (build)
     {
@@ -1818,7 +1834,8 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
       factor_contacts_ = touching_;
       freshMatrix(previous);
     }
-    correction_ = solve(-residual_);
+    rhs_ = -residual_;
+    solve(rhs_, correction_);
     ++out.iterations;
     ++stats_.iterations;
     if (!correction_.allFinite())
@@ -2045,7 +2062,7 @@ Summary NaturalSolver::advance(NaturalState& s, double t_end, const ActuationLaw
       for (const NaturalTouch& c : trial_.touching)
         if (!(s.contactSpeed(c.slot) > 0.0))
         {
-          ActuationValues u0;
+          ActuationValues& u0 = u_onset_;
           law(s.t, u0);
           const NaturalContactSlot cs = naturalContactSlot(nm_, c.slot);
           gap_start = std::max(
@@ -2064,7 +2081,8 @@ Summary NaturalSolver::advance(NaturalState& s, double t_end, const ActuationLaw
     }
     // a step that gained energy no force accounts for did not resolve a stiff event (a contact or a cable going taut
     // within it), one that lost it in contact damped an impact numerically: halved, as a failed step
-    const ActuationValues u_end = u_;  // (tryStep left the trial's end in u_)
+    u_end_ = u_;  // (tryStep left the trial's end in u_)
+    const ActuationValues& u_end = u_end_;
     if (!start_energy_valid_ || start_energy_t_ != s.t)
     {
       law(s.t, u_start_);

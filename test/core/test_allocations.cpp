@@ -28,17 +28,21 @@ ActuationLaw writingLaw(const Model& m)
   return ActuationLaw::writing([&m](double t, ActuationValues& u) { scheduledActuation(m, t, u); });
 }
 
-/// The fold twice with one solver: the first pass grows its buffers (contact lists, factorizations, the stepper's
-/// trial state), the second must not allocate at all. `advance(state, pass)` takes the state through the fold;
-/// the allocations of each pass are counted from after initialize. Empty after a fatal failure.
+/// The fold twice with one solver and one state, put back at the start for the second pass: the first pass grows
+/// their buffers (contact lists, factorizations, the stepper's trial state, the state's touching contacts), the second
+/// must not allocate at all. `advance(state, pass)` takes the state through the fold; the allocations of each pass
+/// are counted from after initialize. Empty after a fatal failure.
 template <class Advance>
 std::vector<long> allocationsOfTwoPasses(const Model& m, DynamicsSolver& solver, const ActuationLaw& law,
                                          const Advance& advance)
 {
   std::vector<long> allocations;
+  State s = initialState(m);
   for (int pass = 0; pass < 2; ++pass)
   {
-    State s = initialState(m);
+    s.t = 0.0;
+    s.q = m.q0;
+    s.qd.setZero();
     EXPECT_TRUE(solver.initialize(s, law).ok());
     solver.resetTimings();
     const long before = heapAllocationCount();

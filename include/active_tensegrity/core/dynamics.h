@@ -113,6 +113,12 @@ public:
 private:
   DynamicsSolver& solver_;
   AdaptiveStats stats_;
+  // advanceTo's call: its state and on_step, and the last accepted step's end, for each_ (made once: a lambda of
+  // this size converted at each call would allocate)
+  State* state_ = nullptr;
+  const std::function<void(const State&)>* on_step_ = nullptr;
+  double last_t_ = 0.0;
+  std::function<void(const NaturalState&)> each_;
 };
 
 }  // namespace active_tensegrity::core

@@ -280,6 +280,7 @@ public:
   /// The touching contacts at s, the end of the last accepted step (those the solver keeps listed: all within its
   /// margin), with their impact speeds.
   std::vector<ContactPairState> contactsAt(const NaturalState& s) const;
+  void contactsAt(const NaturalState& s, std::vector<ContactPairState>& out) const;
 
   const NaturalStats& stats() const
   {
@@ -355,6 +356,7 @@ private:
   /// Factorizes the matrix of `entries_` (size x size): dense when small, else sparse; false when singular.
   bool factorize(int size);
   Eigen::VectorXd solve(const Eigen::VectorXd& rhs);
+  void solve(const Eigen::VectorXd& rhs, Eigen::VectorXd& out);
 
   std::vector<NaturalLoad> external_;  // setExternalLoads
   Eigen::VectorXd f_;                  // applied forces at the iterate
@@ -386,7 +388,16 @@ private:
   std::vector<int> pattern_outer_, pattern_inner_;  // the pattern sparse_lu_ analysed
   bool pattern_ready_ = false;
   bool dense_mode_ = true;
-  Eigen::VectorXd residual_, correction_, acc_, lambda_, x_, v_;
+  Eigen::VectorXd residual_, rhs_, correction_, acc_, lambda_, x_, v_;
+  ActuationValues u_end_, u_onset_;  // an adaptive step's end, and a refused onset's start (advance)
+public:
+  /// The actuation values of the last step's end (or of the state initialize or energyAt was given).
+  const ActuationValues& actuation() const
+  {
+    return u_;
+  }
+
+private:
   Eigen::VectorXd c0_, x_pred_, v_pred_, a_end_;  // a step's predictors and end accelerations (tryStep)
   NaturalState static_state_;                     // solveStatic's listing state (velocities zero, no contact memory)
   Eigen::VectorXd zero_v_;
