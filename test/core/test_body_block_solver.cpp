@@ -453,59 +453,6 @@ TEST(LinearSolver, FactorizeApproximateLeavesTheExactFactorizationToTheCaller)
   EXPECT_LT((other.a * x - Eigen::VectorXd::Ones(other.a.rows())).norm(), 1e-12 * x.norm());
 }
 
-TEST(BodyBlocks, AdaptiveStepsSolveEveryBodyAlone)
-{
-  // With variable steps the body blocks keep every body alone: the couplings in H grow against the mass
-  // terms as h^2, and on the tower's adaptive fold the groups followed the step size (112 analyses in its
-  // first second). Alone, the pattern is analyzed once, and again when contact adds to it.
-  const Model m = loadScene(std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) + "/config/scenes/tower.yaml",
-                            { parseOverride("analysis.type=dynamic"), parseOverride("actuation.speed=0.5"),
-                              parseOverride("analysis.duration=1.0"), parseOverride("solver.adaptive=true") });
-  const RunResult r = runAnalysis(
-      m, [](const State&) {}, {}, [](const State&) {});
-  ASSERT_TRUE(r.summary.ok()) << r.summary.message;
-  EXPECT_GT(r.timings.body_block_factorizations, 10);
-  EXPECT_LE(r.timings.analyses, 3);
-  std::printf("[ measured ] tower, 1 s adaptive: %ld analyses, %ld of %ld factorizations on body blocks\n",
-              static_cast<long>(r.timings.analyses), r.timings.body_block_factorizations, r.timings.factorizations);
-}
-
-TEST(BodyBlocks, TheTowerFoldOnBodyBlocksFollowsFullNewton)
-{
-  // the first 0.2 s of the tower's fold at the paper's step: modified Newton on body blocks stays within a
-  // small multiple of the tolerance of full Newton. (Further on the fold amplifies any difference: at 0.6 s
-  // modified Newton on the whole matrix is 3.5e-3 m from full Newton at this tolerance, on body blocks
-  // 1.9e-3 m. The lattices' test follows full Newton through contact.)
-  Model m = loadScene(std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) + "/config/scenes/tower.yaml",
-                      { parseOverride("analysis.type=dynamic"), parseOverride("actuation.speed=0.5"),
-                        parseOverride("analysis.duration=0.2") });
-  m.solver.newton_tolerance = 1e-8;
-  const auto run = [&m](bool reuse)
-  {
-    Model copy = m;
-    copy.solver.reuse_jacobian = reuse;
-    return runAnalysis(
-        copy, [](const State&) {}, {}, [](const State&) {});
-  };
-  const RunResult modified = run(true);
-  const RunResult full = run(false);
-  ASSERT_TRUE(modified.summary.ok()) << modified.summary.message;
-  ASSERT_TRUE(full.summary.ok()) << full.summary.message;
-  EXPECT_GT(modified.timings.body_block_factorizations, 0);
-  EXPECT_EQ(full.timings.body_block_factorizations, 0);
-  // every exact factorization with the one-body rows eliminated (200 unknowns, 120 factorized)
-  EXPECT_EQ(full.timings.reduced_factorizations, full.timings.factorizations);
-  EXPECT_EQ(modified.timings.reduced_factorizations,
-            modified.timings.factorizations - modified.timings.body_block_factorizations);
-  EXPECT_LT(modified.timings.factorizations, modified.timings.newton_iterations / 10);
-  const double distance = (modified.final_state.q - full.final_state.q).lpNorm<Eigen::Infinity>();
-  EXPECT_LT(distance, 1e-6);
-  std::printf("[ measured ] tower fold, %d steps: body blocks %ld of %ld factorizations, %ld Newton iterations "
-              "(full Newton %ld); distance %.2e\n",
-              modified.solver_steps, modified.timings.body_block_factorizations, modified.timings.factorizations,
-              modified.timings.newton_iterations, full.timings.newton_iterations, distance);
-}
-
 TEST(BodyBlocks, TheTowersNewtonMatrixIsCloseToItsBodyBlocks)
 {
   // The premise of body blocks: at the paper's step the mass dominates the tower's Newton matrix, so the

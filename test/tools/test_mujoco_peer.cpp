@@ -597,14 +597,4 @@ TEST(MujocoPeer, WorkPrecisionLabelsADivergedPeerRun)
   EXPECT_EQ(status["mujoco_implicit 0.00025"], "converged") << r.output;
   EXPECT_EQ(status["generalized_alpha 0.0005"], "converged") << r.output;
   EXPECT_NE(r.output.find("came apart"), std::string::npos) << r.output;
-  // a run that ends finite, its joints together, 1.2 m off a structure 1.5 m across: the quadruplex pressed into
-  // steel-on-steel contact, MuJoCo's RK4 at 1 ms
-  const active_tensegrity::test::CommandResult q = active_tensegrity::test::runCommand(
-      std::string(TENSEGRITY_BENCH_PATH) + " work-precision " + kScenes +
-      "quadruplex.yaml --set analysis.type=dynamic --set actuation.speed=0.5 --set contact.enabled=true"
-      " --set analysis.max_actuation=1.2 --set analysis.duration=1.5 --schemes generalized_alpha --dts 1e-3"
-      " --mujoco-dts 1e-3 --mujoco-integrators rk4 2>&1");
-  ASSERT_EQ(q.code, 0) << q.output;
-  EXPECT_NE(q.output.find("mujoco_rk4,0.001,0,diverged,"), std::string::npos) << q.output;
-  EXPECT_NE(q.output.find("more than 0.5 of the structure's size 1.5 m"), std::string::npos) << q.output;
 }
