@@ -115,7 +115,7 @@ const EnergyPoint& BodyAdaptiveStepper::startEnergy(const State& s)
 }
 
 Summary BodyAdaptiveStepper::advanceTo(State& s, double t_end, const ActuationLaw& law,
-                                   const std::function<void(const State&)>& on_step)
+                                       const std::function<void(const State&)>& on_step)
 {
   Summary total;
   const double eps = 1e-12 * std::max(1.0, std::abs(t_end));

@@ -99,7 +99,7 @@ BodyDynamicsSolver::BodyDynamicsSolver(const Model& model, const SolverOptions& 
 }
 
 void BodyDynamicsSolver::predict(const State& s, double h, const Eigen::VectorXd& qdd_new, Eigen::VectorXd& q,
-                             Eigen::VectorXd& qd, Eigen::VectorXd& acc) const
+                                 Eigen::VectorXd& qd, Eigen::VectorXd& acc) const
 {
   const auto& c = coef_;
   // (1 - am) a_{n+1} + am a_n = (1 - af) qdd_{n+1} + af qdd_n
@@ -109,8 +109,8 @@ void BodyDynamicsSolver::predict(const State& s, double h, const Eigen::VectorXd
 }
 
 void BodyDynamicsSolver::residualAndJacobian(const State& s, double h, const ActuationValues& u,
-                                         const Eigen::VectorXd& qdd_new, const Eigen::VectorXd& lambda_new,
-                                         Eigen::VectorXd& r, BlockSparseMatrix* jac)
+                                             const Eigen::VectorXd& qdd_new, const Eigen::VectorXd& lambda_new,
+                                             Eigen::VectorXd& r, BlockSparseMatrix* jac)
 {
   prepareContact(s, h);
   residual(s, h, u, qdd_new, lambda_new, r, jac);
@@ -302,7 +302,7 @@ double BodyDynamicsSolver::errorEstimate(const Eigen::VectorXd& a0, const Eigen:
 }
 
 void BodyDynamicsSolver::residual(const State& s, double h, const ActuationValues& u, const Eigen::VectorXd& qdd_new,
-                              const Eigen::VectorXd& lambda_new, Eigen::VectorXd& r, BlockSparseMatrix* jac)
+                                  const Eigen::VectorXd& lambda_new, Eigen::VectorXd& r, BlockSparseMatrix* jac)
 {
   const double da = (1.0 - coef_.alpha_f) / (1.0 - coef_.alpha_m);  // d acc_{n+1} / d qdd_{n+1}
   const double bh2 = coef_.beta * h * h * da;                       // d q / d qdd

@@ -47,8 +47,8 @@ struct DynamicsSolver::Impl
   /// Whether s is the state the last accepted step ended in, untouched since (its time up to callers' rounding).
   bool atEnd(const State& s) const
   {
-    if (!(s.natural.t == end_t) || s.natural.x.size() != end_x.size() || s.natural.x != end_x ||
-        s.natural.v != end_v || s.natural.touching.size() != end_touching.size() || !carriesOwn(s))
+    if (!(s.natural.t == end_t) || s.natural.x.size() != end_x.size() || s.natural.x != end_x || s.natural.v != end_v ||
+        s.natural.touching.size() != end_touching.size() || !carriesOwn(s))
       return false;
     for (size_t i = 0; i < end_touching.size(); ++i)
       if (s.natural.touching[i].slot != end_touching[i].slot || s.natural.touching[i].speed != end_touching[i].speed)
@@ -100,7 +100,8 @@ bool DynamicsSolver::Impl::carriesOwn(const State& s) const
   for (const NaturalStrut& st : nm.struts)
   {
     const int off = model.bodies[st.body].offset;
-    const Vec3 c = 0.5 * (naturalNodePosition(nm, st.a, s.natural.x, s.u) + naturalNodePosition(nm, st.b, s.natural.x, s.u));
+    const Vec3 c =
+        0.5 * (naturalNodePosition(nm, st.a, s.natural.x, s.u) + naturalNodePosition(nm, st.b, s.natural.x, s.u));
     const Vec3 cd =
         0.5 * (naturalNodeVelocity(nm, st.a, s.natural.v, s.u) + naturalNodeVelocity(nm, st.b, s.natural.v, s.u));
     if (c != s.q.segment<3>(off) || cd != s.qd.segment<3>(off))

@@ -1858,7 +1858,8 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
                 0.0;
     const double scaled = std::max(norm / options_.newton_tolerance, lambda_part);
     if (std::getenv("AT_DEBUG"))
-      fprintf(stderr, "t %.9g h %.3g it %d build %d norm %.3e lambda_part %.3e theta %.3f touching %zu\n", s.t, h, it, (int)build, norm / options_.newton_tolerance, lambda_part, theta_, touching_.size());
+      fprintf(stderr, "t %.9g h %.3g it %d build %d norm %.3e lambda_part %.3e theta %.3f touching %zu\n", s.t, h, it,
+              (int)build, norm / options_.newton_tolerance, lambda_part, theta_, touching_.size());
     if (errorLeft(scaled, !build, built_this_step, previous) <= 1.0 && contracting())
     {
       x_ = x_pred_ + bh2 * acc_;

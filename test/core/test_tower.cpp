@@ -217,7 +217,8 @@ TEST(Tower, EveryStepsContactsAreThoseOfAFullSearch)
         active_tensegrity::test::expectSameContacts(scan.active(body), full, s.t);
         if (contacts)
         {
-          active_tensegrity::test::expectSameContacts(*contacts, active_tensegrity::test::searchEverySlot(model, s), s.t);
+          active_tensegrity::test::expectSameContacts(*contacts, active_tensegrity::test::searchEverySlot(model, s),
+                                                      s.t);
           ++given;
         }
         ++steps;
@@ -306,4 +307,3 @@ TEST(Tower, TheSolverGivesContactsOnlyForTheStateItsLastStepEndedIn)
   moved.t += 1e-9;  // callers round the time to their step grid
   EXPECT_NE(solver.contactsAt(moved), nullptr);
 }
-

@@ -28,8 +28,8 @@ struct AdaptiveStats
   double h_max = 0.0;
 };
 
-/// The step-size rules of adaptive stepping, shared by BodyAdaptiveStepper and NaturalSolver::advanceTo: which step to try
-/// next, and how a refusal or an acceptance changes it.
+/// The step-size rules of adaptive stepping, shared by BodyAdaptiveStepper and NaturalSolver::advanceTo: which step to
+/// try next, and how a refusal or an acceptance changes it.
 class StepSizeControl
 {
 public:

@@ -25,10 +25,10 @@ struct NaturalState
   Eigen::VectorXd x, v, a;  // free coordinates (then each spin rate's angle), velocities, algorithmic accelerations
   Eigen::VectorXd qdd;      // accelerations (equal to a with Newmark)
   Eigen::VectorXd lambda;   // one multiplier per strut, then per NaturalModel::rows entry
-  std::vector<NaturalTouch> touching;  // the contacts touching, ascending by slot (the others remember nothing)
+  std::vector<NaturalTouch> touching;      // the contacts touching, ascending by slot (the others remember nothing)
   std::vector<ContactPairState> contacts;  // and their states and forces (the same slots in the same order)
-  Eigen::VectorXd frame_spin;          // per strut: the spin angle its body frame (State::q) carries (rad)
-  std::vector<double> actuator_force;  // per actuator: the force it exerts (N; DynamicsSolver::actuationForce)
+  Eigen::VectorXd frame_spin;              // per strut: the spin angle its body frame (State::q) carries (rad)
+  std::vector<double> actuator_force;      // per actuator: the force it exerts (N; DynamicsSolver::actuationForce)
   /// The impact speed slot remembers (0: not touching).
   double contactSpeed(int slot) const;
 };
