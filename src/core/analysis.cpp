@@ -19,8 +19,14 @@ namespace active_tensegrity::core
 {
 double actuationForce(const Model& model, const State& state, int actuator)
 {
-  if (state.natural.x.size() > 0 && state.natural.actuator_force.size() == model.actuators.size())
+  if (state.natural.x.size() > 0)
+  {
+    // (a dynamics state: its forces are what DynamicsSolver::formActuatorForces formed)
+    if (state.natural.actuator_force.size() != model.actuators.size())
+      throw std::logic_error("actuationForce: the dynamics state at t = " + std::to_string(state.t) +
+                             " s has no actuator forces formed (DynamicsSolver::formActuatorForces)");
     return state.natural.actuator_force[static_cast<size_t>(actuator)];
+  }
   double force = 0.0;
   for (int c : model.actuators[actuator].constraints)
   {
@@ -735,6 +741,8 @@ void runAdaptive(const Model& model, DynamicsSolver& solver, const ActuationLaw&
   double last_t = state.t;
   const std::function<void(const State&)> each_step = [&](const State& s)
   {
+    if (!model.actuators.empty())
+      solver.formActuatorForces(state);  // (s is state)
     result.energy.add(stepper.lastEnergy(), s.t - last_t, s.t, stepper.lastEnergyCheck());
     last_t = s.t;
     timed(
@@ -770,6 +778,8 @@ void runAdaptive(const Model& model, DynamicsSolver& solver, const ActuationLaw&
       ++next_stop;
     if (stop >= next_output - eps || stop >= an.duration - eps)
     {
+      if (!model.actuators.empty())
+        solver.formActuatorForces(state);
       timed([&]() { on_output(state); });
       ++result.steps;
       next_output = output_after(next_output + (interval > 0.0 ? interval : an.duration));
@@ -945,6 +955,8 @@ RunResult run(const Model& model, const std::function<void(const State&)>& user_
       result.final_state = state;
       return result;
     }
+    if (!model.actuators.empty())
+      solver.formActuatorForces(state);  // (what the rows and callbacks read; a step leaves them unformed)
     watch(state);
     on_output(state);
     ++result.steps;
@@ -994,6 +1006,8 @@ RunResult run(const Model& model, const std::function<void(const State&)>& user_
           touched = touching;
         }
         const auto callbacks = std::chrono::steady_clock::now();
+        if (!model.actuators.empty())
+          solver.formActuatorForces(state);
         after_step(state);
         if (every_step || k == n_steps || state.t >= static_cast<double>(next_row) * interval - 1e-9 * dt)
         {
@@ -1032,6 +1046,8 @@ RunResult run(const Model& model, const std::function<void(const State&)>& user_
           std::to_string(e.contact_loss_steps) + " lost; the first at t = " + roundedNumber(e.first_unresolved_t) +
           " s): rebounds and contact forces are off by about as much (energy in the summary)");
     with_yield_warnings(result.summary);
+    if (!model.actuators.empty())
+      solver.formActuatorForces(state);  // (the final state's, for whoever reads it)
   }
   with_crossing_warnings(result.summary);
   result.final_state = state;

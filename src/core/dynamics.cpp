@@ -32,12 +32,11 @@ struct DynamicsSolver::Impl
     timings.factorizations = s.factorizations - stats_at_reset.factorizations;
     timings.analyses = s.analyses - stats_at_reset.analyses;
   }
-  /// `s` ended an accepted step (or initialize): its actuators' forces formed, remembered for contactsAt, the most
-  /// touching counted.
+  /// `s` ended an accepted step (or initialize): remembered for contactsAt, the most touching counted; its actuators'
+  /// forces are formed when asked (formActuatorForces).
   void ended(State& s)
   {
-    if (!model.actuators.empty())
-      solver.actuationForces(s.natural, s.u, s.natural.actuator_force);
+    s.natural.actuator_force.clear();
     end_t = s.natural.t;
     end_x = s.natural.x;
     end_v = s.natural.v;
@@ -189,9 +188,11 @@ void DynamicsSolver::Impl::writeBody(State& s) const
       const double turned = n.x(st.spin) - n.frame_spin(static_cast<Eigen::Index>(k));
       if (turned != 0.0)
       {
+        double sin_half, cos_half;
+        sincos(0.5 * turned, &sin_half, &cos_half);
         Vec4 r;
-        r(0) = std::cos(0.5 * turned);
-        r.tail<3>() = std::sin(0.5 * turned) * bodyZAxis(theta);
+        r(0) = cos_half;
+        r.tail<3>() = sin_half * bodyZAxis(theta);
         theta = multiply(r, theta);
       }
       spin = n.v(st.spin);
@@ -353,15 +354,24 @@ const std::vector<ContactPairState>* DynamicsSolver::contactsAt(const State& s) 
 
 double DynamicsSolver::actuationForce(State& s, int actuator)
 {
+  if (!formActuatorForces(s))
+    return std::numeric_limits<double>::quiet_NaN();
+  return s.natural.actuator_force[static_cast<size_t>(actuator)];
+}
+
+bool DynamicsSolver::formActuatorForces(State& s)
+{
   Impl& m = *impl_;
   if (!m.carriesOwn(s))
   {
     const ActuationValues u = s.u;
     const Summary init = initialize(s, ActuationLaw::writing([&u](double, ActuationValues& out) { out = u; }));
     if (!init.ok())
-      return std::numeric_limits<double>::quiet_NaN();
+      return false;
   }
-  return s.natural.actuator_force[static_cast<size_t>(actuator)];
+  if (s.natural.actuator_force.size() != m.model.actuators.size())
+    m.solver.actuationForces(s.natural, s.u, s.natural.actuator_force);
+  return true;
 }
 
 EnergyPoint DynamicsSolver::energyAt(const State& s)

@@ -639,6 +639,7 @@ public:
     if (!init.ok())
       throw std::runtime_error(std::string("Simulation: the initial state could not be made consistent (") +
                                at::toString(init.status) + ": " + init.message + ")");
+    solver_.formActuatorForces(state_);
   }
 
   Simulation(const Simulation&) = delete;  // the solver and the controller refer to model_
@@ -743,6 +744,7 @@ private:
                "); the simulation keeps the last good state";
       }
       state_.t = t_next;
+      solver_.formActuatorForces(state_);  // (the rows read them)
       steps_.fetch_add(1, std::memory_order_relaxed);
     }
     return {};

@@ -949,6 +949,7 @@ void SimNode::publishState(core::State& state, const ros::Time& stamp,
   // publication they were about 40 % of the node's publishing time on the tower)
   const WallClock::time_point now = WallClock::now();
   const bool markers = loop_params_.marker_rate <= 0.0 || now >= next_markers_;
+  solver_.formActuatorForces(state);  // (the actuators' efforts; a step leaves them unformed)
   const Snapshot snap = builder_.build(state, stamp, contacts, markers);
   published_contacts_ = snap.contacts.contacts.size();
   tf_.sendTransform(snap.transforms);

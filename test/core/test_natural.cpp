@@ -231,7 +231,7 @@ TEST(Natural, MassMatrixGivesTheRigidStrutsKineticEnergy)
 // the strut centres of a run to t_end, each formulation at fixed steps of dt
 std::vector<Vec3> centresBody(const Model& model, double t_end)
 {
-  DynamicsSolver solver(model, model.solver);
+  BodyDynamicsSolver solver(model, model.solver);
   const ActuationLaw law = [&model](double t) { return scheduledActuation(model, t); };
   State s = initialState(model);
   EXPECT_TRUE(solver.initialize(s, law).ok());
@@ -303,7 +303,7 @@ TEST(Natural, ActuationForcesAgreeWithBodyCoordinatesAndTheDrivenBodysBalance)
         scene("quadruplex_linear_contact.yaml",
               { { "solver.integrator", "newmark" }, { "solver.dt", "2e-4" }, { "solver.newton_tolerance", "1e-10" } });
     const ActuationLaw law = [&model](double t) { return scheduledActuation(model, t); };
-    DynamicsSolver body(model, model.solver);
+    BodyDynamicsSolver body(model, model.solver);
     State bs = initialState(model);
     ASSERT_TRUE(body.initialize(bs, law).ok());
     const NaturalModel nm = buildNaturalModel(model);

@@ -241,6 +241,7 @@ TEST(MessageBuilder, GroundContactsNameTheGroundAndTheGroundIsDrawn)
   ASSERT_TRUE(solver.initialize(state, still).ok());
   for (int k = 0; k < 500; ++k)
     ASSERT_TRUE(solver.step(state, model.solver.dt, still).ok());
+  ASSERT_TRUE(solver.formActuatorForces(state));  // (the actuators' efforts the message carries)
   rl::MessageBuilder builder(model, "world", rl::MarkerOptions());
   const rl::Snapshot snap = builder.build(state, ros::Time(100.0));
   std::set<std::string> on_ground;

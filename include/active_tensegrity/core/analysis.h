@@ -18,8 +18,10 @@
 namespace active_tensegrity::core
 {
 /// Force the actuator applies along its directions, summed over its targets (N); positive when it
-/// pushes the nodes the way they are driven. From the multipliers: the constraint force on a body
-/// is -Phi_q^T lambda, so each target contributes -lambda.
+/// pushes the nodes the way they are driven. A static state: from the multipliers (the constraint force on a
+/// body is -Phi_q^T lambda, so each target contributes -lambda) and the pulled cables' tensions. A dynamics state:
+/// what DynamicsSolver::formActuatorForces formed (runAnalysis forms them before its callbacks see a state);
+/// throws std::logic_error when they were not.
 double actuationForce(const Model& model, const State& state, int actuator);
 
 /// The scene's actuation law of a dynamic run at time t, one value per actuator: every actuator on

@@ -48,9 +48,12 @@ public:
   /// step ended in (or initialize made); else null.
   const std::vector<ContactPairState>* contactsAt(const State& state) const;
   /// The force actuator `actuator` exerts at s (N): a driven node's reaction along its direction, a driven row's
-  /// multiplier, plus the tension of each cable it pulls in (as every step and initialize leave it in
-  /// State::natural.actuator_force; a state without them is initialized first, at its actuation values).
+  /// multiplier, plus the tension of each cable it pulls in (formActuatorForces; NaN when s cannot be initialized).
   double actuationForce(State& s, int actuator);
+  /// Forms every actuator's force at s into State::natural.actuator_force, which analysis.h's actuationForce reads
+  /// (a step leaves them unformed: a driven node's reaction costs a force evaluation). s is a state this solver made,
+  /// or it is initialized first at its actuation values; false when that fails.
+  bool formActuatorForces(State& s);
   /// The energy of s and the powers acting on it (energy.h's account).
   EnergyPoint energyAt(const State& s);
   /// The last step's local error estimate (m): largest over the nodes.
