@@ -31,6 +31,11 @@ struct DynamicsSolver::Impl
     timings.newton_iterations = s.iterations - stats_at_reset.iterations;
     timings.factorizations = s.factorizations - stats_at_reset.factorizations;
     timings.analyses = s.analyses - stats_at_reset.analyses;
+    timings.forces = s.forces_time - stats_at_reset.forces_time;
+    timings.contact = s.contact_time - stats_at_reset.contact_time;
+    timings.constraints = s.constraints_time - stats_at_reset.constraints_time;
+    timings.factorization = s.factorization_time - stats_at_reset.factorization_time;
+    timings.solve = s.solve_time - stats_at_reset.solve_time;
   }
   /// `s` ended an accepted step (or initialize): remembered for contactsAt, the most touching counted; its actuators'
   /// forces are formed when asked (formActuatorForces).
@@ -287,10 +292,8 @@ Summary DynamicsSolver::tryStep(State& s, double h, const ActuationLaw& law)
   // s.t + h)
   const double t1 = s.t + h;
   Summary out;
-  {
-    ScopeTimer timer(m.timings.total);
-    out = m.solver.tryStep(s.natural, t1 - s.natural.t, law);
-  }
+  ScopeTimer timer(m.timings.total);
+  out = m.solver.tryStep(s.natural, t1 - s.natural.t, law);
   m.countTimings();
   if (!out.ok())
     return out;
@@ -311,10 +314,8 @@ Summary DynamicsSolver::step(State& s, double h, const ActuationLaw& law)
   }
   const double t1 = s.t + h, t0 = s.natural.t;
   Summary out;
-  {
-    ScopeTimer timer(m.timings.total);
-    out = m.solver.step(s.natural, t1 - s.natural.t, law);
-  }
+  ScopeTimer timer(m.timings.total);  // (the body poses' writing included)
+  out = m.solver.step(s.natural, t1 - s.natural.t, law);
   m.countTimings();
   if (s.natural.t == t0)
     return out;  // (nothing taken: the state is as it was)
@@ -418,7 +419,10 @@ AdaptiveStepper::AdaptiveStepper(DynamicsSolver& solver, const SolverOptions& op
     m.writeBody(s);
     m.ended(s);
     if (*on_step_)
+    {
+      const ScopeTimer timer(callback_time_);
       (*on_step_)(s);
+    }
   };
 }
 
@@ -437,10 +441,12 @@ Summary AdaptiveStepper::advanceTo(State& s, double t_end, const ActuationLaw& l
   state_ = &s;
   on_step_ = &on_step;
   last_t_ = s.t;
+  callback_time_ = 0.0;
   {
     ScopeTimer timer(m.timings.total);
     out = m.solver.advanceAdaptive(s.natural, t_end, law, each_);
   }
+  m.timings.total -= callback_time_;  // (the caller's on_step is not the solver's time)
   m.countTimings();
   const NaturalStats& after = m.solver.stats();
   stats_.accepted += after.accepted - before.accepted;

@@ -1030,8 +1030,28 @@ void NaturalSolver::actuationForces(const NaturalState& s, const ActuationValues
 
 void NaturalSolver::drivenReactions(const NaturalState& s, const ActuationValues& u)
 {
+  // (the same state as the last call, the same step and actuation: its reactions stand)
+  const auto same_u = [&]()
+  {
+    if (reactions_u_.size() != u.size())
+      return false;
+    for (size_t i = 0; i < u.size(); ++i)
+      if (reactions_u_[i].value != u[i].value || reactions_u_[i].rate != u[i].rate ||
+          reactions_u_[i].accel != u[i].accel)
+        return false;
+    return true;
+  };
+  if (reactions_valid_ && reactions_t_ == s.t && reactions_steps_ == stats_.steps && reactions_x_ == s.x &&
+      reactions_v_ == s.v && same_u())
+    return;
   // R = M_D qdd - F_D + (G^T lambda)_D at each driven node D: what it takes, beyond the forces on it, to give it the
   // prescribed motion
+  reactions_valid_ = true;
+  reactions_t_ = s.t;
+  reactions_steps_ = stats_.steps;
+  reactions_x_ = s.x;
+  reactions_v_ = s.v;
+  reactions_u_ = u;
   held_force_.assign(nm_.nodes.size(), Vec3::Zero());
   reaction_along_.assign(nm_.nodes.size(), 0.0);
   held_ = &held_force_;
@@ -1549,6 +1569,7 @@ Summary NaturalSolver::initialize(NaturalState& s, const ActuationLaw& law)
   Summary out;
   const int n = nm_.coordinates, m = static_cast<int>(nm_.struts.size() + nm_.rows.size());
   law(s.t, u_);
+  reactions_valid_ = false;  // (the multipliers and accelerations are made anew)
   findNear(s, kNearFloor);
   forces(s.x, s.v, false);
   contactForces(s.x, s.v, false);
@@ -1739,6 +1760,7 @@ Summary NaturalSolver::setExternalLoads(const std::vector<PointLoad>& loads, Nat
   for (const PointLoad& l : loads)
     converted.push_back(naturalLoad(nm_, l));
   external_ = std::move(converted);
+  reactions_valid_ = false;
   start_energy_valid_ = false;
   history_count_ = 0;
   last_end_t_ = -1.0;
@@ -1758,7 +1780,10 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
   for (const NaturalNode& nd : nm_.nodes)
     if (nd.kind == NaturalNode::Kind::kDriven)
       reach = std::max(reach, std::abs(u_[nd.actuator].rate) * h + std::abs(u_[nd.actuator].accel) * h * h);
-  findNear(s, std::max(2.0 * reach, kNearFloor));
+  {
+    const ScopeTimer timer(stats_.contact_time);
+    findNear(s, std::max(2.0 * reach, kNearFloor));
+  }
   // The unknowns are the accelerations qdd at the step's end; the algorithmic accelerations are
   // a = c1 qdd + c0 (generalized-alpha: (1 - alpha_m) a + alpha_m a_n = (1 - alpha_f) qdd + alpha_f qdd_n; Newmark:
   // a = qdd), and x = x_n + h v_n + h^2 ((1/2 - beta) a_n + beta a), v = v_n + h ((1 - gamma) a_n + gamma a).
@@ -1811,14 +1836,28 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
       entries_.k_weight = bh2;
       entries_.c_weight = gh;
     }
-    forces(x_, v_, build);
-    contactForces(x_, v_, build);
+    {
+      const ScopeTimer timer(stats_.forces_time);
+      forces(x_, v_, build);
+    }
+    {
+      const ScopeTimer timer(stats_.contact_time);
+      contactForces(x_, v_, build);
+    }
     residual_.head(n) = -f_;
     residual_.head(n).noalias() += nm_.mass * acc_;  // (no temporary for the product)
-    constraintRows(x_, lambda_, bh2, bh2, build);
+    {
+      const ScopeTimer timer(stats_.constraints_time);
+      constraintRows(x_, lambda_, bh2, bh2, build);
+    }
     if (build)
     {
-      if (!factorize(n + m))
+      bool factorized = false;
+      {
+        const ScopeTimer timer(stats_.factorization_time);
+        factorized = factorize(n + m);
+      }
+      if (!factorized)
       {
         out.status = SolveStatus::kSingular;
         out.message = "natural coordinates: a singular Newton matrix";
@@ -1835,7 +1874,10 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
       freshMatrix(previous);
     }
     rhs_ = -residual_;
-    solve(rhs_, correction_);
+    {
+      const ScopeTimer timer(stats_.solve_time);
+      solve(rhs_, correction_);
+    }
     ++out.iterations;
     ++stats_.iterations;
     if (!correction_.allFinite())
@@ -1870,6 +1912,7 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
         continue;
       }
       // a step that jumps a strut through another is refused (and cut), never accepted silently
+      const ScopeTimer timer(stats_.contact_time);  // (the pass-through check and the end's contacts)
       const int crossed = firstPassedThrough();
       if (crossed >= 0)
       {

@@ -121,6 +121,7 @@ private:
   State* state_ = nullptr;
   const std::function<void(const State&)>* on_step_ = nullptr;
   double last_t_ = 0.0;
+  double callback_time_ = 0.0;  // s in on_step during the call
   std::function<void(const NaturalState&)> each_;
 };
 

@@ -172,6 +172,10 @@ struct NaturalStats
   // adaptive steps (advanceTo): accepted, of them at dt_min with their checks still failing, the smallest and largest
   long accepted = 0, at_min_step = 0;
   double h_min = 0.0, h_max = 0.0;
+  // wall time (s) in dynamic steps' parts (steady_clock around each): applied forces and their tangents; contact
+  // (listing, forces and tangents, the pass-through check, the end's contacts); constraint rows; factorizations;
+  // triangular solves
+  double forces_time = 0.0, contact_time = 0.0, constraints_time = 0.0, factorization_time = 0.0, solve_time = 0.0;
 };
 
 /// Index-3 Newmark or generalized-alpha in natural coordinates with modified Newton, by the body solver's rules
@@ -378,8 +382,14 @@ private:
   bool in_contact_ = false;
   ActuationValues u_start_;
   std::vector<double> reaction_along_;  // per driven node: its reaction along its direction (drivenReactions)
-  /// The reactions of every driven node at s under u into reaction_along_.
+  /// The reactions of every driven node at s under u into reaction_along_ (kept for the same state: actuator forces
+  /// and the energy account both ask at each step's end).
   void drivenReactions(const NaturalState& s, const ActuationValues& u);
+  bool reactions_valid_ = false;
+  double reactions_t_ = 0.0;
+  long reactions_steps_ = -1;
+  Eigen::VectorXd reactions_x_, reactions_v_;
+  ActuationValues reactions_u_;
   std::vector<Vec3> pos_, vel_;  // every node's position and velocity at the iterate (forces())
   Entries entries_;
   Eigen::SparseMatrix<double> sparse_;

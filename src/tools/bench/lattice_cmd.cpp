@@ -32,7 +32,6 @@ struct Row
   long nonzeros = 0;
   int steps = 0;
   double iterations = 0.0, factorizations = 0.0;  // per step
-  double body_blocks = 0.0;                       // share of the factorizations on body blocks
   long analyses = 0;                              // symbolic analyses (a new pair touching grows the pattern)
   double us_per_step = 0.0;                       // step() calls only, median over repeats
   double forces = 0.0, contact = 0.0, constraints = 0.0, factorization = 0.0, solve = 0.0;  // us per step
@@ -83,8 +82,6 @@ Row measure(const LatticeCells& cells, const LatticeOptions& base, const std::ve
   row.steps = res.solver_steps;
   row.iterations = static_cast<double>(res.summary.iterations) / n;
   row.factorizations = static_cast<double>(res.timings.factorizations) / n;
-  row.body_blocks = static_cast<double>(res.timings.body_block_factorizations) /
-                    static_cast<double>(std::max<long>(1, res.timings.factorizations));
   row.analyses = res.timings.analyses;
   row.us_per_step = 1e6 * mid.per_step;
   row.forces = 1e6 * res.timings.forces / n;
@@ -102,7 +99,7 @@ Row measure(const LatticeCells& cells, const LatticeOptions& base, const std::ve
 
 const char* kColumns =
     "struts,nx,ny,bodies,coordinates,constraint_rows,checked_pairs,matrix_nonzeros,steps,newton_per_step,"
-    "factorizations_per_step,body_block_share,analyses,us_per_step,us_per_step_per_strut,forces_us,contact_us,"
+    "factorizations_per_step,analyses,us_per_step,us_per_step_per_strut,forces_us,contact_us,"
     "constraints_us,"
     "factorization_us,solve_us,peak_contacts,setup_ms,status";
 
@@ -110,9 +107,9 @@ std::string csvLine(const Row& r)
 {
   char buf[512];
   std::snprintf(buf, sizeof buf,
-                "%d,%d,%d,%d,%d,%d,%zu,%ld,%d,%.4f,%.4f,%.3f,%ld,%.2f,%.3f,%.2f,%.2f,%.2f,%.2f,%.2f,%d,%.1f,%s",
+                "%d,%d,%d,%d,%d,%d,%zu,%ld,%d,%.4f,%.4f,%ld,%.2f,%.3f,%.2f,%.2f,%.2f,%.2f,%.2f,%d,%.1f,%s",
                 r.cells.struts(), r.cells.nx, r.cells.ny, r.bodies, r.coordinates, r.constraint_rows, r.checked_pairs,
-                r.nonzeros, r.steps, r.iterations, r.factorizations, r.body_blocks, r.analyses, r.us_per_step,
+                r.nonzeros, r.steps, r.iterations, r.factorizations, r.analyses, r.us_per_step,
                 r.us_per_step / r.cells.struts(), r.forces, r.contact, r.constraints, r.factorization, r.solve,
                 r.peak_contacts, r.setup_ms, r.status.c_str());
   return buf;
@@ -260,24 +257,22 @@ int runLattice(const std::vector<std::string>& args)
                                                   "near (same or adjacent cells)",
               repeat, overrides.empty() ? "" : " (with --set overrides)");
   std::printf("us/step: wall time of the solver's step() calls / steps, median over the runs; breakdown in us/step\n");
-  std::printf("bblk: share of the factorizations on body blocks (the rest exact or static pivots)\n");
   std::printf("peakC: the most strut pairs touching at the end of a step\n");
-  std::printf("%6s %6s %6s %6s %6s %8s %9s %6s %6s %6s %5s %5s %10s %8s %9s %9s %9s %9s %9s %5s %9s %s\n", "struts",
-              "cells", "bodies", "coords", "rows", "pairs", "nnz", "steps", "newton", "factor", "bblk", "anal",
-              "us/step", "us/strut", "forces", "contact", "constr", "factorize", "solve", "peakC", "setup ms",
-              "status");
+  std::printf("%6s %6s %6s %6s %6s %8s %9s %6s %6s %6s %5s %10s %8s %9s %9s %9s %9s %9s %5s %9s %s\n", "struts",
+              "cells", "bodies", "coords", "rows", "pairs", "nnz", "steps", "newton", "factor", "anal", "us/step",
+              "us/strut", "forces", "contact", "constr", "factorize", "solve", "peakC", "setup ms", "status");
   std::fflush(stdout);
   std::vector<double> xs, ys;
   bool all_ok = true;
   for (const LatticeCells& cells : sizes)
   {
     const Row r = measure(cells, base, overrides, repeat);
-    std::printf("%6d %6s %6d %6d %6d %8zu %9ld %6d %6.2f %6.3f %5.2f %5ld %10.1f %8.2f %9.1f %9.1f %9.1f %9.1f %9.1f "
+    std::printf("%6d %6s %6d %6d %6d %8zu %9ld %6d %6.2f %6.3f %5ld %10.1f %8.2f %9.1f %9.1f %9.1f %9.1f %9.1f "
                 "%5d %9.1f %s\n",
                 r.cells.struts(), (std::to_string(r.cells.nx) + "x" + std::to_string(r.cells.ny)).c_str(), r.bodies,
                 r.coordinates, r.constraint_rows, r.checked_pairs, r.nonzeros, r.steps, r.iterations, r.factorizations,
-                r.body_blocks, r.analyses, r.us_per_step, r.us_per_step / r.cells.struts(), r.forces, r.contact,
-                r.constraints, r.factorization, r.solve, r.peak_contacts, r.setup_ms, r.status.c_str());
+                r.analyses, r.us_per_step, r.us_per_step / r.cells.struts(), r.forces, r.contact, r.constraints,
+                r.factorization, r.solve, r.peak_contacts, r.setup_ms, r.status.c_str());
     std::fflush(stdout);
     if (csv.is_open())
       csv << csvLine(r) << "\n" << std::flush;

@@ -68,23 +68,15 @@ int steps(const std::string& scene, const std::vector<at::Override>& overrides, 
   else if (!peaks)
     std::printf("heap allocations per step (solver and loop, after the first output): %.2f\n",
                 static_cast<double>(allocations) / std::max(1, last.solver_steps));
-  std::printf("factorizations per step: %.3f (body blocks %.3f, static pivots %.3f, one-body rows eliminated %.3f), "
-              "symbolic analyses: %ld\n",
-              static_cast<double>(last.timings.factorizations) / std::max(1, last.solver_steps),
-              static_cast<double>(last.timings.body_block_factorizations) / std::max(1, last.solver_steps),
-              static_cast<double>(last.timings.static_pivot_factorizations) / std::max(1, last.solver_steps),
-              static_cast<double>(last.timings.reduced_factorizations) / std::max(1, last.solver_steps),
-              last.timings.analyses);
   if (dynamic)
-  {
-    std::printf("full-Newton retries: %ld, switches to full Newton: %ld, iterates beyond the contact reach: %ld, "
-                "fresh starts: %ld\n",
-                last.timings.full_newton_retries, last.timings.newton_switches, last.timings.contact_reach_misses,
-                last.timings.fresh_starts);
-    std::printf("body blocks distrusted: %ld, rebuilt where they slowed: %ld; static pivots kept through a change of "
-                "touching pairs: %ld\n",
-                last.timings.body_block_distrusts, last.timings.body_block_rebuilds, last.timings.static_pivots_kept);
-  }
+    std::printf("factorizations per step: %.3f, symbolic analyses: %ld\n",
+                static_cast<double>(last.timings.factorizations) / std::max(1, last.solver_steps),
+                last.timings.analyses);
+  else
+    std::printf("factorizations per step: %.3f (one-body rows eliminated %.3f), symbolic analyses: %ld\n",
+                static_cast<double>(last.timings.factorizations) / std::max(1, last.solver_steps),
+                static_cast<double>(last.timings.reduced_factorizations) / std::max(1, last.solver_steps),
+                last.timings.analyses);
   std::printf("where the time goes (last run, us per step, share of its wall time):\n");
   const int n = std::max(1, last.solver_steps);
   for (const auto& [part, seconds] : at::timeBreakdown(last))
