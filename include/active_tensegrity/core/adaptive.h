@@ -1,3 +1,5 @@
+/// The adaptive steps' size rules (StepSizeControl), shared by the dynamics (AdaptiveStepper in dynamics.h, on the
+/// natural coordinates) and the body coordinates' BodyAdaptiveStepper below, kept for `tensegrity_bench natural`.
 /// Variable time steps for BodyDynamicsSolver (solver.adaptive): the step follows a local error estimate
 /// (StepEstimate::error against solver.error_tolerance), a step that brings a pair into contact deeper
 /// than solver.onset_depth is refused and retried at the interpolated onset time, a step that gains energy

@@ -1,4 +1,7 @@
-/// Index-3 DAE time integration (paper Sec. 5): Newton-Raphson on [qdd_{n+1}; lambda_{n+1}] with the
+/// Index-3 DAE time integration in the body coordinates (7 per strut), kept as the comparison `tensegrity_bench
+/// natural` runs against the package's dynamics in natural coordinates (dynamics.h), with its adaptive steps
+/// (BodyAdaptiveStepper, adaptive.h).
+/// Paper Sec. 5: Newton-Raphson on [qdd_{n+1}; lambda_{n+1}] with the
 /// full analytic Jacobian (Eq. 68) and the constraint rows scaled by 1 / (beta h^2) (Bottasso et al.
 /// 2007). Integrators: Newmark (gamma, beta) and generalized-alpha (Arnold & Bruls 2007, from
 /// rho_infinity). A step whose Newton iteration fails is halved (up to max_step_cuts times).

@@ -16,10 +16,10 @@
 /// -J_a w_s e_dot. No force depends on the spin angle, which is not tracked. The tangents are exact: forward-mode
 /// automatic differentiation of the same kernels (natural.cpp).
 ///
-/// This is a second formulation measured against the body coordinates (state.h, dynamics.h) by
-/// `tensegrity_bench natural` and `work-precision`: dynamics with the scene's point loads and forces from outside (on
-/// strut axes and point masses), with Newmark or generalized-alpha at fixed or adaptive steps (error, onset and energy
-/// control); statics and paths of equilibria without spin locks.
+/// The package's dynamics (DynamicsSolver and AdaptiveStepper in dynamics.h run it on a State): the scene's point
+/// loads and forces from outside (on strut axes and point masses), Newmark or generalized-alpha at fixed or adaptive
+/// steps (error, onset and energy control). Also statics and paths of equilibria without spin locks, which
+/// `tensegrity_bench natural` compares with the body coordinates' StaticSolver (statics.h).
 #pragma once
 
 #include <array>

@@ -35,15 +35,18 @@ struct NaturalState
 
 struct State
 {
-  double t = 0.0;          // s (dynamics) or load parameter (statics)
-  Eigen::VectorXd q;       // coordinates, 7 per strut, 3 per point mass
-  Eigen::VectorXd qd;      // their time derivatives
-  Eigen::VectorXd qdd;     // accelerations
-  Eigen::VectorXd acc;     // generalized-alpha pseudo-accelerations (equal to qdd for Newmark)
-  Eigen::VectorXd lambda;  // multipliers of the model's constraints (then any solver-added ones)
-  ActuationValues u;       // actuation values at t
-  /// Contact memory per contact slot (strut pairs, then ground contacts): the impact speed v_0 (m/s) of a
-  /// live contact, 0 when apart. Set at contact onset, forgotten at separation (dynamics).
+  double t = 0.0;      // s (dynamics) or load parameter (statics)
+  Eigen::VectorXd q;   // body coordinates, 7 per strut (centre, Euler parameters), 3 per point mass
+  Eigen::VectorXd qd;  // their time derivatives
+  // The body coordinates' accelerations, generalized-alpha pseudo-accelerations, multipliers (of the model's
+  // constraints, then any solver-added ones) and contact memory: what statics and the body coordinates' dynamics
+  // (BodyDynamicsSolver) keep. The dynamics solver keeps its own in `natural` and leaves these as they were.
+  Eigen::VectorXd qdd;
+  Eigen::VectorXd acc;
+  Eigen::VectorXd lambda;
+  ActuationValues u;  // actuation values at t
+  /// Per contact slot (strut pairs, then ground contacts): the impact speed v_0 (m/s) of a live contact, 0 when apart
+  /// (the body coordinates' dynamics).
   SlotValues contact_speed;
   /// The coordinates the dynamics solver integrates (natural.h): the free nodes' positions, velocities and
   /// accelerations, the strut-length and row multipliers, the touching contacts. q and qd above are their body
