@@ -235,17 +235,9 @@ const Model& DynamicsSolver::model() const
 {
   return impl_->model;
 }
-const NaturalModel& DynamicsSolver::naturalModel() const
-{
-  return impl_->nm;
-}
 NaturalSolver& DynamicsSolver::natural()
 {
   return impl_->solver;
-}
-void DynamicsSolver::writeBody(State& state) const
-{
-  impl_->writeBody(state);
 }
 
 Summary DynamicsSolver::prepare(State& s, const ActuationLaw& law)
@@ -282,12 +274,8 @@ Summary DynamicsSolver::initialize(State& s, const ActuationLaw& law)
 Summary DynamicsSolver::tryStep(State& s, double h, const ActuationLaw& law)
 {
   Impl& m = *impl_;
-  if (!m.carriesOwn(s))
-  {
-    const Summary init = initialize(s, law);
-    if (!init.ok())
-      return init;
-  }
+  if (const Summary init = prepare(s, law); !init.ok())
+    return init;
   // (from the natural coordinates' own time, which the caller's may differ from by its rounding: the step lands on
   // s.t + h)
   const double t1 = s.t + h;
@@ -306,12 +294,8 @@ Summary DynamicsSolver::tryStep(State& s, double h, const ActuationLaw& law)
 Summary DynamicsSolver::step(State& s, double h, const ActuationLaw& law)
 {
   Impl& m = *impl_;
-  if (!m.carriesOwn(s))
-  {
-    const Summary init = initialize(s, law);
-    if (!init.ok())
-      return init;
-  }
+  if (const Summary init = prepare(s, law); !init.ok())
+    return init;
   const double t1 = s.t + h, t0 = s.natural.t;
   Summary out;
   ScopeTimer timer(m.timings.total);  // (the body poses' writing included)
@@ -333,12 +317,8 @@ Summary DynamicsSolver::setExternalLoads(const std::vector<PointLoad>& loads, St
   Impl& m = *impl_;
   const ActuationValues u = s.u;
   const ActuationLaw held = ActuationLaw::writing([&u](double, ActuationValues& out) { out = u; });
-  if (!m.carriesOwn(s))
-  {
-    const Summary init = initialize(s, held);
-    if (!init.ok())
-      return init;
-  }
+  if (const Summary init = prepare(s, held); !init.ok())
+    return init;
   const Summary out = m.solver.setExternalLoads(loads, s.natural, held);
   if (out.ok())
     m.ended(s);
@@ -365,9 +345,8 @@ bool DynamicsSolver::formActuatorForces(State& s)
   Impl& m = *impl_;
   if (!m.carriesOwn(s))
   {
-    const ActuationValues u = s.u;
-    const Summary init = initialize(s, ActuationLaw::writing([&u](double, ActuationValues& out) { out = u; }));
-    if (!init.ok())
+    const ActuationValues u = s.u;  // (initialized at its own actuation values)
+    if (!initialize(s, ActuationLaw::writing([&u](double, ActuationValues& out) { out = u; })).ok())
       return false;
   }
   if (s.natural.actuator_force.size() != m.model.actuators.size())
@@ -378,11 +357,6 @@ bool DynamicsSolver::formActuatorForces(State& s)
 EnergyPoint DynamicsSolver::energyAt(const State& s)
 {
   return impl_->solver.energyAt(s.natural, s.u);
-}
-
-double DynamicsSolver::lastError() const
-{
-  return impl_->solver.lastError();
 }
 
 const StepTimings& DynamicsSolver::timings() const
@@ -430,12 +404,8 @@ Summary AdaptiveStepper::advanceTo(State& s, double t_end, const ActuationLaw& l
                                    const std::function<void(const State&)>& on_step)
 {
   DynamicsSolver::Impl& m = *solver_.impl_;
-  if (!m.carriesOwn(s))
-  {
-    const Summary init = solver_.initialize(s, law);
-    if (!init.ok())
-      return init;
-  }
+  if (const Summary init = solver_.prepare(s, law); !init.ok())
+    return init;
   const NaturalStats before = m.solver.stats();
   Summary out;
   state_ = &s;

@@ -20,7 +20,6 @@
 namespace active_tensegrity::core
 {
 class NaturalSolver;
-struct NaturalModel;
 
 class DynamicsSolver
 {
@@ -56,8 +55,6 @@ public:
   bool formActuatorForces(State& s);
   /// The energy of s and the powers acting on it (energy.h's account).
   EnergyPoint energyAt(const State& s);
-  /// The last step's local error estimate (m): largest over the nodes.
-  double lastError() const;
 
   /// Counts of the solver's work since construction or resetTimings (StepTimings: iterations, factorizations,
   /// analyses, the most contacts touching at an accepted step's end, the time in step calls).
@@ -71,16 +68,13 @@ public:
   Coefficients coefficients() const;
 
   const Model& model() const;
-  const NaturalModel& naturalModel() const;
   NaturalSolver& natural();
 
-  /// Gives `state` natural coordinates formed from its q and qd (projected onto the constraints, accelerations and
-  /// multipliers solved) unless it carries its own; no-op for a state a step or initialize made.
-  Summary prepare(State& state, const ActuationLaw& law);
-  /// Writes the body poses and rates of state.natural into state.q, state.qd (state.u at state.natural.t).
-  void writeBody(State& state) const;
-
 private:
+  /// Gives `state` natural coordinates formed from its q and qd (initialize) unless it carries its own (a state a step
+  /// or initialize made, untouched since).
+  Summary prepare(State& state, const ActuationLaw& law);
+
   friend class AdaptiveStepper;
   struct Impl;
   std::unique_ptr<Impl> impl_;

@@ -208,11 +208,6 @@ public:
   /// the positions to a correction of at most 1e-12 (1 + |x|), then the velocity rows), for a state formed from
   /// elsewhere (body poses, a caller's positions).
   Summary project(NaturalState& s, const ActuationValues& u);
-  /// The adaptive steps start afresh: the next one options.dt, no step-size history.
-  void restartStepControl()
-  {
-    control_ = StepSizeControl(options_);
-  }
   /// The energy where the last accepted adaptive step ended, and that step's energy check (advanceTo).
   const EnergyPoint& lastEnergy() const
   {
