@@ -747,6 +747,7 @@ namespace
 {
 constexpr double kNearFloor = 1e-4;        // m: the least motion the near pairs allow for
 constexpr double kRateFloor = 0.05;        // the least contraction rate assumed of modified Newton
+constexpr int kFullNewtonFrom = 8;         // a step's iterations from this one on build their own matrix (full Newton)
 constexpr int kDenseMost = 160;            // Newton matrices up to this size are factorized dense, larger ones sparse
 constexpr int kDirectPairsMost = 64;       // up to this many strut pairs are checked without the broad phase
 constexpr double kListMarginLeast = 2e-3;  // m: the least margin of the listed contacts
@@ -1828,7 +1829,7 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
   {
     x_ = x_pred_ + bh2 * acc_;
     v_ = v_pred_ + gh * acc_;
-    const bool build = rebuild || it >= 3 || !options_.reuse_jacobian;
+    const bool build = rebuild || it >= kFullNewtonFrom || !options_.reuse_jacobian;
     if (build)
     {
       entries_.clear(n + m, n + m <= kDenseMost);

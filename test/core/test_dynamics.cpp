@@ -496,7 +496,7 @@ TEST(Dynamics, ModifiedNewtonReusesTheMatrixAndItsErrorFollowsTheTolerance)
   {
     // within a small multiple of the tolerance over 3000 steps
     EXPECT_LT(run.distance, 10.0 * tol) << "tolerance " << tol;
-    // the matrix is rebuilt rarely (slack/taut changes, age, a fourth iteration), most iterations reuse it
+    // the matrix is rebuilt rarely (slack/taut changes, age, a step's ninth iteration), most iterations reuse it
     EXPECT_LT(run.timings.factorizations, run.timings.newton_iterations / 10) << "tolerance " << tol;
   }
   EXPECT_LT(mid.distance, 0.1 * loose.distance);
