@@ -275,6 +275,9 @@ void SimNode::diagnoseCommands(diagnostic_updater::DiagnosticStatusWrapper& d)
   d.add("accepted", accepted_);
   d.add("rejected", rejected_);
   d.add("last_rejection", last_rejection_);
+  d.add("last_motion_simulated", last_motion_sim_);
+  d.add("last_motion_wall", last_motion_wall_);
+  d.add("last_motion_real_time_factor", last_motion_wall_ > 0.0 ? last_motion_sim_ / last_motion_wall_ : 0.0);
   diagnosed_rejected_ = rejected_;
 }
 
@@ -361,6 +364,7 @@ void SimNode::onTrajectory(const trajectory_msgs::JointTrajectory::ConstPtr& msg
 core::Summary SimNode::restart(core::State& s)
 {
   controller_.reset(s.u);
+  was_moving_ = false;
   const core::Summary init = solver_.initialize(s, [this](double t) { return controller_.values(t); });
   if (init.ok() && finite(s) && params_.adaptive)
     stepper_ = std::make_unique<core::AdaptiveStepper>(solver_, model_.solver);  // a new step-size history
@@ -1090,6 +1094,7 @@ void SimNode::run()
       else
       {
         const core::State before = state_;
+        const WallClock::time_point wall_before = WallClock::now();
         const double push_end = applyPushes();
         core::Summary s;
         if (stepper_)
@@ -1124,6 +1129,18 @@ void SimNode::run()
           publishStatus();
           continue;
         }
+        const bool moving = controller_.moving(state_.t);
+        if (moving && !was_moving_)
+        {
+          motion_start_sim_ = before.t;
+          motion_start_wall_ = wall_before;
+        }
+        else if (!moving && was_moving_)
+        {
+          last_motion_sim_ = state_.t - motion_start_sim_;
+          last_motion_wall_ = std::chrono::duration<double>(WallClock::now() - motion_start_wall_).count();
+        }
+        was_moving_ = moving;
       }
     }
 

@@ -154,6 +154,10 @@ class SimInterfaces(unittest.TestCase):
                         "solver_status", "active_contacts", "pushes"):
                 self.assertIn(key, values)
             self.assertEqual(named("planner").level, DiagnosticStatus.OK)
+            commands = {kv.key: kv.value for kv in named("commands").values}
+            for key in ("accepted", "rejected", "last_rejection", "last_motion_simulated", "last_motion_wall",
+                        "last_motion_real_time_factor"):
+                self.assertIn(key, commands)
             # a bad command: the commands' status warns at the next report, naming it (after the reports of what
             # came before are OK)
             self.assertTrue(wait_for(lambda: named("commands").level == DiagnosticStatus.OK, WAIT))
@@ -164,6 +168,17 @@ class SimInterfaces(unittest.TestCase):
             self.assertIn("no_such_actuator", named("commands").message)
             # ... and is OK again at the report after
             self.assertTrue(wait_for(lambda: named("commands").level == DiagnosticStatus.OK, WAIT))
+            # a motion of the actuator (1 cm at 0.1 m/s, paced at real time): its simulated and wall durations
+            pub.publish(ActuationCommand(names=["lift"], targets=[0.01], max_speeds=[0.1]))
+
+            def motion():
+                values = {kv.key: kv.value for kv in named("commands").values}
+                return float(values["last_motion_simulated"]), float(values["last_motion_wall"])
+
+            self.assertTrue(wait_for(lambda: motion()[0] > 0.0, WAIT), named("commands"))
+            simulated, wall = motion()
+            self.assertGreater(simulated, 0.09)  # 0.1 s at the speed, more with the ramps
+            self.assertGreater(wall, 0.0)
             # paused: said so
             rospy.ServiceProxy(A + "/pause", SetBool)(True)
             self.assertTrue(wait_for(lambda: named("simulation").message.startswith("paused"), WAIT),

@@ -146,6 +146,12 @@ private:
   core::State state_;
   bool paused_by_user_ = false;
   bool failed_ = false;
+  // the actuators' last motion, from the stepping that set them moving to the one after which they had all arrived:
+  // its simulated and wall durations (s), for /diagnostics (the real-time factor of a fold, publishing included)
+  bool was_moving_ = false;
+  double motion_start_sim_ = 0.0;
+  WallClock::time_point motion_start_wall_;
+  double last_motion_sim_ = 0.0, last_motion_wall_ = 0.0;
   // ~plan_folding requests with execute under way: the simulation does not step while there is one
   int plan_holds_ = 0;
   // counts every change of the actuation or the state other than stepping (commands, trajectories, resets, plan
