@@ -1,5 +1,5 @@
 /// An approximate solver of the dynamic Newton matrix: the bodies' own blocks and the constraint rows,
-/// without the couplings between bodies in the force block (docs/physics.md, "Linear solves").
+/// without the couplings between bodies in the force block (docs/design.md, "Body blocks for modified Newton").
 #pragma once
 
 #include <utility>
