@@ -7,6 +7,7 @@
 #include <limits>
 #include <sstream>
 
+#include "active_tensegrity/core/adaptive.h"
 #include "active_tensegrity/core/text.h"
 
 namespace active_tensegrity::core
@@ -652,47 +653,8 @@ Summary BodyDynamicsSolver::attempt(State& s, double h, const ActuationLaw& law,
 
 Summary BodyDynamicsSolver::advance(State& s, double h, const ActuationLaw& law)
 {
-  // A failed step is halved, and each half may be halved again, up to max_step_cuts levels: the
-  // recursion of halving, kept as a binary counter. `depth` is the level of the current piece (its
-  // length is h / 2^depth) and `done` the pieces of that length behind it; two finished pieces of one
-  // level make one of the level above.
-  Summary total;
-  int depth = 0;
-  long long done = 0;
-  while (depth > 0 || done == 0)
-  {
-    const double piece = std::ldexp(h, -depth);
-    const Summary sum = attemptOrFullNewton(s, piece, law);  // changes s only when it succeeds
-    total.iterations += sum.iterations;
-    total.residual = sum.residual;
-    if (sum.ok())
-    {
-      ++done;
-      while (depth > 0 && done % 2 == 0)
-      {
-        done /= 2;
-        --depth;
-      }
-      continue;
-    }
-    if (sum.status == SolveStatus::kPassedThrough)
-      ++total.crossings_refused;
-    const bool below_min = 0.5 * piece < options_.dt_min;
-    if (depth >= options_.max_step_cuts || below_min)
-    {
-      std::ostringstream msg;
-      msg << sum.message << " at t = " << s.t << " s with the step cut to " << piece << " s";
-      if (below_min && depth < options_.max_step_cuts)
-        msg << " (a further cut would go below solver.dt_min = " << options_.dt_min << " s)";
-      total.status = sum.status;
-      total.message = msg.str();
-      return total;
-    }
-    ++total.step_cuts;
-    ++depth;
-    done *= 2;
-  }
-  return total;
+  return stepInPieces(
+      h, options_, [&](double piece) { return attemptOrFullNewton(s, piece, law); }, [&]() { return s.t; });
 }
 
 Summary BodyDynamicsSolver::tryStep(State& s, double h, const ActuationLaw& law)

@@ -1990,52 +1990,19 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
 
 Summary NaturalSolver::stepOnce(NaturalState& s, double h, const ActuationLaw& law)
 {
-  // A failed step is halved, and each half may be halved again, up to max_step_cuts levels and never below dt_min:
-  // the recursion of halving kept as a binary counter. `depth` is the level of the current piece (its length
-  // h / 2^depth) and `done` the pieces of that length behind it; two finished pieces of one level make one of the level
-  // above. The last piece ends on s.t + h exactly.
-  Summary total;
   const double t_end = s.t + h;
-  int depth = 0;
-  long long done = 0;
-  while (depth > 0 || done == 0)
-  {
-    const double left = t_end - s.t;
-    double piece = std::ldexp(h, -depth);
-    if (piece >= left * (1.0 - 1e-9))
-      piece = left;
-    const Summary sum = tryStep(s, piece, law);  // changes s only when it succeeds
-    total.iterations += sum.iterations;
-    total.residual = sum.residual;
-    if (sum.ok())
-    {
-      ++done;
-      while (depth > 0 && done % 2 == 0)
+  Summary total = stepInPieces(
+      h, options_,
+      [&](double piece)
       {
-        done /= 2;
-        --depth;
-      }
-      continue;
-    }
-    ++stats_.rejected_solver;
-    if (sum.status == SolveStatus::kPassedThrough)
-      ++total.crossings_refused;
-    const bool below_min = 0.5 * piece < options_.dt_min;
-    if (depth >= options_.max_step_cuts || below_min)
-    {
-      std::ostringstream msg;
-      msg << sum.message << " at t = " << s.t << " s with the step cut to " << piece << " s";
-      if (below_min && depth < options_.max_step_cuts)
-        msg << " (a further cut would go below solver.dt_min = " << options_.dt_min << " s)";
-      total.status = sum.status;
-      total.message = msg.str();
-      return total;
-    }
-    ++total.step_cuts;
-    ++depth;
-    done *= 2;
-  }
-  s.t = t_end;
+        Summary r = tryStep(s, piece, law);  // (changes s only when it succeeds)
+        if (!r.ok())
+          ++stats_.rejected_solver;
+        return r;
+      },
+      [&]() { return s.t; });
+  if (total.ok())
+    s.t = t_end;
   return total;
 }
 

@@ -7,9 +7,11 @@
 /// the step grows again after (docs/physics.md, "Adaptive time steps").
 #pragma once
 
+#include <cmath>
 #include <functional>
 #include <limits>
 #include <memory>
+#include <sstream>
 
 #include "active_tensegrity/core/body_dynamics.h"
 #include "active_tensegrity/core/energy.h"
@@ -70,6 +72,58 @@ private:
   double h_;
   double energy_bound_ = std::numeric_limits<double>::infinity();  // steps gaining energy were refused above it (s)
 };
+
+/// A step of h taken in pieces: a failed piece is halved, and each half may be halved again, up to
+/// options.max_step_cuts levels and never below options.dt_min (the recursion of halving kept as a binary counter:
+/// `depth` is the level of the current piece, its length h / 2^depth, and `done` the pieces of that length behind it;
+/// two finished pieces of one level make one of the level above). `attempt(piece)` tries one piece, changing the state
+/// only when it succeeds; `now()` is the state's time. The last piece ends where the step was to end. On failure the
+/// summary gives the failed piece's status and message with the time and the piece's length.
+template <class Attempt, class Now>
+Summary stepInPieces(double h, const SolverOptions& options, const Attempt& attempt, const Now& now)
+{
+  Summary total;
+  const double t_end = now() + h;
+  int depth = 0;
+  long long done = 0;
+  while (depth > 0 || done == 0)
+  {
+    const double left = t_end - now();
+    double piece = std::ldexp(h, -depth);
+    if (piece >= left * (1.0 - 1e-9))
+      piece = left;
+    const Summary sum = attempt(piece);
+    total.iterations += sum.iterations;
+    total.residual = sum.residual;
+    if (sum.ok())
+    {
+      ++done;
+      while (depth > 0 && done % 2 == 0)
+      {
+        done /= 2;
+        --depth;
+      }
+      continue;
+    }
+    if (sum.status == SolveStatus::kPassedThrough)
+      ++total.crossings_refused;
+    const bool below_min = 0.5 * piece < options.dt_min;
+    if (depth >= options.max_step_cuts || below_min)
+    {
+      std::ostringstream msg;
+      msg << sum.message << " at t = " << now() << " s with the step cut to " << piece << " s";
+      if (below_min && depth < options.max_step_cuts)
+        msg << " (a further cut would go below solver.dt_min = " << options.dt_min << " s)";
+      total.status = sum.status;
+      total.message = msg.str();
+      return total;
+    }
+    ++total.step_cuts;
+    ++depth;
+    done *= 2;
+  }
+  return total;
+}
 
 class ContactScan;
 
