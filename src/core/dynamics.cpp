@@ -4,7 +4,6 @@
 #include <limits>
 
 #include "active_tensegrity/core/natural.h"
-#include "active_tensegrity/core/rotation.h"
 
 namespace active_tensegrity::core
 {
@@ -62,165 +61,27 @@ struct DynamicsSolver::Impl
   /// Whether s carries natural coordinates of this model whose body poses are q, qd (a state a step made, untouched
   /// since), at its time up to callers' rounding (sameTime).
   bool carriesOwn(const State& s) const;
+  bool carriesFrames(const State& s) const
+  {
+    return s.natural.frame_spin.size() == static_cast<Eigen::Index>(nm.struts.size());
+  }
   static bool sameTime(double a, double b)
   {
     return std::abs(a - b) <= 1e-8 * std::max(1.0, std::abs(a));
   }
-  void fromBody(State& s) const;
-  void writeBody(State& s) const;
+  void fromBody(State& s) const
+  {
+    naturalFromBody(nm, s);
+  }
+  void writeBody(State& s) const
+  {
+    writeBodyPoses(nm, s);
+  }
 };
-
-namespace
-{
-/// The unit quaternion (scalar first) that takes the unit vector a onto the unit vector b along the shortest arc:
-/// (1 + a.b, a x b) normalized, or a half turn about an axis normal to a when b is -a.
-Vec4 shortestArc(const Vec3& a, const Vec3& b)
-{
-  const double c = 1.0 + a.dot(b);
-  if (c < 1e-8)
-    return fromEigenQuaternion(Eigen::Quaterniond::FromTwoVectors(a, b));
-  Vec4 r;
-  r(0) = c;
-  r.tail<3>() = a.cross(b);
-  return r / r.norm();
-}
-
-Vec4 multiply(const Vec4& p, const Vec4& q)
-{
-  Vec4 r;
-  r(0) = p(0) * q(0) - p.tail<3>().dot(q.tail<3>());
-  r.tail<3>() = p(0) * q.tail<3>() + q(0) * p.tail<3>() + p.tail<3>().cross(q.tail<3>());
-  return r;
-}
-}  // namespace
 
 bool DynamicsSolver::Impl::carriesOwn(const State& s) const
 {
-  if (s.natural.x.size() != nm.coordinates || s.natural.v.size() != nm.coordinates || !sameTime(s.natural.t, s.t) ||
-      s.q.size() != model.nq || s.qd.size() != model.nq ||
-      s.natural.frame_spin.size() != static_cast<Eigen::Index>(nm.struts.size()))
-    return false;
-  // the strut centres and point masses as writeBody forms them, bit for bit
-  for (const NaturalStrut& st : nm.struts)
-  {
-    const int off = model.bodies[st.body].offset;
-    const Vec3 c =
-        0.5 * (naturalNodePosition(nm, st.a, s.natural.x, s.u) + naturalNodePosition(nm, st.b, s.natural.x, s.u));
-    const Vec3 cd =
-        0.5 * (naturalNodeVelocity(nm, st.a, s.natural.v, s.u) + naturalNodeVelocity(nm, st.b, s.natural.v, s.u));
-    if (c != s.q.segment<3>(off) || cd != s.qd.segment<3>(off))
-      return false;
-  }
-  for (size_t i = 0; i < model.bodies.size(); ++i)
-  {
-    const int node = nm.node_of_body[i];
-    if (node < 0)
-      continue;
-    const int off = model.bodies[i].offset;
-    if (naturalNodePosition(nm, node, s.natural.x, s.u) != s.q.segment<3>(off) ||
-        naturalNodeVelocity(nm, node, s.natural.v, s.u) != s.qd.segment<3>(off))
-      return false;
-  }
-  return true;
-}
-
-void DynamicsSolver::Impl::fromBody(State& s) const
-{
-  NaturalState& n = s.natural;
-  n.t = s.t;
-  n.x.setZero(nm.coordinates);
-  n.v.setZero(nm.coordinates);
-  n.a.setZero(nm.coordinates);
-  n.qdd.setZero(nm.coordinates);
-  n.lambda.setZero(static_cast<Eigen::Index>(nm.struts.size() + nm.rows.size()));
-  n.touching.clear();
-  n.frame_spin.setZero(static_cast<Eigen::Index>(nm.struts.size()));
-  const auto set = [&](int node, const Vec3& r, const Vec3& v)
-  {
-    const int col = nm.nodes[static_cast<size_t>(node)].column;
-    if (col < 0)
-      return;
-    n.x.segment<3>(col) = r;
-    n.v.segment<3>(col) = v;
-  };
-  for (const NaturalStrut& st : nm.struts)
-  {
-    const int off = model.bodies[st.body].offset;
-    const Vec3 c = s.q.segment<3>(off), cd = s.qd.segment<3>(off);
-    const Vec4 theta = s.q.segment<4>(off + 3).normalized();
-    const Vec3 e = bodyZAxis(theta);
-    // world angular velocity: A(Theta) 2 L(Theta) Theta_dot
-    const Vec3 w = rotate(theta, 2.0 * lTimes(theta, s.qd.segment<4>(off + 3)));
-    const Vec3 e_dot = w.cross(e);
-    set(st.a, c - 0.5 * st.length * e, cd - 0.5 * st.length * e_dot);
-    set(st.b, c + 0.5 * st.length * e, cd + 0.5 * st.length * e_dot);
-    if (st.spin >= 0)
-      n.v(st.spin) = w.dot(e);
-  }
-  for (size_t i = 0; i < model.bodies.size(); ++i)
-    if (nm.node_of_body[i] >= 0)
-    {
-      const int off = model.bodies[i].offset;
-      set(nm.node_of_body[i], s.q.segment<3>(off), s.qd.segment<3>(off));
-    }
-}
-
-void DynamicsSolver::Impl::writeBody(State& s) const
-{
-  const NaturalState& n = s.natural;
-  if (s.q.size() != model.nq)
-    s.q = model.q0;
-  s.qd.setZero(model.nq);
-  s.t = n.t;
-  State& out = s;
-  for (size_t k = 0; k < nm.struts.size(); ++k)
-  {
-    const NaturalStrut& st = nm.struts[k];
-    const int off = model.bodies[st.body].offset;
-    const Vec3 ra = naturalNodePosition(nm, st.a, n.x, s.u), rb = naturalNodePosition(nm, st.b, n.x, s.u);
-    const Vec3 va = naturalNodeVelocity(nm, st.a, n.v, s.u), vb = naturalNodeVelocity(nm, st.b, n.v, s.u);
-    const Vec3 e = (rb - ra).normalized();
-    out.q.segment<3>(off) = 0.5 * (ra + rb);
-    out.qd.segment<3>(off) = 0.5 * (va + vb);
-    // the frame: turned about its last axis by the spin angle integrated since, then carried along the shortest arc
-    // onto the new axis (the same as carrying it first and turning it about the new axis)
-    Vec4 theta = out.q.segment<4>(off + 3);
-    const double norm = theta.norm();
-    theta = norm > 0.0 ? Vec4(theta / norm) : thetaFromZAxis(e);
-    double spin = 0.0;
-    if (st.spin >= 0)
-    {
-      const double turned = n.x(st.spin) - n.frame_spin(static_cast<Eigen::Index>(k));
-      if (turned != 0.0)
-      {
-        double sin_half, cos_half;
-        sincos(0.5 * turned, &sin_half, &cos_half);
-        Vec4 r;
-        r(0) = cos_half;
-        r.tail<3>() = sin_half * bodyZAxis(theta);
-        theta = multiply(r, theta);
-      }
-      spin = n.v(st.spin);
-    }
-    theta = multiply(shortestArc(bodyZAxis(theta).normalized(), e), theta);
-    theta /= theta.norm();
-    out.q.segment<4>(off + 3) = theta;
-    // Theta_dot = 1/2 L(Theta)^T omega_bar, omega_bar = A(Theta)^T omega, omega = e x e_dot + spin e
-    const Vec3 e_dot = (vb - va) / st.length;
-    const Vec3 w = e.cross(e_dot) + spin * e;
-    const Vec4 conj(theta(0), -theta(1), -theta(2), -theta(3));
-    out.qd.segment<4>(off + 3) = 0.5 * lMatrixTransposeTimes(theta, rotate(conj, w));
-  }
-  for (size_t i = 0; i < model.bodies.size(); ++i)
-    if (nm.node_of_body[i] >= 0)
-    {
-      const int off = model.bodies[i].offset;
-      out.q.segment<3>(off) = naturalNodePosition(nm, nm.node_of_body[i], n.x, s.u);
-      out.qd.segment<3>(off) = naturalNodeVelocity(nm, nm.node_of_body[i], n.v, s.u);
-    }
-  for (const NaturalStrut& st : nm.struts)
-    if (st.spin >= 0)
-      s.natural.frame_spin(&st - nm.struts.data()) = n.x(st.spin);
+  return !s.natural.equilibrium && carriesFrames(s) && sameTime(s.natural.t, s.t) && carriesNaturalOf(nm, s);
 }
 
 DynamicsSolver::DynamicsSolver(const Model& model, const SolverOptions& options)
@@ -251,9 +112,11 @@ Summary DynamicsSolver::initialize(State& s, const ActuationLaw& law)
 {
   Impl& m = *impl_;
   law(s.t, s.u);
-  if (!m.carriesOwn(s))
+  // (a static equilibrium's own coordinates too)
+  if (!m.carriesOwn(s) && !(m.carriesFrames(s) && carriesNaturalOf(m.nm, s)))
     m.fromBody(s);
   s.natural.t = s.t;
+  s.natural.equilibrium = false;
   Summary out = m.solver.project(s.natural, s.u);
   if (out.ok())
   {

@@ -655,6 +655,166 @@ Eigen::VectorXd naturalToBodyCoordinates(const NaturalModel& nm, const Eigen::Ve
   return q;
 }
 
+// ---- body poses ----------------------------------------------------------------------------------------
+
+namespace
+{
+/// The unit quaternion (scalar first) that takes the unit vector a onto the unit vector b along the shortest arc:
+/// (1 + a.b, a x b) normalized, or a half turn about an axis normal to a when b is -a.
+Vec4 shortestArc(const Vec3& a, const Vec3& b)
+{
+  const double c = 1.0 + a.dot(b);
+  if (c < 1e-8)
+    return fromEigenQuaternion(Eigen::Quaterniond::FromTwoVectors(a, b));
+  Vec4 r;
+  r(0) = c;
+  r.tail<3>() = a.cross(b);
+  return r / r.norm();
+}
+
+Vec4 multiply(const Vec4& p, const Vec4& q)
+{
+  Vec4 r;
+  r(0) = p(0) * q(0) - p.tail<3>().dot(q.tail<3>());
+  r.tail<3>() = p(0) * q.tail<3>() + q(0) * p.tail<3>() + p.tail<3>().cross(q.tail<3>());
+  return r;
+}
+}  // namespace
+
+bool carriesNaturalOf(const NaturalModel& nm, const State& s)
+{
+  const Model& model = *nm.model;
+  if (s.natural.x.size() != nm.coordinates || s.natural.v.size() != nm.coordinates || s.q.size() != model.nq ||
+      s.qd.size() != model.nq)
+    return false;
+  // the strut centres and point masses as writeBodyPoses forms them, bit for bit
+  for (const NaturalStrut& st : nm.struts)
+  {
+    const int off = model.bodies[st.body].offset;
+    const Vec3 c =
+        0.5 * (naturalNodePosition(nm, st.a, s.natural.x, s.u) + naturalNodePosition(nm, st.b, s.natural.x, s.u));
+    const Vec3 cd =
+        0.5 * (naturalNodeVelocity(nm, st.a, s.natural.v, s.u) + naturalNodeVelocity(nm, st.b, s.natural.v, s.u));
+    if (c != s.q.segment<3>(off) || cd != s.qd.segment<3>(off))
+      return false;
+  }
+  for (size_t i = 0; i < model.bodies.size(); ++i)
+  {
+    const int node = nm.node_of_body[i];
+    if (node < 0)
+      continue;
+    const int off = model.bodies[i].offset;
+    if (naturalNodePosition(nm, node, s.natural.x, s.u) != s.q.segment<3>(off) ||
+        naturalNodeVelocity(nm, node, s.natural.v, s.u) != s.qd.segment<3>(off))
+      return false;
+  }
+  return true;
+}
+
+void naturalFromBody(const NaturalModel& nm, State& s)
+{
+  const Model& model = *nm.model;
+  NaturalState& n = s.natural;
+  n.t = s.t;
+  n.x.setZero(nm.coordinates);
+  n.v.setZero(nm.coordinates);
+  n.a.setZero(nm.coordinates);
+  n.qdd.setZero(nm.coordinates);
+  n.lambda.setZero(static_cast<Eigen::Index>(nm.struts.size() + nm.rows.size()));
+  n.touching.clear();
+  n.contacts.clear();
+  n.actuator_force.clear();
+  n.equilibrium = false;
+  n.frame_spin.setZero(static_cast<Eigen::Index>(nm.struts.size()));
+  const auto set = [&](int node, const Vec3& r, const Vec3& v)
+  {
+    const int col = nm.nodes[static_cast<size_t>(node)].column;
+    if (col < 0)
+      return;
+    n.x.segment<3>(col) = r;
+    n.v.segment<3>(col) = v;
+  };
+  for (const NaturalStrut& st : nm.struts)
+  {
+    const int off = model.bodies[st.body].offset;
+    const Vec3 c = s.q.segment<3>(off), cd = s.qd.segment<3>(off);
+    const Vec4 theta = s.q.segment<4>(off + 3).normalized();
+    const Vec3 e = bodyZAxis(theta);
+    // world angular velocity: A(Theta) 2 L(Theta) Theta_dot
+    const Vec3 w = rotate(theta, 2.0 * lTimes(theta, s.qd.segment<4>(off + 3)));
+    const Vec3 e_dot = w.cross(e);
+    set(st.a, c - 0.5 * st.length * e, cd - 0.5 * st.length * e_dot);
+    set(st.b, c + 0.5 * st.length * e, cd + 0.5 * st.length * e_dot);
+    if (st.spin >= 0)
+      n.v(st.spin) = w.dot(e);
+  }
+  for (size_t i = 0; i < model.bodies.size(); ++i)
+    if (nm.node_of_body[i] >= 0)
+    {
+      const int off = model.bodies[i].offset;
+      set(nm.node_of_body[i], s.q.segment<3>(off), s.qd.segment<3>(off));
+    }
+}
+
+void writeBodyPoses(const NaturalModel& nm, State& s)
+{
+  const Model& model = *nm.model;
+  const NaturalState& n = s.natural;
+  if (s.q.size() != model.nq)
+    s.q = model.q0;
+  s.qd.setZero(model.nq);
+  s.t = n.t;
+  State& out = s;
+  for (size_t k = 0; k < nm.struts.size(); ++k)
+  {
+    const NaturalStrut& st = nm.struts[k];
+    const int off = model.bodies[st.body].offset;
+    const Vec3 ra = naturalNodePosition(nm, st.a, n.x, s.u), rb = naturalNodePosition(nm, st.b, n.x, s.u);
+    const Vec3 va = naturalNodeVelocity(nm, st.a, n.v, s.u), vb = naturalNodeVelocity(nm, st.b, n.v, s.u);
+    const Vec3 e = (rb - ra).normalized();
+    out.q.segment<3>(off) = 0.5 * (ra + rb);
+    out.qd.segment<3>(off) = 0.5 * (va + vb);
+    // the frame: turned about its last axis by the spin angle integrated since, then carried along the shortest arc
+    // onto the new axis (the same as carrying it first and turning it about the new axis)
+    Vec4 theta = out.q.segment<4>(off + 3);
+    const double norm = theta.norm();
+    theta = norm > 0.0 ? Vec4(theta / norm) : thetaFromZAxis(e);
+    double spin = 0.0;
+    if (st.spin >= 0)
+    {
+      const double turned = n.x(st.spin) - n.frame_spin(static_cast<Eigen::Index>(k));
+      if (turned != 0.0)
+      {
+        double sin_half, cos_half;
+        sincos(0.5 * turned, &sin_half, &cos_half);
+        Vec4 r;
+        r(0) = cos_half;
+        r.tail<3>() = sin_half * bodyZAxis(theta);
+        theta = multiply(r, theta);
+      }
+      spin = n.v(st.spin);
+    }
+    theta = multiply(shortestArc(bodyZAxis(theta).normalized(), e), theta);
+    theta /= theta.norm();
+    out.q.segment<4>(off + 3) = theta;
+    // Theta_dot = 1/2 L(Theta)^T omega_bar, omega_bar = A(Theta)^T omega, omega = e x e_dot + spin e
+    const Vec3 e_dot = (vb - va) / st.length;
+    const Vec3 w = e.cross(e_dot) + spin * e;
+    const Vec4 conj(theta(0), -theta(1), -theta(2), -theta(3));
+    out.qd.segment<4>(off + 3) = 0.5 * lMatrixTransposeTimes(theta, rotate(conj, w));
+  }
+  for (size_t i = 0; i < model.bodies.size(); ++i)
+    if (nm.node_of_body[i] >= 0)
+    {
+      const int off = model.bodies[i].offset;
+      out.q.segment<3>(off) = naturalNodePosition(nm, nm.node_of_body[i], n.x, s.u);
+      out.qd.segment<3>(off) = naturalNodeVelocity(nm, nm.node_of_body[i], n.v, s.u);
+    }
+  for (const NaturalStrut& st : nm.struts)
+    if (st.spin >= 0)
+      s.natural.frame_spin(&st - nm.struts.data()) = n.x(st.spin);
+}
+
 NaturalContactInput naturalContactInput(const NaturalModel& nm, const NaturalContactSlot& cs, const Eigen::VectorXd& x,
                                         const Eigen::VectorXd& v, const ActuationValues& u)
 {
@@ -803,10 +963,13 @@ void NaturalSolver::forces(const Eigen::VectorXd& x, const Eigen::VectorXd& v, b
   }
   // point loads: linear in the nodes' positions, constant forces (no tangent)
   for (const std::vector<NaturalLoad>* loads : { &nm_.loads, static_cast<const std::vector<NaturalLoad>*>(&external_) })
+  {
+    const double factor = loads == &nm_.loads ? load_factor_ : 1.0;
     for (const NaturalLoad& l : *loads)
       for (int i = 0; i < 2; ++i)
         if (l.nodes[i] >= 0)
-          addNodeForce(l.nodes[i], l.weights[i] * l.force);
+          addNodeForce(l.nodes[i], factor * l.weights[i] * l.force);
+  }
   // every node's position and velocity at this iterate, read below and by contactForces and the rows
   pos_.resize(nm_.nodes.size());
   vel_.resize(nm_.nodes.size());
@@ -1133,8 +1296,8 @@ EnergyPoint NaturalSolver::energyAt(const NaturalState& s, const ActuationValues
     for (const NaturalLoad& l : *loads)
       for (int i = 0; i < 2; ++i)
         if (l.nodes[i] >= 0)
-          e.gravity -=
-              l.weights[i] * l.force.dot(position(l.nodes[i]) - nm_.nodes[static_cast<size_t>(l.nodes[i])].position0);
+          e.gravity -= (loads == &nm_.loads ? load_factor_ : 1.0) * l.weights[i] *
+                       l.force.dot(position(l.nodes[i]) - nm_.nodes[static_cast<size_t>(l.nodes[i])].position0);
   for (size_t k = 0; k < model_.cables.size(); ++k)
   {
     const Cable& c = model_.cables[k];
@@ -1219,6 +1382,7 @@ void NaturalSolver::contactsAt(const NaturalState& s, std::vector<ContactPairSta
 
 bool NaturalSolver::factorize(int size)
 {
+  scaled_ = false;
   dense_mode_ = entries_.to_dense;
   if (dense_mode_)
   {
@@ -1259,6 +1423,11 @@ Eigen::VectorXd NaturalSolver::solve(const Eigen::VectorXd& rhs)
 
 void NaturalSolver::solve(const Eigen::VectorXd& rhs, Eigen::VectorXd& out)
 {
+  if (scaled_)
+  {
+    out = col_scale_.cwiseProduct(dense_lu_.solve(row_scale_.cwiseProduct(rhs)));
+    return;
+  }
   if (dense_mode_)
     out = dense_lu_.solve(rhs);
   else
@@ -1301,6 +1470,7 @@ double NaturalSolver::largestMotion(const Eigen::VectorXd& x0, const Eigen::Vect
 
 void NaturalSolver::findNear(const NaturalState& s, double motion)
 {
+  static_listed_ = false;  // (listStatic marks its own)
   near_.clear();
   near_motion_ = motion;
   if (!model_.contact.enabled && nm_.ground_contacts.empty())
@@ -1401,168 +1571,216 @@ void NaturalSolver::freshMatrix(double& previous)
 
 // ---- statics ----------------------------------------------------------------------------------------------
 
-Summary NaturalSolver::solveStatic(NaturalState& s, const ActuationValues& u, double reach)
+void NaturalSolver::listStatic(const Eigen::VectorXd& x)
 {
-  Summary out;
+  if (!model_.contact.enabled && nm_.ground_contacts.empty())
+    return;
+  // a contact left out of the near ones was more than 2 D apart at the listing (D = near_motion_); no node has moved by
+  // more than D since, so it is still apart
+  double moved = 0.0;
+  if (static_listed_)
+    for (size_t i = 0; i < nm_.nodes.size() && moved <= near_motion_; ++i)
+      moved = std::max(moved, (naturalNodePosition(nm_, static_cast<int>(i), x, u_) - static_nodes_[i]).norm());
+  if (static_listed_ && moved <= near_motion_)
+    return;
+  static_state_.x = x;
+  static_state_.v = zero_v_;
+  static_state_.t = std::numeric_limits<double>::quiet_NaN();
+  static_state_.touching.clear();
+  findNear(static_state_, std::max({ kNearFloor, 2.0 * moved, static_listed_ ? near_motion_ : 0.0 }));
+  static_nodes_ = node_now_;
+  static_listed_ = true;
+}
+
+void NaturalSolver::assembleStatic(const Eigen::VectorXd& x, const Eigen::VectorXd& lambda, const ActuationValues& u,
+                                   bool tangent)
+{
   const int n = nm_.coordinates, m = static_cast<int>(nm_.struts.size() + nm_.rows.size());
   u_ = u;
   for (ActuationValue& a : u_)
     a.rate = a.accel = 0.0;
-  zero_v_.setZero(n);
-  // the contacts within reach of the correction (no contact memory: statics has neither damping nor friction)
-  static_state_.x = s.x;
-  static_state_.v = zero_v_;
-  static_state_.t = std::numeric_limits<double>::quiet_NaN();
-  static_state_.touching.clear();
-  findNear(static_state_, std::max(kNearFloor, reach));
-  x_ = s.x;
-  lambda_ = s.lambda;
-  residual_.resize(n + m);
-  double previous = 0.0;
-  have_lu_ = false;  // (the dynamics' factorization is replaced)
-  for (int it = 0; it < options_.max_iterations; ++it)
+  if (zero_v_.size() != n)
+    zero_v_.setZero(n);
+  reactions_valid_ = false;
+  have_lu_ = false;  // (the dynamics' factorization, if any, is replaced)
   {
-    // a new tangent at each load step's first iteration (a kept one from the step before contracts slowly on a path
-    // that bends), kept for the next two while they contract
-    const bool build = it == 0 || it >= 3 || !static_lu_valid_ || !options_.reuse_jacobian;
-    if (build)
-    {
-      entries_.clear(n + m, n + m <= kDenseMost);
-      entries_.k_weight = 1.0;
-      entries_.c_weight = 0.0;
-    }
-    forces(x_, zero_v_, build);
-    contactForces(x_, zero_v_, build);
-    residual_.head(n) = -f_;
-    constraintRows(x_, lambda_, 1.0, 1.0, build);
-    // (no spin in statics: its rows hold the spin entries still)
-    for (const NaturalStrut& st : nm_.struts)
-      if (st.spin >= 0)
-      {
-        residual_(st.spin) = 0.0;
-        if (build)
-          entries_.add(st.spin, st.spin, mass_scale_);
-      }
-    if (build)
-    {
-      if (!factorize(n + m))
-      {
-        static_lu_valid_ = false;
-        out.status = SolveStatus::kSingular;
-        out.message = "natural coordinates: a singular static tangent";
-        return out;
-      }
-      static_lu_valid_ = true;
-      freshMatrix(previous);
-    }
-    rhs_ = -residual_;
-    solve(rhs_, correction_);
-    ++out.iterations;
-    ++stats_.iterations;
-    if (!correction_.allFinite())
-    {
-      static_lu_valid_ = false;
-      out.status = SolveStatus::kNonFinite;
-      out.message = "natural coordinates: a non-finite static correction";
-      return out;
-    }
-    x_.head(nm_.positions) += correction_.head(nm_.positions);
-    lambda_ += correction_.tail(m);
-    const double norm = correction_.head(nm_.positions).lpNorm<Eigen::Infinity>();
-    // (the multipliers to the tolerance relative to their size)
-    const double lambda_part = m > 0 ? correction_.tail(m).lpNorm<Eigen::Infinity>() /
-                                           (options_.newton_tolerance * (1.0 + lambda_.lpNorm<Eigen::Infinity>())) :
-                                       0.0;
-    const double scaled = std::max(norm / options_.newton_tolerance, lambda_part);
-    out.residual = norm;
-    if (errorLeft(scaled, !build, build, previous) <= 1.0 && contracting())
-    {
-      // a node went further than the listed contacts allow for: again with the contacts it can reach
-      const double moved = largestMotion(s.x, x_);
-      if (moved > near_motion_)
-      {
-        static_state_.x = s.x;
-        findNear(static_state_, 2.0 * moved);
-        continue;
-      }
-      s.x = x_;
-      s.lambda = lambda_;
-      s.v.setZero(n);
-      s.a.setZero(n);
-      s.qdd.setZero(n);
-      return out;
-    }
+    const ScopeTimer timer(stats_.contact_time);
+    listStatic(x);
   }
-  static_lu_valid_ = false;
-  out.status = SolveStatus::kMaxIterations;
-  out.message = "natural coordinates: no static equilibrium within solver.max_iterations";
+  residual_.resize(n + m);
+  if (tangent)
+  {
+    entries_.clear(n + m, n + m <= kDenseMost);
+    entries_.k_weight = 1.0;
+    entries_.c_weight = 0.0;
+  }
+  {
+    const ScopeTimer timer(stats_.forces_time);
+    forces(x, zero_v_, tangent);
+  }
+  {
+    const ScopeTimer timer(stats_.contact_time);
+    contactForces(x, zero_v_, tangent);
+  }
+  const ScopeTimer timer(stats_.constraints_time);
+  residual_.head(n) = -f_;
+  constraintRows(x, lambda, 1.0, 1.0, tangent);
+  // (no spin in statics: its rows hold the spin entries still)
+  for (const NaturalStrut& st : nm_.struts)
+    if (st.spin >= 0)
+    {
+      residual_(st.spin) = 0.0;
+      if (tangent)
+        entries_.add(st.spin, st.spin, mass_scale_);
+    }
+}
+
+void NaturalSolver::addStaticMass(double mu)
+{
+  for (int k = 0; k < nm_.mass.outerSize(); ++k)
+    for (Eigen::SparseMatrix<double>::InnerIterator it(nm_.mass, k); it; ++it)
+      entries_.add(static_cast<int>(it.row()), static_cast<int>(it.col()), mu * it.value());
+}
+
+bool NaturalSolver::factorizeStatic()
+{
+  const int size = static_cast<int>(residual_.size());
+  const ScopeTimer timer(stats_.factorization_time);
+  ++stats_.factorizations;
+  if (entries_.to_dense && !entries_.dense.allFinite())
+    return false;
+  if (!entries_.to_dense)
+    return factorize(size);
+  // equilibrated (rows, then columns, to a largest entry of 1): a stiffness of 1e5 N/m beside the rows' 2 L, near a
+  // mechanism, leaves partial pivoting's tangents to round-off otherwise
+  const Eigen::MatrixXd& a = entries_.dense;
+  row_scale_ = a.cwiseAbs().rowwise().maxCoeff();
+  for (Eigen::Index i = 0; i < row_scale_.size(); ++i)
+    row_scale_(i) = row_scale_(i) > 0.0 ? 1.0 / row_scale_(i) : 1.0;
+  equilibrated_ = row_scale_.asDiagonal() * a;
+  col_scale_ = equilibrated_.cwiseAbs().colwise().maxCoeff().transpose();
+  for (Eigen::Index j = 0; j < col_scale_.size(); ++j)
+    col_scale_(j) = col_scale_(j) > 0.0 ? 1.0 / col_scale_(j) : 1.0;
+  equilibrated_ = equilibrated_ * col_scale_.asDiagonal();
+  dense_mode_ = true;
+  dense_lu_.compute(equilibrated_);
+  scaled_ = true;
+  // singular below a reciprocal condition of 1e-14; the estimate only when the pivots spread over more than 8
+  // decades (a mechanism's matrix has a pivot at round-off)
+  const auto pivots = dense_lu_.matrixLU().diagonal().cwiseAbs();
+  if (pivots.size() > 0 && pivots.minCoeff() > 1e-8 * pivots.maxCoeff())
+    return true;
+  return dense_lu_.rcond() > 1e-14;
+}
+
+int NaturalSolver::determinantSign()
+{
+  if (!dense_mode_)
+    return static_cast<int>(sparse_lu_.signDeterminant());
+  int sign = dense_lu_.permutationP().determinant();
+  const Eigen::MatrixXd& lu = dense_lu_.matrixLU();
+  for (Eigen::Index k = 0; k < lu.rows(); ++k)
+  {
+    if (lu(k, k) == 0.0)
+      return 0;
+    if (lu(k, k) < 0.0)
+      sign = -sign;
+  }
+  return sign;
+}
+
+Eigen::VectorXd NaturalSolver::assembledDiagonal() const
+{
+  if (entries_.to_dense)
+    return entries_.dense.diagonal();
+  Eigen::VectorXd d = Eigen::VectorXd::Zero(residual_.size());
+  for (const Eigen::Triplet<double>& t : entries_.triplets)
+    if (t.row() == t.col())
+      d(t.row()) += t.value();
+  return d;
+}
+
+Eigen::SparseMatrix<double> NaturalSolver::assembledRows() const
+{
+  const int n = nm_.coordinates, m = static_cast<int>(residual_.size()) - n;
+  std::vector<Eigen::Triplet<double>> g;
+  if (entries_.to_dense)
+  {
+    for (int c = 0; c < n; ++c)
+      for (int r = 0; r < m; ++r)
+        if (entries_.dense(n + r, c) != 0.0)
+          g.emplace_back(r, c, entries_.dense(n + r, c));
+  }
+  else
+    for (const Eigen::Triplet<double>& t : entries_.triplets)
+      if (t.row() >= n && t.col() < n)
+        g.emplace_back(t.row() - n, t.col(), t.value());
+  Eigen::SparseMatrix<double> out(m, n);
+  out.setFromTriplets(g.begin(), g.end());
   return out;
 }
 
-Summary NaturalSolver::followStaticPath(NaturalState& s, const ActuationValues& u0, const ActuationValues& u_end,
-                                        int steps, const std::function<void(const NaturalState&)>& on_step)
+int NaturalSolver::passedThrough(const Eigen::VectorXd& x0, const ActuationValues& u0, const Eigen::VectorXd& x1,
+                                 const ActuationValues& u1)
 {
-  Summary total;
-  static_lu_valid_ = false;
-  end_t_ = std::numeric_limits<double>::quiet_NaN();  // (no gaps cached from dynamics)
-  const auto at = [&](double w)
+  if (!model_.contact.enabled)
+    return -1;
+  // the pairs that can meet on the way: within twice the largest motion of a node at the start
+  double motion = 0.0;
+  node_now_.resize(nm_.nodes.size());
+  points_.resize(nm_.nodes.size());
+  for (size_t i = 0; i < nm_.nodes.size(); ++i)
   {
-    ActuationValues u = u0;
-    for (size_t i = 0; i < u.size(); ++i)
-      u[i].value = (1.0 - w) * u0[i].value + w * u_end[i].value;
-    return u;
-  };
-  const double nominal = 1.0 / steps;
-  double w = 0.0, dw = nominal, last_dw = 0.0;
-  Eigen::VectorXd x_last = s.x, lambda_last = s.lambda;
-  int cuts = 0;
-  s.t = 0.0;
-  while (w < 1.0 - 1e-12)
-  {
-    // (never past the next point of the load steps' grid: a cut increment's path comes back onto it)
-    const double next = std::min(1.0, (std::floor(w * steps + 1e-9) + 1.0) / steps);
-    dw = std::min(dw, next - w);
-    // secant predictor from the last two equilibria
-    NaturalState trial = s;
-    if (last_dw > 0.0)
-    {
-      const double f = dw / last_dw;
-      trial.x += f * (s.x - x_last);
-      trial.lambda += f * (s.lambda - lambda_last);
-    }
-    const double reach = 2.0 * largestMotion(s.x, trial.x);
-    const Summary r = solveStatic(trial, at(w + dw), reach);
-    total.iterations += r.iterations;
-    total.residual = r.residual;
-    if (!r.ok())
-    {
-      if (cuts >= options_.max_step_cuts)
-      {
-        total.status = r.status;
-        total.message = r.message + " at path parameter " + std::to_string(w + dw);
-        return total;
-      }
-      ++cuts;
-      ++total.step_cuts;
-      dw *= 0.5;
-      continue;
-    }
-    x_last = s.x;
-    lambda_last = s.lambda;
-    last_dw = dw;
-    w = std::abs(w + dw - next) <= 1e-12 ? next : w + dw;
-    s.x = trial.x;
-    s.lambda = trial.lambda;
-    s.v = trial.v;
-    s.a = trial.a;
-    s.qdd = trial.qdd;
-    s.t = w;
-    if (on_step)
-      on_step(s);
-    cuts = 0;
-    dw = std::min(nominal, 2.0 * dw);
+    node_now_[i] = naturalNodePosition(nm_, static_cast<int>(i), x0, u0);
+    points_[i] = naturalNodePosition(nm_, static_cast<int>(i), x1, u1);
+    motion = std::max(motion, (points_[i] - node_now_[i]).norm());
   }
-  return total;
+  static_listed_ = false;  // (node_now_ is the listing's scratch)
+  candidates_.clear();
+  if (use_broad_phase_)
+  {
+    broad_q_ = naturalToBodyCoordinates(nm_, x0, u0);
+    broad_phase_.candidates(broad_q_, motion, candidates_);
+    std::sort(candidates_.begin(), candidates_.end());
+  }
+  else
+    candidates_ = direct_pairs_;
+  for (const int slot : candidates_)
+  {
+    const NaturalContactSlot c = naturalContactSlot(nm_, slot);
+    AxisPose start[2], end[2];
+    for (int i = 0; i < 2; ++i)
+    {
+      const size_t a = static_cast<size_t>(c.nodes[2 * i]), b = static_cast<size_t>(c.nodes[2 * i + 1]);
+      start[i] = { 0.5 * (node_now_[a] + node_now_[b]), (node_now_[b] - node_now_[a]).normalized() };
+      end[i] = { 0.5 * (points_[a] + points_[b]), (points_[b] - points_[a]).normalized() };
+    }
+    const double half_a = 0.5 * nm_.struts[static_cast<size_t>(c.struts[0])].length;
+    const double half_b = 0.5 * nm_.struts[static_cast<size_t>(c.struts[1])].length;
+    if (axesPassedThrough(start[0], start[1], end[0], end[1], half_a, half_b))
+      return slot;
+  }
+  return -1;
+}
+
+void NaturalSolver::staticContacts(const Eigen::VectorXd& x, const ActuationValues& u,
+                                   std::vector<ContactPairState>& out)
+{
+  out.clear();
+  u_ = u;
+  for (ActuationValue& a : u_)
+    a.rate = a.accel = 0.0;
+  if (zero_v_.size() != nm_.coordinates)
+    zero_v_.setZero(nm_.coordinates);
+  listStatic(x);
+  for (const Listed& l : listed_)
+  {
+    Vec14 f;
+    const ContactPairState st =
+        naturalContact(nm_, l.c, naturalContactInput(nm_, l.c, x, zero_v_, u_), 0.0, &f, nullptr, nullptr);
+    if (st.active)
+      out.push_back(st);
+  }
 }
 
 Summary NaturalSolver::initialize(NaturalState& s, const ActuationLaw& law)
@@ -1606,7 +1824,6 @@ Summary NaturalSolver::initialize(NaturalState& s, const ActuationLaw& law)
   }
   factorize(n + m);
   have_lu_ = false;  // (not a Newton matrix)
-  static_lu_valid_ = false;
   const Eigen::VectorXd z = solve(rhs);
   if (!z.allFinite())
   {
@@ -1701,7 +1918,6 @@ Summary NaturalSolver::project(NaturalState& s, const ActuationValues& u)
   }
   s.v.head(nm_.positions) += z.head(nm_.positions);
   have_lu_ = false;  // (not a Newton matrix)
-  static_lu_valid_ = false;
   return out;
 }
 
@@ -1866,7 +2082,6 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
         return out;
       }
       have_lu_ = true;
-      static_lu_valid_ = false;
       lu_h_ = h;
       rebuild = false;
       built_this_step = true;

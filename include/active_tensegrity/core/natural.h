@@ -18,8 +18,8 @@
 ///
 /// The package's dynamics (DynamicsSolver and AdaptiveStepper in dynamics.h run it on a State): the scene's point
 /// loads and forces from outside (on strut axes and point masses), Newmark or generalized-alpha at fixed or adaptive
-/// steps (error, onset and energy control). Also statics and paths of equilibria without spin locks, which
-/// `tensegrity_bench natural` compares with the body coordinates' StaticSolver (statics.h).
+/// steps (error, onset and energy control). NaturalStaticSolver (natural_statics.h) is statics built on its static
+/// residual and Jacobian (no spin locks: a strut's spin is not a coordinate).
 #pragma once
 
 #include <array>
@@ -38,6 +38,7 @@
 #include "active_tensegrity/core/actuation_law.h"
 #include "active_tensegrity/core/energy.h"
 #include "active_tensegrity/core/model.h"
+#include "active_tensegrity/core/state.h"
 #include "active_tensegrity/core/summary.h"
 
 namespace active_tensegrity::core
@@ -139,6 +140,17 @@ Vec3 naturalNodeVelocity(const NaturalModel& nm, int i, const Eigen::VectorXd& v
 /// The body coordinates of the same configuration (state.h): strut centres and the rotation that takes z to the
 /// strut's axis with no spin; point masses at their nodes.
 Eigen::VectorXd naturalToBodyCoordinates(const NaturalModel& nm, const Eigen::VectorXd& x, const ActuationValues& u);
+
+/// A State's body poses and its natural coordinates (State::natural). writeBodyPoses writes q and qd from the natural
+/// coordinates at s.u (and s.t from theirs): strut centres and velocities, each strut's frame carried from its last
+/// pose along the shortest arc onto the new axis and turned by the spin its spin rate integrated since
+/// (NaturalState::frame_spin), point masses at their nodes. naturalFromBody forms the natural coordinates of q and qd
+/// (nodes at the struts' ends, spin rates from the angular velocities; accelerations and multipliers zero).
+/// carriesNaturalOf: whether s carries natural coordinates of nm's layout whose strut centres and point masses are
+/// q's (and their velocities qd's) bit for bit, as writeBodyPoses left them.
+void writeBodyPoses(const NaturalModel& nm, State& s);
+void naturalFromBody(const NaturalModel& nm, State& s);
+bool carriesNaturalOf(const NaturalModel& nm, const State& s);
 
 /// Contact slot `slot` of the model (a checked strut pair's or a ground contact's).
 NaturalContactSlot naturalContactSlot(const NaturalModel& nm, int slot);
@@ -247,16 +259,39 @@ public:
   /// a fresh step-size history.
   void setAdaptiveOptions(const SolverOptions& o);
 
-  /// Statics: Newton from s to the equilibrium -F(x, u) + G^T lambda = 0, Phi(x, u) = 0 under the actuation values of u
-  /// (velocities zero: contact without damping or friction, no spin), the contacts within `reach` (m) of s listed;
-  /// modified Newton keeps its factorization while it contracts. On failure s is unchanged.
-  Summary solveStatic(NaturalState& s, const ActuationValues& u, double reach = 0.0);
-  /// The path of equilibria from s (at u0) to u_end in `steps` equal steps of the path parameter w
-  /// (u = (1 - w) u0 + w u_end, s.t = w): a secant predictor from the last two equilibria, solveStatic as the
-  /// corrector, an increment halved (at most solver.max_step_cuts times in a row) when it fails and doubled back after.
-  /// on_step after each equilibrium.
-  Summary followStaticPath(NaturalState& s, const ActuationValues& u0, const ActuationValues& u_end, int steps,
-                           const std::function<void(const NaturalState&)>& on_step = {});
+  // ---- statics' parts (NaturalStaticSolver, natural_statics.h; velocities zero: contact without damping or friction)
+  /// The static residual at (x, lambda) under the actuation values of u, r = [G^T lambda - F; Phi] (the coordinates'
+  /// entries, then one per row; a spin rate's entry 0), into staticResidual(); with `tangent` also its Jacobian
+  /// [K + sum_k lambda_k Phi_k'', G^T; G, 0] (a spin rate's diagonal the mass scale) for factorizeStatic. The contacts
+  /// are listed from x, and listed again when a node has moved further than the listing allows for.
+  void assembleStatic(const Eigen::VectorXd& x, const Eigen::VectorXd& lambda, const ActuationValues& u, bool tangent);
+  const Eigen::VectorXd& staticResidual() const
+  {
+    return residual_;
+  }
+  /// Adds mu times the mass matrix to the Jacobian assembleStatic built (Levenberg-Marquardt damping).
+  void addStaticMass(double mu);
+  /// Factorizes the Jacobian assembleStatic built; false when it is singular (a reciprocal condition below 1e-14 when
+  /// dense, a zero pivot when sparse).
+  bool factorizeStatic();
+  /// The sign of the last factorization's determinant (0: singular).
+  int determinantSign();
+  /// The diagonal of the Jacobian assembleStatic built, and its rows' block G (rows x coordinates).
+  Eigen::VectorXd assembledDiagonal() const;
+  Eigen::SparseMatrix<double> assembledRows() const;
+  /// Solves with the last factorization.
+  void solve(const Eigen::VectorXd& rhs, Eigen::VectorXd& out);
+  /// The point loads' factor: Model::loads times it (1 unless set).
+  void setLoadFactor(double factor)
+  {
+    load_factor_ = factor;
+  }
+  /// The slot of the first checked strut pair whose axes passed through each other while the nodes moved in straight
+  /// lines from their positions at (x0, u0) to those at (x1, u1), or -1.
+  int passedThrough(const Eigen::VectorXd& x0, const ActuationValues& u0, const Eigen::VectorXd& x1,
+                    const ActuationValues& u1);
+  /// The touching contacts at a static equilibrium x under u (assembleStatic's listing), with their forces.
+  void staticContacts(const Eigen::VectorXd& x, const ActuationValues& u, std::vector<ContactPairState>& out);
 
   /// The applied forces other than contact (weight, cables and springs, the spinning struts' gyroscopic couples) at
   /// (x, v) under u into `force`, and their tangents K = -dF/dx and C = -dF/dv (dense) when asked.
@@ -355,7 +390,6 @@ private:
   /// Factorizes the matrix of `entries_` (size x size): dense when small, else sparse; false when singular.
   bool factorize(int size);
   Eigen::VectorXd solve(const Eigen::VectorXd& rhs);
-  void solve(const Eigen::VectorXd& rhs, Eigen::VectorXd& out);
 
   std::vector<NaturalLoad> external_;  // setExternalLoads
   Eigen::VectorXd f_;                  // applied forces at the iterate
@@ -404,10 +438,17 @@ public:
 
 private:
   Eigen::VectorXd c0_, x_pred_, v_pred_, a_end_;  // a step's predictors and end accelerations (tryStep)
-  NaturalState static_state_;                     // solveStatic's listing state (velocities zero, no contact memory)
+  NaturalState static_state_;                     // assembleStatic's listing state (velocities zero, no contact memory)
+  std::vector<Vec3> static_nodes_;                // ... its nodes' positions
+  bool static_listed_ = false;                    // whether the listing is assembleStatic's
   Eigen::VectorXd zero_v_;
-  bool static_lu_valid_ = false;  // whether the factorization is a static tangent (solveStatic)
-  NaturalState trial_;            // an adaptive step's trial (advanceTo)
+  double load_factor_ = 1.0;
+  bool scaled_ = false;                    // the dense factorization is of the equilibrated matrix (factorizeStatic)
+  Eigen::VectorXd row_scale_, col_scale_;  // ... R J C
+  Eigen::MatrixXd equilibrated_;
+  /// Lists the contacts for a static state x under u_ when a node has moved further from the listing than it allows.
+  void listStatic(const Eigen::VectorXd& x);
+  NaturalState trial_;  // an adaptive step's trial (advanceTo)
   struct History
   {
     double t = 0.0;

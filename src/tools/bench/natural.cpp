@@ -20,6 +20,7 @@
 #include "active_tensegrity/core/natural.h"
 #include "active_tensegrity/core/scene.h"
 #include "active_tensegrity/core/state.h"
+#include "active_tensegrity/core/natural_statics.h"
 #include "active_tensegrity/core/statics.h"
 #include "../cli.h"
 #include "bench.h"
@@ -294,34 +295,26 @@ int naturalStatics(const std::string& scene, const at::Model& model, int repeat)
     }
     return std::make_pair(r, solver.timings().newton_iterations);
   };
-  const at::NaturalModel nm = at::buildNaturalModel(model);
   long natural_iterations = 0, natural_factorizations = 0;
   const auto natural = [&](Path* path)
   {
-    at::NaturalSolver solver(nm, model.solver);
-    at::NaturalState s = at::naturalInitialState(nm);
-    const at::ActuationValues u0 = at::initialState(model).u;
-    at::Summary r = solver.solveStatic(s, u0);
+    at::NaturalStaticSolver solver(model, model.solver);
+    at::State s = at::initialState(model);
+    at::Summary r = solver.solve(s, s.u);
     if (r.ok())
     {
-      at::ActuationValues u_end = u0;
+      at::ActuationValues u_end = s.u;
       for (at::ActuationValue& v : u_end)
         v.value = model.analysis.max_actuation;
-      r = solver.followStaticPath(s, u0, u_end, steps,
-                                  [&](const at::NaturalState& st)
-                                  {
-                                    // (the equilibria on the load steps' grid: a cut increment adds others)
-                                    const double k = st.t * steps;
-                                    if (!path || std::abs(k - std::round(k)) > 1e-9)
-                                      return;
-                                    at::ActuationValues u = u0;
-                                    for (size_t i = 0; i < u.size(); ++i)
-                                      u[i].value = st.t * u_end[i].value + (1.0 - st.t) * u0[i].value;
-                                    path->push_back(centres(model, at::naturalToBodyCoordinates(nm, st.x, u)));
-                                  });
+      r = solver.followPath(s, u_end, steps,
+                            [&](const at::State& st, const at::Summary&)
+                            {
+                              if (path)
+                                path->push_back(centres(model, st.q));
+                            });
     }
-    natural_iterations = solver.stats().iterations;
-    natural_factorizations = solver.stats().factorizations;
+    natural_iterations = solver.timings().newton_iterations;
+    natural_factorizations = solver.timings().factorizations;
     return std::make_pair(r, natural_iterations);
   };
   Path body_path, natural_path;
