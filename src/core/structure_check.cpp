@@ -13,7 +13,7 @@
 #include "active_tensegrity/core/constraints.h"
 #include "active_tensegrity/core/kinematics.h"
 #include "active_tensegrity/core/mechanics.h"
-#include "active_tensegrity/core/statics.h"
+#include "active_tensegrity/core/body_statics.h"
 #include "active_tensegrity/core/svd.h"
 #include "active_tensegrity/core/text.h"
 

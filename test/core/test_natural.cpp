@@ -12,7 +12,7 @@
 #include "active_tensegrity/core/natural.h"
 #include "active_tensegrity/core/scene.h"
 #include "active_tensegrity/core/state.h"
-#include "active_tensegrity/core/natural_statics.h"
+#include "active_tensegrity/core/body_statics.h"
 #include "active_tensegrity/core/statics.h"
 #include "test_models.h"
 
@@ -491,15 +491,15 @@ TEST(Natural, AdaptiveStepsRefuseWhatGainsEnergy)
 TEST(Natural, StaticPathsAgreeWithBodyCoordinates)
 {
   // the quadruplex compressed to its ultimate configuration (no contact) and the tower folded with contact: the path
-  // of equilibria of NaturalStaticSolver (natural coordinates, no spin locks) against the body coordinates'
-  // StaticSolver.
+  // of equilibria of StaticSolver (natural coordinates, no spin locks) against the body coordinates'
+  // BodyStaticSolver.
   // The quadruplex agrees at every load step, its actuation force too; the unprestressed tower starts as a mechanism
   // (its first equilibria are not unique), and its fold ends where the body coordinates' does.
   for (const char* name : { "quadruplex.yaml", "tower.yaml" })
   {
     const Model model = scene(name);
     const int steps = model.analysis.steps;
-    StaticSolver body(model, model.solver);
+    BodyStaticSolver body(model, model.solver);
     State bs = initialState(model);
     ASSERT_TRUE(body.solve(bs, bs.u).ok());
     ActuationValues u_end = bs.u;
@@ -508,7 +508,7 @@ TEST(Natural, StaticPathsAgreeWithBodyCoordinates)
     std::vector<Eigen::VectorXd> body_path;
     ASSERT_TRUE(
         body.followPath(bs, u_end, steps, [&](const State& s, const Summary&) { body_path.push_back(s.q); }).ok());
-    NaturalStaticSolver natural(model, model.solver);
+    StaticSolver natural(model, model.solver);
     State ns = initialState(model);
     ASSERT_TRUE(natural.solve(ns, ns.u).ok());
     EXPECT_TRUE(ns.natural.equilibrium);
@@ -535,54 +535,6 @@ TEST(Natural, StaticPathsAgreeWithBodyCoordinates)
     else
       EXPECT_LT(difference(body_path.size() - 1), 1e-8) << name << " at the end of the fold";
   }
-}
-
-TEST(Natural, StaticRelaxationFindsTheFoldWhereNewtonPassesStrutsThroughEachOther)
-{
-  // the tower folded quasi-statically to a pull of 0.8 m (struts in contact), every body then thrown up to 5 cm off:
-  // Newton's equilibrium from there lies beyond struts it would pass through each other (or Newton fails); dynamic
-  // relaxation brings the tower back to the fold's equilibrium. (Cores of 0.1 mm: thrown into each other, struts of
-  // the real 12.5 mm cores are pushed apart by them.)
-  const std::string path = std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) + "/config/scenes/tower.yaml";
-  const Model model = loadScene(
-      path, { { "analysis.max_actuation", "0.8" }, { "analysis.steps", "160" }, { "struts.core.radius", "0.000001" } });
-  const RunResult fold = runAnalysis(model, [](const State&) {});
-  ASSERT_TRUE(fold.summary.ok()) << fold.summary.message;
-  const auto thrown = [&](double amplitude)
-  {
-    std::mt19937 rng(1);
-    std::uniform_real_distribution<double> push(-amplitude, amplitude);
-    State s = fold.final_state;
-    s.natural = NaturalState();  // (a caller's poses)
-    for (const Body& b : model.bodies)
-      for (int k = 0; k < 3; ++k)
-        s.q(b.offset + k) += push(rng);
-    return s;
-  };
-  const auto farthest = [&](const State& s)
-  {
-    double most = 0.0;
-    for (const Node& n : model.nodes)
-      most = std::max(most,
-                      (pointPosition(model, n.point, s.q) - pointPosition(model, n.point, fold.final_state.q)).norm());
-    return most;
-  };
-  NaturalStaticSolver solver(model, model.solver);
-  State s = thrown(0.05);
-  State plain = s;
-  const Summary newton = solver.solve(plain, s.u);
-  ASSERT_FALSE(newton.ok());
-  std::cerr << "[ measured ] Newton from the thrown tower: " << newton.message << "\n";
-  const Summary eq = solver.relax(s, s.u);
-  ASSERT_TRUE(eq.ok()) << eq.message;
-  ASSERT_EQ(eq.warnings.size(), 1u);
-  EXPECT_NE(eq.warnings[0].find("dynamic relaxation"), std::string::npos) << eq.warnings[0];
-  EXPECT_EQ(s.qd.lpNorm<Eigen::Infinity>(), 0.0);
-  EXPECT_LT(solver.forceResidual(s), 1e-3);
-  std::cerr << "[ measured ] " << eq.warnings[0] << "; the farthest node " << farthest(s)
-            << " m from the fold's equilibrium\n";
-  EXPECT_NEAR(structureHeight(model, s.q), structureHeight(model, fold.final_state.q), 1e-6);
-  EXPECT_LT(farthest(s), 1e-5);
 }
 
 TEST(Natural, GeneralizedAlphaConvergesAtSecondOrder)

@@ -17,7 +17,7 @@
 
 #include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/scene.h"
-#include "active_tensegrity/core/statics.h"
+#include "active_tensegrity/core/body_statics.h"
 #include "active_tensegrity/core/structure_check.h"
 #include "active_tensegrity/core/svd.h"
 #include "test_models.h"
@@ -53,11 +53,12 @@ std::string edited(const std::string& name, const std::vector<std::pair<std::str
   return text;
 }
 
-/// The equilibrium of a model at actuation `value` (0: the start), as StaticSolver leaves it.
+/// The equilibrium of a model at actuation `value` (0: the start), as the body coordinates' BodyStaticSolver leaves
+/// it: with the multipliers of the body coordinates' constraints, which these checks read.
 State equilibrium(const Model& model, double value = 0.0, int steps = 20)
 {
   State s = initialState(model);
-  StaticSolver solver(model, model.solver);
+  BodyStaticSolver solver(model, model.solver);
   EXPECT_TRUE(solver.solve(s, s.u).ok());
   if (value > 0.0)
   {

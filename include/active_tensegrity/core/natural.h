@@ -18,7 +18,7 @@
 ///
 /// The package's dynamics (DynamicsSolver and AdaptiveStepper in dynamics.h run it on a State): the scene's point
 /// loads and forces from outside (on strut axes and point masses), Newmark or generalized-alpha at fixed or adaptive
-/// steps (error, onset and energy control). NaturalStaticSolver (natural_statics.h) is statics built on its static
+/// steps (error, onset and energy control). StaticSolver (statics.h) is statics built on its static
 /// residual and Jacobian (no spin locks: a strut's spin is not a coordinate).
 #pragma once
 
@@ -259,7 +259,7 @@ public:
   /// a fresh step-size history.
   void setAdaptiveOptions(const SolverOptions& o);
 
-  // ---- statics' parts (NaturalStaticSolver, natural_statics.h; velocities zero: contact without damping or friction)
+  // ---- statics' parts (StaticSolver, statics.h; velocities zero: contact without damping or friction)
   /// The static residual at (x, lambda) under the actuation values of u, r = [G^T lambda - F; Phi] (the coordinates'
   /// entries, then one per row; a spin rate's entry 0), into staticResidual(); with `tangent` also its Jacobian
   /// [K + sum_k lambda_k Phi_k'', G^T; G, 0] (a spin rate's diagonal the mass scale) for factorizeStatic. The contacts

@@ -29,7 +29,7 @@ struct NaturalState
   std::vector<ContactPairState> contacts;  // and their states and forces (the same slots in the same order)
   Eigen::VectorXd frame_spin;              // per strut: the spin angle its body frame (State::q) carries (rad)
   std::vector<double> actuator_force;      // per actuator: the force it exerts (N; DynamicsSolver::actuationForce)
-  /// A static equilibrium (NaturalStaticSolver): velocities and accelerations zero, no contact memory; the dynamics
+  /// A static equilibrium (StaticSolver): velocities and accelerations zero, no contact memory; the dynamics
   /// starts from it by initializing (DynamicsSolver::initialize).
   bool equilibrium = false;
   /// The impact speed slot remembers (0: not touching).
@@ -53,8 +53,8 @@ struct State
   SlotValues contact_speed;
   /// The coordinates the dynamics solver integrates (natural.h): the free nodes' positions, velocities and
   /// accelerations, the strut-length and row multipliers, the touching contacts. q and qd above are their body
-  /// poses and rates when the dynamics solver (or NaturalStaticSolver) made the state; a state made otherwise
-  /// (statics, a caller's q) has none (x empty), and the dynamics solver forms them from q and qd.
+  /// poses and rates when a solver (dynamics or statics) made the state; a state made otherwise (a caller's q) has
+  /// none (x empty), and the solvers form them from q and qd.
   NaturalState natural;
   /// The impact speed slot remembers (0: not touching): the natural coordinates' when the state has them, else
   /// contact_speed's.

@@ -20,7 +20,7 @@
 #include "active_tensegrity/core/natural.h"
 #include "active_tensegrity/core/scene.h"
 #include "active_tensegrity/core/state.h"
-#include "active_tensegrity/core/natural_statics.h"
+#include "active_tensegrity/core/body_statics.h"
 #include "active_tensegrity/core/statics.h"
 #include "../cli.h"
 #include "bench.h"
@@ -278,7 +278,7 @@ int naturalStatics(const std::string& scene, const at::Model& model, int repeat)
   const int steps = model.analysis.steps;
   const auto body = [&](Path* path)
   {
-    at::StaticSolver solver(model, model.solver);
+    at::BodyStaticSolver solver(model, model.solver);
     at::State s = at::initialState(model);
     at::Summary r = solver.solve(s, s.u);
     if (r.ok())
@@ -298,7 +298,7 @@ int naturalStatics(const std::string& scene, const at::Model& model, int repeat)
   long natural_iterations = 0, natural_factorizations = 0;
   const auto natural = [&](Path* path)
   {
-    at::NaturalStaticSolver solver(model, model.solver);
+    at::StaticSolver solver(model, model.solver);
     at::State s = at::initialState(model);
     at::Summary r = solver.solve(s, s.u);
     if (r.ok())
