@@ -1689,6 +1689,16 @@ int NaturalSolver::determinantSign()
   return sign;
 }
 
+Eigen::MatrixXd NaturalSolver::assembledMatrix() const
+{
+  if (entries_.to_dense)
+    return entries_.dense;
+  const Eigen::Index size = residual_.size();
+  Eigen::SparseMatrix<double> m(size, size);
+  m.setFromTriplets(entries_.triplets.begin(), entries_.triplets.end());
+  return Eigen::MatrixXd(m);
+}
+
 Eigen::VectorXd NaturalSolver::assembledDiagonal() const
 {
   if (entries_.to_dense)

@@ -276,6 +276,8 @@ public:
   bool factorizeStatic();
   /// The sign of the last factorization's determinant (0: singular).
   int determinantSign();
+  /// The Jacobian assembleStatic built, dense (for checks; a lattice's is large).
+  Eigen::MatrixXd assembledMatrix() const;
   /// The diagonal of the Jacobian assembleStatic built, and its rows' block G (rows x coordinates).
   Eigen::VectorXd assembledDiagonal() const;
   Eigen::SparseMatrix<double> assembledRows() const;
