@@ -1735,19 +1735,29 @@ int NaturalSolver::passedThrough(const Eigen::VectorXd& x0, const ActuationValue
 {
   if (!model_.contact.enabled)
     return -1;
-  // the pairs that can meet on the way: within twice the largest motion of a node at the start
+  // the pairs that can meet on the way: a pair's gap changes by at most the motions of its two struts' nodes, so one
+  // that met on the way is within twice the largest motion at either end
   double motion = 0.0;
   node_now_.resize(nm_.nodes.size());
   points_.resize(nm_.nodes.size());
+  double from_listing = 0.0;  // how far x1's nodes are from the static listing's
   for (size_t i = 0; i < nm_.nodes.size(); ++i)
   {
     node_now_[i] = naturalNodePosition(nm_, static_cast<int>(i), x0, u0);
     points_[i] = naturalNodePosition(nm_, static_cast<int>(i), x1, u1);
     motion = std::max(motion, (points_[i] - node_now_[i]).norm());
+    if (static_listed_)
+      from_listing = std::max(from_listing, (points_[i] - static_nodes_[i]).norm());
   }
-  static_listed_ = false;  // (node_now_ is the listing's scratch)
   candidates_.clear();
-  if (use_broad_phase_)
+  if (static_listed_ && 2.0 * (motion + from_listing) < list_margin_)
+  {
+    // the listing holds every pair within its margin of where it was made: those are all
+    for (const Listed& l : listed_)
+      if (!l.c.ground)
+        candidates_.push_back(l.c.slot);
+  }
+  else if (use_broad_phase_)
   {
     broad_q_ = naturalToBodyCoordinates(nm_, x0, u0);
     broad_phase_.candidates(broad_q_, motion, candidates_);

@@ -962,7 +962,7 @@ Equilibrium followFromStart(const EquilibriumOracle& oracle, const PlanRequest& 
     if (!oracle.follow(e, simple[k], end, true, visit))
     {
       oracle.valid(end, &why);
-      cut = "before waypoint " + std::to_string(k + offset) + " (" + why + ")";
+      cut = "stopped being valid before waypoint " + std::to_string(k + offset) + " (" + why + ")";
       out.message = (clock.stop() ? "following the path from the start was stopped by the time limit before waypoint " :
                                     "followed from the start, the path stops being valid before waypoint ") +
                     std::to_string(k + offset) + " (" + why + "); the trajectory ends at the last valid waypoint";
@@ -1379,10 +1379,17 @@ PlanResult planFolding(const core::Model& model, const core::State& given, const
       joined.insert(joined.end(), out.waypoints.begin() + 1, out.waypoints.end());
       out.waypoints = std::move(joined);
     }
+    if (cut_at.empty() && found.solved && out.status != PlanStatus::kExactSolution)
+    {
+      // followed to its end, the path reached another branch of equilibria than the search's (near the symmetric
+      // fold's bifurcation the branch taken depends on the increments): searched on from there as well
+      std::ostringstream msg;
+      msg << "ended at height " << end.height << " m, on another branch of equilibria than the search's";
+      cut_at = msg.str();
+    }
     if (cut_at.empty() || out.status == PlanStatus::kExactSolution || clock.out() || search + 1 >= kSearchesMost)
       break;
-    cuts.push_back("search " + std::to_string(search + 1) + "'s path, followed from its start, stopped being valid " +
-                   cut_at);
+    cuts.push_back("search " + std::to_string(search + 1) + "'s path, followed from its start, " + cut_at);
     clock.searching();
     oracle.restart(end);
   }

@@ -1045,11 +1045,11 @@ TEST(FoldingPlanner, APathCutWhenFollowedFromTheStartIsSearchedOnFromWhereItStop
 {
   // The node plans from its live state, which differs from run to run by round-off. Planning the tower down to
   // 0.5 m from such starts (positions perturbed by 1e-6 m, then relaxed as the node does), the first search's
-  // path sometimes crosses to another branch of equilibria when it is followed from the start (1 of these 10
-  // starts in the native build, cut before waypoint 1; other starts in other builds): those plans search on from
-  // where the path stopped and still end exact. (Not rechecked by an independent continuation with other increments:
-  // from these starts, near the symmetric fold's bifurcation, 0.01 m increments flag a jump on some paths that 0.02 m
-  // increments follow.)
+  // path sometimes crosses to another branch of equilibria when it is followed from the start (cut before a
+  // waypoint, or followed to its end with the tower still standing; which starts do, if any, depends on the build's
+  // floating point): those plans search on from where the path stopped and still end exact. (Not rechecked by an
+  // independent continuation with other increments: from these starts, near the symmetric fold's bifurcation, 0.01 m
+  // increments flag a jump on some paths that 0.02 m increments follow.)
   const at::Model model = scene("tower.yaml");
   const at::State base = startEquilibrium(model);
   std::mt19937 gen(5);
@@ -1078,7 +1078,9 @@ TEST(FoldingPlanner, APathCutWhenFollowedFromTheStartIsSearchedOnFromWhereItStop
     {
       ++repaired;
       std::printf("[ measured ] start %d: %s\n", k, p.message.c_str());
-      EXPECT_NE(p.message.find("stopped being valid before waypoint"), std::string::npos) << p.message;
+      EXPECT_TRUE(p.message.find("stopped being valid before waypoint") != std::string::npos ||
+                  p.message.find("on another branch of equilibria") != std::string::npos)
+          << p.message;
     }
   }
   std::printf("[ measured ] %d of 10 plans searched on from where their first path stopped\n", repaired);
