@@ -860,13 +860,20 @@ ContactPairState naturalContact(const NaturalModel& nm, const NaturalContactSlot
     else
       pairKernel(model, pc, r, v, spin, impact_speed, with_force, f, st);
   };
-  if (!stiffness && !damping)
   {
+    // (apart: no force, no tangents, and no derivatives to carry through the closest points)
     Vec14 f;
     kernel(in.r, in.v, in.spin, force != nullptr, f);
     if (force)
       *force = f;
-    return st;
+    if ((!stiffness && !damping) || !st.active)
+    {
+      if (stiffness)
+        stiffness->setZero();
+      if (damping)
+        damping->setZero();
+      return st;
+    }
   }
   using Ad = Eigen::AutoDiffScalar<Eigen::Matrix<double, 26, 1>>;
   V3<Ad> ra[4], va[4];
