@@ -59,7 +59,7 @@ struct StaticSolver::Impl
 {
   Impl(const Model& m, const SolverOptions& o)
     : model(m)
-    , nm(buildNaturalModel(model))
+    , nm(buildNaturalModel(model, false))
     , solver(nm, o)
     , options(o)
     , n(nm.coordinates)

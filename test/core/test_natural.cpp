@@ -217,7 +217,8 @@ TEST(Natural, StaticJacobianMatchesCentralDifferences)
     for (ActuationValue& a : end)
       a.value = pull;
     ASSERT_TRUE(statics.followPath(st, end, 60, {}).ok()) << name;
-    const NaturalModel nm = buildNaturalModel(model);
+    const NaturalModel nm = buildNaturalModel(model, false);  // (statics' coordinates: no spin rates)
+    ASSERT_EQ(st.natural.x.size(), nm.coordinates);
     NaturalSolver solver(nm, model.solver);
     std::mt19937 rng(11);
     std::uniform_real_distribution<double> uni(-1.0, 1.0);

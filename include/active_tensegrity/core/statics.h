@@ -2,7 +2,8 @@
 /// Newton on the free nodes' positions x and the rows' multipliers lambda for
 ///   -F(x, u) + G(x)^T lambda = 0,  Phi(x, u) = 0,
 /// under actuation (displacement) control, contact without damping or friction. A strut's spin about its own axis is
-/// not a coordinate, so statics needs no spin locks. The solved state carries its natural coordinates
+/// not a coordinate, so statics needs no spin locks (nor the spin rates dynamics gives a scene with friction: statics
+/// has none, and its matrices are the smaller for it). The solved state carries its natural coordinates
 /// (State::natural, marked as an equilibrium) and their body poses (State::q, each strut's frame carried onto its axis
 /// along the shortest arc from its pose before); its multipliers are the natural ones (State::lambda, the body
 /// coordinates', stays zero).
