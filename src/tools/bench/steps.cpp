@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "active_tensegrity/core/analysis.h"
+#include "active_tensegrity/core/natural.h"
 #include "active_tensegrity/core/scene.h"
 #include "bench.h"
 
@@ -51,9 +52,11 @@ int steps(const std::string& scene, const std::vector<at::Override>& overrides, 
   const double median = per_step[per_step.size() / 2];
   const bool dynamic = model.analysis.type == at::AnalysisType::kDynamic;
   std::printf("scene: %s\n", scene.c_str());
-  std::printf("analysis: %s, %d bodies, %d coordinates, %d constraint rows, %zu cables\n",
-              dynamic ? "dynamic" : "static", static_cast<int>(model.bodies.size()), model.nq, model.n_lambda,
-              model.cables.size());
+  // (the solvers' natural coordinates: statics has no spin rates, dynamics one per strut in a scene with friction)
+  const at::NaturalModel nm = at::buildNaturalModel(model, dynamic);
+  std::printf("analysis: %s, %d bodies, %zu cables; solved in natural coordinates: %d coordinates, %zu rows\n",
+              dynamic ? "dynamic" : "static", static_cast<int>(model.bodies.size()), model.cables.size(),
+              nm.coordinates, nm.struts.size() + nm.rows.size());
   if (dynamic)
     std::printf("dt: %g s, integrator: %s, duration: %g s\n", model.solver.dt,
                 model.solver.integrator == at::Integrator::kNewmark ? "newmark" : "generalized_alpha",
