@@ -1658,42 +1658,20 @@ bool NaturalSolver::factorizeStatic()
     return false;
   if (!entries_.to_dense)
     return factorize(size);
-  // equilibrated (rows, then columns, to a largest entry of 1): a stiffness of 1e5 N/m beside the rows' 2 L, near a
-  // mechanism, leaves partial pivoting's tangents to round-off otherwise
-  const Eigen::MatrixXd& a = entries_.dense;
-  row_scale_ = a.cwiseAbs().rowwise().maxCoeff();
-  for (Eigen::Index i = 0; i < row_scale_.size(); ++i)
-    row_scale_(i) = row_scale_(i) > 0.0 ? 1.0 / row_scale_(i) : 1.0;
-  equilibrated_ = row_scale_.asDiagonal() * a;
-  col_scale_ = equilibrated_.cwiseAbs().colwise().maxCoeff().transpose();
-  for (Eigen::Index j = 0; j < col_scale_.size(); ++j)
-    col_scale_(j) = col_scale_(j) > 0.0 ? 1.0 / col_scale_(j) : 1.0;
-  equilibrated_ = equilibrated_ * col_scale_.asDiagonal();
+  // equilibrated: a stiffness of 1e5 N/m beside the rows' 2 L, near a mechanism, leaves partial pivoting's tangents to
+  // round-off otherwise
+  equilibrate(entries_.dense, row_scale_, col_scale_, equilibrated_);
   dense_mode_ = true;
   dense_lu_.compute(equilibrated_);
   scaled_ = true;
-  // singular below a reciprocal condition of 1e-14; the estimate only when the pivots spread over more than 8
-  // decades (a mechanism's matrix has a pivot at round-off)
-  const auto pivots = dense_lu_.matrixLU().diagonal().cwiseAbs();
-  if (pivots.size() > 0 && pivots.minCoeff() > 1e-8 * pivots.maxCoeff())
-    return true;
-  return dense_lu_.rcond() > 1e-14;
+  return regular(dense_lu_);
 }
 
 int NaturalSolver::determinantSign()
 {
   if (!dense_mode_)
     return static_cast<int>(sparse_lu_.signDeterminant());
-  int sign = dense_lu_.permutationP().determinant();
-  const Eigen::MatrixXd& lu = dense_lu_.matrixLU();
-  for (Eigen::Index k = 0; k < lu.rows(); ++k)
-  {
-    if (lu(k, k) == 0.0)
-      return 0;
-    if (lu(k, k) < 0.0)
-      sign = -sign;
-  }
-  return sign;
+  return core::determinantSign(dense_lu_);
 }
 
 Eigen::MatrixXd NaturalSolver::assembledMatrix() const

@@ -226,24 +226,45 @@ bool SparseLinearSolver::factorizeExact(const Eigen::SparseMatrix<double>& a)
   dense_ = a;
   if (equilibrate_)
   {
-    row_scale_ = dense_.cwiseAbs().rowwise().maxCoeff();
-    for (Eigen::Index i = 0; i < row_scale_.size(); ++i)
-      row_scale_(i) = row_scale_(i) > 0.0 ? 1.0 / row_scale_(i) : 1.0;
-    dense_ = row_scale_.asDiagonal() * dense_;
-    col_scale_ = dense_.cwiseAbs().colwise().maxCoeff().transpose();
-    for (Eigen::Index j = 0; j < col_scale_.size(); ++j)
-      col_scale_(j) = col_scale_(j) > 0.0 ? 1.0 / col_scale_(j) : 1.0;
-    dense_ = dense_ * col_scale_.asDiagonal();
+    equilibrate(dense_, row_scale_, col_scale_, dense_);  // (coefficient-wise: in place)
   }
   dense_lu_.compute(dense_);
-  // singular below a reciprocal condition of 1e-14. The estimate (a few triangular solves, about 15 us on
-  // a 104-unknown matrix, a tenth of a tower load step) is made only when the pivots spread over more than
-  // 8 decades: with partial pivoting on an equilibrated matrix, a condition beyond 1e14 shows in its pivots
-  // in practice (a mechanism's matrix has a pivot at round-off)
-  const auto pivots = dense_lu_.matrixLU().diagonal().cwiseAbs();  // (an expression: no allocation)
+  return regular(dense_lu_);
+}
+
+void equilibrate(const Eigen::MatrixXd& a, Eigen::VectorXd& row, Eigen::VectorXd& col, Eigen::MatrixXd& out)
+{
+  row = a.cwiseAbs().rowwise().maxCoeff();
+  for (Eigen::Index i = 0; i < row.size(); ++i)
+    row(i) = row(i) > 0.0 ? 1.0 / row(i) : 1.0;
+  out = row.asDiagonal() * a;
+  col = out.cwiseAbs().colwise().maxCoeff().transpose();
+  for (Eigen::Index j = 0; j < col.size(); ++j)
+    col(j) = col(j) > 0.0 ? 1.0 / col(j) : 1.0;
+  out = out * col.asDiagonal();
+}
+
+bool regular(const Eigen::PartialPivLU<Eigen::MatrixXd>& lu)
+{
+  // with partial pivoting on an equilibrated matrix a condition beyond 1e14 shows in its pivots in practice
+  const auto pivots = lu.matrixLU().diagonal().cwiseAbs();  // (an expression: no allocation)
   if (pivots.size() > 0 && pivots.minCoeff() > 1e-8 * pivots.maxCoeff())
     return true;
-  return dense_lu_.rcond() > 1e-14;
+  return lu.rcond() > 1e-14;
+}
+
+int determinantSign(const Eigen::PartialPivLU<Eigen::MatrixXd>& lu)
+{
+  int sign = lu.permutationP().determinant();
+  const Eigen::MatrixXd& m = lu.matrixLU();
+  for (Eigen::Index k = 0; k < m.rows(); ++k)
+  {
+    if (m(k, k) == 0.0)
+      return 0;
+    if (m(k, k) < 0.0)
+      sign = -sign;
+  }
+  return sign;
 }
 
 int SparseLinearSolver::determinantSign() const
@@ -251,18 +272,7 @@ int SparseLinearSolver::determinantSign() const
   switch (method_)
   {
     case Method::kDense:
-    {
-      int sign = dense_lu_.permutationP().determinant();
-      const Eigen::MatrixXd& lu = dense_lu_.matrixLU();
-      for (Eigen::Index k = 0; k < lu.rows(); ++k)
-      {
-        if (lu(k, k) == 0.0)
-          return 0;
-        if (lu(k, k) < 0.0)
-          sign = -sign;
-      }
-      return sign;
-    }
+      return core::determinantSign(dense_lu_);
     case Method::kStaticPivot:
     case Method::kStaticPivotRefined:
       return static_lu_.determinantSign();
