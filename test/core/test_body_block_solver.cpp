@@ -11,10 +11,10 @@
 #include <gtest/gtest.h>
 
 #include "active_tensegrity/core/analysis.h"
-#include "active_tensegrity/core/body_block_solver.h"
-#include "active_tensegrity/core/body_dynamics.h"
+#include "active_tensegrity/oracle/body_block_solver.h"
+#include "active_tensegrity/oracle/body_dynamics.h"
 #include "active_tensegrity/core/scene.h"
-#include "active_tensegrity/core/sparse_linear_solver.h"
+#include "active_tensegrity/oracle/sparse_linear_solver.h"
 #include "tower_fold.h"
 
 using namespace active_tensegrity::core;

@@ -13,6 +13,7 @@
 #include "active_tensegrity/core/adaptive.h"
 #include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/dynamics.h"
+#include "active_tensegrity/oracle/body_dynamics.h"
 #include "fd_check.h"
 #include "test_models.h"
 

@@ -14,7 +14,8 @@
 #include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/dynamics.h"
 #include "active_tensegrity/core/scene.h"
-#include "active_tensegrity/core/sparse_linear_solver.h"
+#include "active_tensegrity/oracle/sparse_linear_solver.h"
+#include "active_tensegrity/oracle/body_dynamics.h"
 #include "fd_check.h"
 #include "test_models.h"
 

@@ -10,7 +10,7 @@
 #include <gtest/gtest.h>
 
 #include "active_tensegrity/core/analysis.h"
-#include "active_tensegrity/core/body_statics.h"
+#include "active_tensegrity/oracle/body_statics.h"
 #include "active_tensegrity/core/cable.h"
 #include "active_tensegrity/core/form_finding.h"
 #include "active_tensegrity/core/generators.h"

@@ -12,8 +12,9 @@
 #include "active_tensegrity/core/natural.h"
 #include "active_tensegrity/core/scene.h"
 #include "active_tensegrity/core/state.h"
-#include "active_tensegrity/core/body_statics.h"
+#include "active_tensegrity/oracle/body_statics.h"
 #include "active_tensegrity/core/statics.h"
+#include "active_tensegrity/oracle/body_dynamics.h"
 #include "test_models.h"
 
 using namespace active_tensegrity::core;

@@ -8,10 +8,10 @@
 #include <gtest/gtest.h>
 
 #include "active_tensegrity/core/analysis.h"
-#include "active_tensegrity/core/body_dynamics.h"
-#include "active_tensegrity/core/reduced_linear_solver.h"
+#include "active_tensegrity/oracle/body_dynamics.h"
+#include "active_tensegrity/oracle/reduced_linear_solver.h"
 #include "active_tensegrity/core/scene.h"
-#include "active_tensegrity/core/body_statics.h"
+#include "active_tensegrity/oracle/body_statics.h"
 #include "test_models.h"
 #include "tower_fold.h"
 

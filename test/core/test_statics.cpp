@@ -6,7 +6,7 @@
 
 #include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/scene.h"
-#include "active_tensegrity/core/body_statics.h"
+#include "active_tensegrity/oracle/body_statics.h"
 #include "active_tensegrity/core/statics.h"
 #include "test_models.h"
 

@@ -17,7 +17,7 @@
 
 #include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/scene.h"
-#include "active_tensegrity/core/body_statics.h"
+#include "active_tensegrity/oracle/body_statics.h"
 #include "active_tensegrity/core/structure_check.h"
 #include "active_tensegrity/core/svd.h"
 #include "test_models.h"

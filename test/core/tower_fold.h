@@ -9,7 +9,7 @@
 #include <gtest/gtest.h>
 
 #include "active_tensegrity/core/analysis.h"
-#include "active_tensegrity/core/body_dynamics.h"
+#include "active_tensegrity/oracle/body_dynamics.h"
 #include "active_tensegrity/core/scene.h"
 
 namespace active_tensegrity::test

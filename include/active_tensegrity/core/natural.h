@@ -35,6 +35,7 @@
 #include "active_tensegrity/core/adaptive.h"
 #include "active_tensegrity/core/broad_phase.h"
 #include "active_tensegrity/core/contact.h"
+#include "active_tensegrity/core/dense_lu.h"
 #include "active_tensegrity/core/actuation_law.h"
 #include "active_tensegrity/core/energy.h"
 #include "active_tensegrity/core/model.h"

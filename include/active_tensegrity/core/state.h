@@ -1,5 +1,5 @@
-/// The changing part of a simulation. Includes the solvers' Summary (summary.h) and linear solver
-/// (sparse_linear_solver.h) as well, which code written against this header finds through it.
+/// The changing part of a simulation. Includes the solvers' Summary (summary.h) as well, which code written against
+/// this header finds through it.
 #pragma once
 
 #include <vector>
@@ -7,7 +7,6 @@
 #include <Eigen/Core>
 
 #include "active_tensegrity/core/mechanics.h"
-#include "active_tensegrity/core/sparse_linear_solver.h"
 #include "active_tensegrity/core/summary.h"
 
 namespace active_tensegrity::core

@@ -16,12 +16,14 @@
 #include <vector>
 
 #include "active_tensegrity/core/adaptive.h"
+#include "active_tensegrity/oracle/body_adaptive.h"
 #include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/natural.h"
 #include "active_tensegrity/core/scene.h"
 #include "active_tensegrity/core/state.h"
-#include "active_tensegrity/core/body_statics.h"
+#include "active_tensegrity/oracle/body_statics.h"
 #include "active_tensegrity/core/statics.h"
+#include "active_tensegrity/oracle/body_dynamics.h"
 #include "../cli.h"
 #include "bench.h"
 

@@ -8,7 +8,7 @@
 #include <Eigen/QR>
 
 #include "active_tensegrity/core/block_sparse.h"
-#include "active_tensegrity/core/sparse_linear_solver.h"
+#include "active_tensegrity/oracle/sparse_linear_solver.h"
 
 namespace active_tensegrity::core
 {

@@ -12,17 +12,14 @@
 #include <vector>
 
 #include "active_tensegrity/core/mechanics.h"
-#include "active_tensegrity/core/reduced_linear_solver.h"
+#include "active_tensegrity/oracle/reduced_linear_solver.h"
 #include "active_tensegrity/core/state.h"
 #include "active_tensegrity/core/statics.h"
+#include "active_tensegrity/core/structure_check.h"
 #include "active_tensegrity/core/summary.h"
 
 namespace active_tensegrity::core
 {
-/// One spin-lock row per strut, (conj(Theta0) (x) Theta)_z = 0 with Theta0 the model's initial
-/// orientation: the constraints statics (and every analysis about an equilibrium) adds so that a strut's
-/// spin about its own axis, which no element resists, is not a degree of freedom.
-std::vector<Constraint> spinLocks(const Model& model);
 
 class BodyStaticSolver
 {
@@ -151,9 +148,5 @@ private:
   Eigen::VectorXd force_rows_;  // 1 on the multipliers of kPoints constraints (forces), else 0
   Eigen::VectorXd zero_q_, F_, cforce_, phi_, r_, dx_, fplus_, fminus_;
 };
-
-/// Multipliers that best satisfy the force equations at a given q (least squares), for checks of
-/// equilibrium and initial actuation forces.
-Eigen::VectorXd leastSquaresMultipliers(const System& system, const Eigen::VectorXd& q, const ActuationValues& u = {});
 
 }  // namespace active_tensegrity::core

@@ -1,4 +1,4 @@
-#include "active_tensegrity/core/static_lu.h"
+#include "active_tensegrity/oracle/static_lu.h"
 
 #include <algorithm>
 #include <cmath>

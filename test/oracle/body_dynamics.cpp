@@ -1,4 +1,4 @@
-#include "active_tensegrity/core/body_dynamics.h"
+#include "active_tensegrity/oracle/body_dynamics.h"
 
 #include <algorithm>
 #include <chrono>

@@ -9,8 +9,10 @@
 #include <Eigen/SparseCore>
 #include <Eigen/SparseLU>
 
-#include "active_tensegrity/core/body_block_solver.h"
-#include "active_tensegrity/core/static_lu.h"
+#include "active_tensegrity/oracle/body_block_solver.h"
+#include "active_tensegrity/oracle/static_lu.h"
+
+#include "active_tensegrity/core/dense_lu.h"
 
 namespace active_tensegrity::core
 {
@@ -40,16 +42,6 @@ namespace active_tensegrity::core
 ///   couplings between bodies dropped (modified Newton in dynamics, at steps where the mass dominates).
 ///   Approximate, so exact() is false. A refused one (BodyBlockSolver::factorize) and the next four after it
 ///   get the other methods; so do the next ones after distrustBodyBlocks().
-/// Dense LU helpers shared by the solvers that factorize small matrices densely. equilibrate: `a` scaled by rows,
-/// then by columns, to a largest entry of 1 in each (out = diag(row) a diag(col); an empty row or column keeps 1; out
-/// may be a).
-void equilibrate(const Eigen::MatrixXd& a, Eigen::VectorXd& row, Eigen::VectorXd& col, Eigen::MatrixXd& out);
-/// Whether the LU of an equilibrated matrix is regular: its reciprocal condition above 1e-14, estimated only when the
-/// pivots spread over more than 8 decades (a mechanism's matrix has a pivot at round-off; the estimate costs a few
-/// triangular solves).
-bool regular(const Eigen::PartialPivLU<Eigen::MatrixXd>& lu);
-/// The sign of the determinant of a dense LU (0 when a pivot is zero).
-int determinantSign(const Eigen::PartialPivLU<Eigen::MatrixXd>& lu);
 
 class SparseLinearSolver
 {

@@ -1,4 +1,4 @@
-#include "active_tensegrity/core/reduced_linear_solver.h"
+#include "active_tensegrity/oracle/reduced_linear_solver.h"
 
 #include <algorithm>
 #include <cmath>

@@ -1,6 +1,6 @@
 /// Index-3 DAE time integration in the body coordinates (7 per strut), kept as the comparison `tensegrity_bench
 /// natural` runs against the package's dynamics in natural coordinates (dynamics.h), with its adaptive steps
-/// (BodyAdaptiveStepper, adaptive.h).
+/// (BodyAdaptiveStepper, body_adaptive.h).
 /// Paper Sec. 5: Newton-Raphson on [qdd_{n+1}; lambda_{n+1}] with the
 /// full analytic Jacobian (Eq. 68) and the constraint rows scaled by 1 / (beta h^2) (Bottasso et al.
 /// 2007). Integrators: Newmark (gamma, beta) and generalized-alpha (Arnold & Bruls 2007, from
@@ -13,8 +13,8 @@
 
 #include "active_tensegrity/core/actuation_law.h"
 #include "active_tensegrity/core/contact.h"
-#include "active_tensegrity/core/reduced_linear_solver.h"
-#include "active_tensegrity/core/sparse_linear_solver.h"
+#include "active_tensegrity/oracle/reduced_linear_solver.h"
+#include "active_tensegrity/oracle/sparse_linear_solver.h"
 #include "active_tensegrity/core/state.h"
 #include "active_tensegrity/core/summary.h"
 

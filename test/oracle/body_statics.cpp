@@ -1,4 +1,4 @@
-#include "active_tensegrity/core/body_statics.h"
+#include "active_tensegrity/oracle/body_statics.h"
 
 #include <algorithm>
 #include <cmath>
@@ -7,28 +7,11 @@
 
 #include <Eigen/Dense>
 
-#include "active_tensegrity/core/body_dynamics.h"
+#include "active_tensegrity/oracle/body_dynamics.h"
 #include "active_tensegrity/core/structure_check.h"
 
 namespace active_tensegrity::core
 {
-std::vector<Constraint> spinLocks(const Model& model)
-{
-  std::vector<Constraint> locks;
-  for (size_t i = 0; i < model.bodies.size(); ++i)
-  {
-    const Body& b = model.bodies[i];
-    if (b.kind != BodyKind::kStrut)
-      continue;
-    Constraint c;
-    c.kind = Constraint::Kind::kSpinLock;
-    c.name = b.name + ".spin_lock";
-    c.body = static_cast<int>(i);
-    c.coefficients = spinLockCoefficients(model.q0.segment<4>(b.offset + 3));
-    locks.push_back(c);
-  }
-  return locks;
-}
 
 namespace
 {
@@ -1085,16 +1068,6 @@ double BodyStaticSolver::forceResidual(const State& s)
     lambda.conservativeResizeLike(Eigen::VectorXd::Zero(system_.nLambda()));
   system_.constraintForce(s.q, lambda, cforce_);
   return (cforce_ - F_).lpNorm<Eigen::Infinity>();
-}
-
-Eigen::VectorXd leastSquaresMultipliers(const System& system, const Eigen::VectorXd& q, const ActuationValues& u)
-{
-  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(system.nq());
-  Eigen::VectorXd F;
-  system.appliedForce(q, zero, u, F, nullptr, 0.0, 0.0);
-  system.contactForce(q, zero, {}, ContactMode::kStatic, F, nullptr, 0.0, 0.0);
-  const Eigen::MatrixXd jt = system.constraintJacobianDense(q).transpose();
-  return jt.colPivHouseholderQr().solve(F);
 }
 
 }  // namespace active_tensegrity::core

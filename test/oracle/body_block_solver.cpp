@@ -1,4 +1,4 @@
-#include "active_tensegrity/core/body_block_solver.h"
+#include "active_tensegrity/oracle/body_block_solver.h"
 
 #include <algorithm>
 #include <cmath>
