@@ -1,5 +1,5 @@
 /// An approximate solver of the dynamic Newton matrix: the bodies' own blocks and the constraint rows,
-/// without the couplings between bodies in the force block (docs/design.md, "Body blocks for modified Newton").
+/// without the couplings between bodies in the force block (docs/design.md, "The body coordinates as a test oracle").
 #pragma once
 
 #include <utility>

@@ -162,7 +162,7 @@ private:
   BlockSparseMatrix jac_;
   /// The Newton matrix's factorizations: linear_ (body blocks when they serve; every method on large systems),
   /// and on systems of at most kReducedMost unknowns the exact ones in reduced_, the one-body rows eliminated
-  /// (docs/design.md, "Body blocks for modified Newton").
+  /// (docs/design.md, "The body coordinates as a test oracle").
   SparseLinearSolver linear_;
   ReducedLinearSolver reduced_;
   bool use_reduced_ = false;      // whether the exact factorizations go to reduced_

@@ -1,5 +1,5 @@
 /// The Newton matrix of coordinates and multipliers solved with every one-body constraint eliminated
-/// (docs/physics.md, "Linear solvers").
+/// (docs/design.md, "The body coordinates as a test oracle").
 #pragma once
 
 #include <vector>
