@@ -296,20 +296,23 @@ TEST(Statics, EquilibriumFromAFoldedDynamicState)
         << n.name;
 }
 
-TEST(Statics, RelaxationFindsTheEquilibriumWhereNewtonFails)
+TEST(Statics, RelaxationFindsAnEquilibriumWhereNewtonFails)
 {
-  // the tower folded quasi-statically to a pull of 0.8 m (struts in contact), every body then thrown up to 5 cm off:
-  // Newton's equilibrium from there lies beyond struts it would pass through each other (or Newton fails); dynamic
-  // relaxation brings the tower back to the fold's equilibrium. (Cores of 0.1 mm: thrown into each other, struts of
-  // the real 12.5 mm cores are pushed apart by them.)
+  // the tower folded quasi-statically to a pull of 0.8 m (struts in contact), every body then thrown up to 5 cm off
+  // (twelve throws): where Newton's equilibrium lies beyond struts it would pass through each other (or Newton fails),
+  // dynamic relaxation brings the tower to rest in an equilibrium. Which one is the throw's basin: the fold's own, or
+  // another 0.2-0.4 m from it with the struts resting on each other otherwise; a throw near the basins' boundary goes
+  // either way with the processor's rounding, so each relaxed state is checked as an equilibrium (Newton from it stays
+  // put), not as a particular one. (Cores of 1 um: thrown into each other, struts of the real 12.5 mm cores are
+  // pushed apart by them.)
   const std::string path = std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) + "/config/scenes/tower.yaml";
   const Model model = loadScene(
       path, { { "analysis.max_actuation", "0.8" }, { "analysis.steps", "160" }, { "struts.core.radius", "0.000001" } });
   const RunResult fold = runAnalysis(model, [](const State&) {});
   ASSERT_TRUE(fold.summary.ok()) << fold.summary.message;
-  const auto thrown = [&](double amplitude)
+  const auto thrown = [&](double amplitude, unsigned seed)
   {
-    std::mt19937 rng(1);
+    std::mt19937 rng(seed);
     std::uniform_real_distribution<double> push(-amplitude, amplitude);
     State s = fold.final_state;
     s.natural = NaturalState();  // (a caller's poses)
@@ -318,30 +321,42 @@ TEST(Statics, RelaxationFindsTheEquilibriumWhereNewtonFails)
         s.q(b.offset + k) += push(rng);
     return s;
   };
-  const auto farthest = [&](const State& s)
+  const auto farthest = [&](const State& a, const State& b)
   {
     double most = 0.0;
     for (const Node& n : model.nodes)
-      most = std::max(most,
-                      (pointPosition(model, n.point, s.q) - pointPosition(model, n.point, fold.final_state.q)).norm());
+      most = std::max(most, (pointPosition(model, n.point, a.q) - pointPosition(model, n.point, b.q)).norm());
     return most;
   };
   StaticSolver solver(model, model.solver);
-  State s = thrown(0.05);
-  State plain = s;
-  const Summary newton = solver.solve(plain, s.u);
-  ASSERT_FALSE(newton.ok());
-  std::cerr << "[ measured ] Newton from the thrown tower: " << newton.message << "\n";
-  const Summary eq = solver.relax(s, s.u);
-  ASSERT_TRUE(eq.ok()) << eq.message;
-  ASSERT_EQ(eq.warnings.size(), 1u);
-  EXPECT_NE(eq.warnings[0].find("dynamic relaxation"), std::string::npos) << eq.warnings[0];
-  EXPECT_EQ(s.qd.lpNorm<Eigen::Infinity>(), 0.0);
-  EXPECT_LT(solver.forceResidual(s), 1e-3);
-  std::cerr << "[ measured ] " << eq.warnings[0] << "; the farthest node " << farthest(s)
-            << " m from the fold's equilibrium\n";
-  EXPECT_NEAR(structureHeight(model, s.q), structureHeight(model, fold.final_state.q), 1e-6);
-  EXPECT_LT(farthest(s), 1e-5);
+  int relaxed = 0, at_fold = 0;
+  for (unsigned seed = 1; seed <= 12; ++seed)
+  {
+    State s = thrown(0.05, seed);
+    State plain = s;
+    const Summary newton = solver.solve(plain, s.u);
+    if (newton.ok())
+      continue;  // (Newton's own equilibrium, reached without passing struts through each other)
+    ++relaxed;
+    const Summary eq = solver.relax(s, s.u);
+    ASSERT_TRUE(eq.ok()) << "throw " << seed << ": " << eq.message;
+    ASSERT_EQ(eq.warnings.size(), 1u);
+    EXPECT_NE(eq.warnings[0].find("dynamic relaxation"), std::string::npos) << eq.warnings[0];
+    EXPECT_EQ(s.qd.lpNorm<Eigen::Infinity>(), 0.0);
+    EXPECT_LT(solver.forceResidual(s), 1e-3) << "throw " << seed;
+    // an equilibrium: Newton from it converges where it is
+    State again = s;
+    const Summary held = solver.solve(again, s.u);
+    EXPECT_TRUE(held.ok()) << "throw " << seed << ": " << held.message;
+    EXPECT_LT(farthest(again, s), 1e-8) << "throw " << seed;
+    const double from_fold = farthest(s, fold.final_state);
+    at_fold += from_fold < 1e-5;
+    std::cerr << "[ measured ] throw " << seed << ": Newton " << newton.message.substr(0, 60) << "...; "
+              << eq.warnings[0] << "; the farthest node " << from_fold << " m from the fold's equilibrium\n";
+  }
+  std::cerr << "[ measured ] " << relaxed << " of 12 throws relaxed, " << at_fold
+            << " of them to the fold's equilibrium\n";
+  EXPECT_GT(relaxed, 0) << "no throw left Newton without an equilibrium: the test checks nothing";
 }
 
 TEST(Statics, RelaxationThatFindsNothingSaysSo)
