@@ -709,7 +709,7 @@ namespace
 /// The dynamic loop with solver.adaptive: steps to every output time and every actuation breakpoint.
 void runAdaptive(const Model& model, DynamicsSolver& solver, const ActuationLaw& law, State& state, RunResult& result,
                  const std::function<void(const State&)>& on_output, const std::function<void(double)>& on_progress,
-                 const std::function<void(const State&)>& after_step)
+                 const std::function<void(const State&)>& after_step, bool wants_steps)
 {
   const AnalysisSettings& an = model.analysis;
   const double eps = 1e-12 * std::max(1.0, an.duration);
@@ -741,7 +741,8 @@ void runAdaptive(const Model& model, DynamicsSolver& solver, const ActuationLaw&
   double last_t = state.t;
   const std::function<void(const State&)> each_step = [&](const State& s)
   {
-    if (!model.actuators.empty())
+    // (the actuators' forces for whoever reads this step: the caller's on_step or a row)
+    if (!model.actuators.empty() && (wants_steps || (every && s.t < an.duration - eps)))
       solver.formActuatorForces(state);  // (s is state)
     result.energy.add(stepper.lastEnergy(), s.t - last_t, s.t, stepper.lastEnergyCheck());
     last_t = s.t;
@@ -964,7 +965,7 @@ RunResult run(const Model& model, const std::function<void(const State&)>& user_
     // after each step: the yield watch, and the caller's on_step with the step's contacts (formed when asked)
     const auto after_step = [&](const State& s) { step_hook(s, contacts_wanted ? solver.contactsAt(s) : nullptr); };
     if (model.solver.adaptive)
-      runAdaptive(model, solver, law, state, result, on_output, on_progress, after_step);
+      runAdaptive(model, solver, law, state, result, on_output, on_progress, after_step, static_cast<bool>(on_step));
     else
     {
       const double dt = model.solver.dt;
@@ -1006,10 +1007,12 @@ RunResult run(const Model& model, const std::function<void(const State&)>& user_
           touched = touching;
         }
         const auto callbacks = std::chrono::steady_clock::now();
-        if (!model.actuators.empty())
+        const bool row = every_step || k == n_steps || state.t >= static_cast<double>(next_row) * interval - 1e-9 * dt;
+        // (the actuators' forces for whoever reads this step: the caller's on_step or a row)
+        if (!model.actuators.empty() && (on_step || row))
           solver.formActuatorForces(state);
         after_step(state);
-        if (every_step || k == n_steps || state.t >= static_cast<double>(next_row) * interval - 1e-9 * dt)
+        if (row)
         {
           on_output(state);
           ++result.steps;

@@ -21,6 +21,7 @@ struct DynamicsSolver::Impl
   // the state the last accepted step (or initialize) ended in: its time and positions, and its contacts when asked
   double end_t = std::numeric_limits<double>::quiet_NaN();
   Eigen::VectorXd end_x, end_v;
+  Eigen::VectorXd end_q, end_qd;  // the body poses the end's state carried
   std::vector<NaturalTouch> end_touching;
   ActuationValues u;  // scratch: the law's values
 
@@ -44,6 +45,8 @@ struct DynamicsSolver::Impl
     end_t = s.natural.t;
     end_x = s.natural.x;
     end_v = s.natural.v;
+    end_q = s.q;
+    end_qd = s.qd;
     end_touching = s.natural.touching;
     timings.most_touching = std::max(timings.most_touching, static_cast<long>(s.natural.touching.size()));
   }
@@ -81,7 +84,14 @@ struct DynamicsSolver::Impl
 
 bool DynamicsSolver::Impl::carriesOwn(const State& s) const
 {
-  return !s.natural.equilibrium && carriesFrames(s) && sameTime(s.natural.t, s.t) && carriesNaturalOf(nm, s);
+  if (s.natural.equilibrium || !carriesFrames(s) || !sameTime(s.natural.t, s.t))
+    return false;
+  // (the state the last step left, untouched: its body poses are the ones written from its natural coordinates)
+  const auto same = [](const Eigen::VectorXd& a, const Eigen::VectorXd& b) { return a.size() == b.size() && a == b; };
+  if (s.natural.t == end_t && same(s.natural.x, end_x) && same(s.natural.v, end_v) && same(s.q, end_q) &&
+      same(s.qd, end_qd))
+    return true;
+  return carriesNaturalOf(nm, s);
 }
 
 DynamicsSolver::DynamicsSolver(const Model& model, const SolverOptions& options)

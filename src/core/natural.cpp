@@ -608,36 +608,6 @@ NaturalContactSlot naturalContactSlot(const NaturalModel& nm, int slot)
   return cs;
 }
 
-Vec3 naturalNodePosition(const NaturalModel& nm, int i, const Eigen::VectorXd& x, const ActuationValues& u)
-{
-  const NaturalNode& n = nm.nodes[i];
-  switch (n.kind)
-  {
-    case NaturalNode::Kind::kFree:
-      return x.segment<3>(n.column);
-    case NaturalNode::Kind::kFixed:
-      return n.position0;
-    case NaturalNode::Kind::kDriven:
-      break;
-  }
-  return n.position0 + (u.empty() ? 0.0 : u[n.actuator].value) * n.direction;
-}
-
-Vec3 naturalNodeVelocity(const NaturalModel& nm, int i, const Eigen::VectorXd& v, const ActuationValues& u)
-{
-  const NaturalNode& n = nm.nodes[i];
-  switch (n.kind)
-  {
-    case NaturalNode::Kind::kFree:
-      return v.segment<3>(n.column);
-    case NaturalNode::Kind::kFixed:
-      return Vec3::Zero();
-    case NaturalNode::Kind::kDriven:
-      break;
-  }
-  return (u.empty() ? 0.0 : u[n.actuator].rate) * n.direction;
-}
-
 Eigen::VectorXd naturalToBodyCoordinates(const NaturalModel& nm, const Eigen::VectorXd& x, const ActuationValues& u)
 {
   const Model& model = *nm.model;
@@ -1229,13 +1199,17 @@ void NaturalSolver::drivenReactions(const NaturalState& s, const ActuationValues
   u_ = u;
   forces(s.x, s.v, false);
   held_ = nullptr;
+  // (the contacts at driven nodes: only their reactions are formed here)
+  const auto driven = [&](int node) { return node >= 0 && nm_.nodes[node].kind == NaturalNode::Kind::kDriven; };
   for (const Listed& l : listed_)
   {
+    if (!driven(l.c.nodes[0]) && !driven(l.c.nodes[1]) && !driven(l.c.nodes[2]) && !driven(l.c.nodes[3]))
+      continue;
     const NaturalContactInput in = naturalContactInput(nm_, l.c, s.x, s.v, u);
     Vec14 f;
     naturalContact(nm_, l.c, in, s.contactSpeed(l.c.slot), &f, nullptr, nullptr);
     for (int i = 0; i < 4; ++i)
-      if (l.c.nodes[i] >= 0 && nm_.nodes[l.c.nodes[i]].column < 0)
+      if (driven(l.c.nodes[i]))
         held_force_[static_cast<size_t>(l.c.nodes[i])] += f.segment<3>(3 * i);
   }
   const auto accel = [&](int node)
@@ -2120,9 +2094,6 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
                     (options_.newton_tolerance * (1.0 + lambda_.lpNorm<Eigen::Infinity>()) + lambda_floor) :
                 0.0;
     const double scaled = std::max(norm / options_.newton_tolerance, lambda_part);
-    if (std::getenv("AT_DEBUG"))
-      fprintf(stderr, "t %.9g h %.3g it %d build %d norm %.3e lambda_part %.3e theta %.3f touching %zu\n", s.t, h, it,
-              (int)build, norm / options_.newton_tolerance, lambda_part, theta_, touching_.size());
     if (errorLeft(scaled, !build, built_this_step, previous) <= 1.0 && contracting())
     {
       x_ = x_pred_ + bh2 * acc_;
@@ -2152,34 +2123,31 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
       v_ = v_pred_ + gh * acc_;
       onset_depth_ = 0.0;
       // the listed contacts at the end (the next step's start reads them), a new contact's depth, and the contact
-      // memory: the contacts touching at the end keep (or take) this step's impact speed, the others forget it
-      for (Listed& l : listed_)
-      {
-        const ContactPairState st =
-            naturalContact(nm_, l.c, naturalContactInput(nm_, l.c, x_, v_, u_), 0.0, nullptr, nullptr, nullptr);
-        l.end_gap = st.gap;
-        l.end_rate = st.penetration_rate;
-      }
-      end_t_ = t1;
-      end_list_version_ = list_version_;
-      // (near_ ascends by slot, as listed_ does)
+      // memory: the contacts touching at the end keep (or take) this step's impact speed, the others forget it; a near
+      // pair's forces at its impact speed, in the same pass (near_ ascends, as listed_ does by slot)
       s.touching.clear();
       s.contacts.clear();
-      for (const int k : near_)
+      auto next_near = near_.begin();
+      for (size_t k = 0; k < listed_.size(); ++k)
       {
-        const Listed& l = listed_[k];
-        if (!(l.end_gap < 0.0))
-          continue;
+        Listed& l = listed_[k];
+        const bool near = next_near != near_.end() && *next_near == static_cast<int>(k);
+        if (near)
+          ++next_near;
         Vec14 f;
-        const ContactPairState st =
-            naturalContact(nm_, l.c, naturalContactInput(nm_, l.c, x_, v_, u_), l.step_speed, &f, nullptr, nullptr);
-        if (!st.active)
+        const ContactPairState st = naturalContact(nm_, l.c, naturalContactInput(nm_, l.c, x_, v_, u_),
+                                                   near ? l.step_speed : 0.0, near ? &f : nullptr, nullptr, nullptr);
+        l.end_gap = st.gap;
+        l.end_rate = st.penetration_rate;
+        if (!near || !st.active)
           continue;
         s.touching.push_back({ l.c.slot, l.step_speed });
         s.contacts.push_back(st);
         if (-l.end_gap > onset_depth_ && !std::binary_search(touching_.begin(), touching_.end(), l.c.slot))
           onset_depth_ = -l.end_gap;
       }
+      end_t_ = t1;
+      end_list_version_ = list_version_;
       // the history of Newton's first guess
       if (s.t == last_end_t_ && history_count_ > 0)
         std::swap(history_[0], history_[1]);

@@ -134,9 +134,25 @@ NaturalLoad naturalLoad(const NaturalModel& nm, const PointLoad& load);
 /// At rest at the scene's start.
 NaturalState naturalInitialState(const NaturalModel& nm);
 
-/// The position and velocity of node i at (x, v) under actuation u.
-Vec3 naturalNodePosition(const NaturalModel& nm, int i, const Eigen::VectorXd& x, const ActuationValues& u);
-Vec3 naturalNodeVelocity(const NaturalModel& nm, int i, const Eigen::VectorXd& v, const ActuationValues& u);
+/// The position and velocity of node i at (x, v) under actuation u (inline: every force, contact and output reads them).
+inline Vec3 naturalNodePosition(const NaturalModel& nm, int i, const Eigen::VectorXd& x, const ActuationValues& u)
+{
+  const NaturalNode& n = nm.nodes[static_cast<size_t>(i)];
+  if (n.kind == NaturalNode::Kind::kFree)
+    return x.segment<3>(n.column);
+  if (n.kind == NaturalNode::Kind::kFixed)
+    return n.position0;
+  return n.position0 + (u.empty() ? 0.0 : u[static_cast<size_t>(n.actuator)].value) * n.direction;
+}
+inline Vec3 naturalNodeVelocity(const NaturalModel& nm, int i, const Eigen::VectorXd& v, const ActuationValues& u)
+{
+  const NaturalNode& n = nm.nodes[static_cast<size_t>(i)];
+  if (n.kind == NaturalNode::Kind::kFree)
+    return v.segment<3>(n.column);
+  if (n.kind == NaturalNode::Kind::kFixed)
+    return Vec3::Zero();
+  return (u.empty() ? 0.0 : u[static_cast<size_t>(n.actuator)].rate) * n.direction;
+}
 
 /// The body coordinates of the same configuration (state.h): strut centres and the rotation that takes z to the
 /// strut's axis with no spin; point masses at their nodes.
