@@ -741,9 +741,13 @@ void runAdaptive(const Model& model, DynamicsSolver& solver, const ActuationLaw&
   double last_t = state.t;
   const std::function<void(const State&)> each_step = [&](const State& s)
   {
-    // (the actuators' forces for whoever reads this step: the caller's on_step or a row)
-    if (!model.actuators.empty() && (wants_steps || (every && s.t < an.duration - eps)))
-      solver.formActuatorForces(state);  // (s is state)
+    // (the body poses and the actuators' forces for whoever reads this step: the caller's on_step, the yield watch or a
+    // row)
+    const bool row = every && s.t < an.duration - eps;
+    if (wants_steps || row)
+      solver.writePoses(state);  // (s is state)
+    if (!model.actuators.empty() && (wants_steps || row))
+      solver.formActuatorForces(state);
     result.energy.add(stepper.lastEnergy(), s.t - last_t, s.t, stepper.lastEnergyCheck());
     last_t = s.t;
     timed(
@@ -779,6 +783,7 @@ void runAdaptive(const Model& model, DynamicsSolver& solver, const ActuationLaw&
       ++next_stop;
     if (stop >= next_output - eps || stop >= an.duration - eps)
     {
+      solver.writePoses(state);
       if (!model.actuators.empty())
         solver.formActuatorForces(state);
       timed([&]() { on_output(state); });
@@ -958,6 +963,7 @@ RunResult run(const Model& model, const std::function<void(const State&)>& user_
     }
     if (!model.actuators.empty())
       solver.formActuatorForces(state);  // (what the rows and callbacks read; a step leaves them unformed)
+    solver.deferPoses(true);             // (written below for the steps that are read)
     watch(state);
     on_output(state);
     ++result.steps;
@@ -965,7 +971,7 @@ RunResult run(const Model& model, const std::function<void(const State&)>& user_
     // after each step: the yield watch, and the caller's on_step with the step's contacts (formed when asked)
     const auto after_step = [&](const State& s) { step_hook(s, contacts_wanted ? solver.contactsAt(s) : nullptr); };
     if (model.solver.adaptive)
-      runAdaptive(model, solver, law, state, result, on_output, on_progress, after_step, static_cast<bool>(on_step));
+      runAdaptive(model, solver, law, state, result, on_output, on_progress, after_step, on_step || !watched.empty());
     else
     {
       const double dt = model.solver.dt;
@@ -1008,7 +1014,10 @@ RunResult run(const Model& model, const std::function<void(const State&)>& user_
         }
         const auto callbacks = std::chrono::steady_clock::now();
         const bool row = every_step || k == n_steps || state.t >= static_cast<double>(next_row) * interval - 1e-9 * dt;
-        // (the actuators' forces for whoever reads this step: the caller's on_step or a row)
+        // (the body poses and the actuators' forces for whoever reads this step: the caller's on_step, the yield watch
+        // or a row)
+        if (on_step || !watched.empty() || row)
+          solver.writePoses(state);
         if (!model.actuators.empty() && (on_step || row))
           solver.formActuatorForces(state);
         after_step(state);
@@ -1049,6 +1058,7 @@ RunResult run(const Model& model, const std::function<void(const State&)>& user_
           std::to_string(e.contact_loss_steps) + " lost; the first at t = " + roundedNumber(e.first_unresolved_t) +
           " s): rebounds and contact forces are off by about as much (energy in the summary)");
     with_yield_warnings(result.summary);
+    solver.writePoses(state);  // (a failed step's last good state included)
     if (!model.actuators.empty())
       solver.formActuatorForces(state);  // (the final state's, for whoever reads it)
   }

@@ -23,7 +23,8 @@ struct DynamicsSolver::Impl
   Eigen::VectorXd end_x, end_v;
   Eigen::VectorXd end_q, end_qd;  // the body poses the end's state carried
   std::vector<NaturalTouch> end_touching;
-  ActuationValues u;  // scratch: the law's values
+  ActuationValues u;   // scratch: the law's values
+  bool defer = false;  // deferPoses
 
   void countTimings()
   {
@@ -45,8 +46,16 @@ struct DynamicsSolver::Impl
     end_t = s.natural.t;
     end_x = s.natural.x;
     end_v = s.natural.v;
-    end_q = s.q;
-    end_qd = s.qd;
+    if (s.natural.poses_pending)
+    {
+      end_q.resize(0);
+      end_qd.resize(0);
+    }
+    else
+    {
+      end_q = s.q;
+      end_qd = s.qd;
+    }
     end_touching = s.natural.touching;
     timings.most_touching = std::max(timings.most_touching, static_cast<long>(s.natural.touching.size()));
   }
@@ -79,6 +88,19 @@ struct DynamicsSolver::Impl
   void writeBody(State& s) const
   {
     writeBodyPoses(nm, s);
+    s.natural.poses_pending = false;
+  }
+  /// A step's end: the body poses written, or their frames carried and the rest left to writePoses
+  void stepped(State& s) const
+  {
+    if (!defer)
+    {
+      writeBody(s);
+      return;
+    }
+    carryBodyFrames(nm, s);
+    s.t = s.natural.t;
+    s.natural.poses_pending = true;
   }
 };
 
@@ -86,8 +108,11 @@ bool DynamicsSolver::Impl::carriesOwn(const State& s) const
 {
   if (s.natural.equilibrium || !carriesFrames(s) || !sameTime(s.natural.t, s.t))
     return false;
-  // (the state the last step left, untouched: its body poses are the ones written from its natural coordinates)
   const auto same = [](const Eigen::VectorXd& a, const Eigen::VectorXd& b) { return a.size() == b.size() && a == b; };
+  // (the state the last step left with its poses deferred: its natural coordinates alone say what it is)
+  if (s.natural.poses_pending)
+    return s.natural.t == end_t && same(s.natural.x, end_x) && same(s.natural.v, end_v);
+  // (the state the last step left, untouched: its body poses are the ones written from its natural coordinates)
   if (s.natural.t == end_t && same(s.natural.x, end_x) && same(s.natural.v, end_v) && same(s.q, end_q) &&
       same(s.qd, end_qd))
     return true;
@@ -159,7 +184,7 @@ Summary DynamicsSolver::tryStep(State& s, double h, const ActuationLaw& law)
   if (!out.ok())
     return out;
   s.u = m.solver.actuation();  // (the step's end: the law is not asked again)
-  m.writeBody(s);
+  m.stepped(s);
   m.ended(s);
   return out;
 }
@@ -180,7 +205,7 @@ Summary DynamicsSolver::step(State& s, double h, const ActuationLaw& law)
     s.u = m.solver.actuation();  // (the step's end: the law is not asked again)
   else
     law(s.natural.t, s.u);
-  m.writeBody(s);
+  m.stepped(s);
   m.ended(s);
   return out;
 }
@@ -227,6 +252,26 @@ bool DynamicsSolver::formActuatorForces(State& s)
   return true;
 }
 
+void DynamicsSolver::deferPoses(bool defer)
+{
+  impl_->defer = defer;
+}
+
+void DynamicsSolver::writePoses(State& s)
+{
+  Impl& m = *impl_;
+  if (!s.natural.poses_pending)
+    return;
+  const bool at_end = m.carriesOwn(s);
+  writeBodyMotion(m.nm, s);  // (the frames carried at every step)
+  s.natural.poses_pending = false;
+  if (at_end)
+  {
+    m.end_q = s.q;
+    m.end_qd = s.qd;
+  }
+}
+
 EnergyPoint DynamicsSolver::energyAt(const State& s)
 {
   return impl_->solver.energyAt(s.natural, s.u);
@@ -263,7 +308,7 @@ AdaptiveStepper::AdaptiveStepper(DynamicsSolver& solver, const SolverOptions& op
     stats_.h_min = stats_.h_max == 0.0 ? h : std::min(stats_.h_min, h);
     stats_.h_max = std::max(stats_.h_max, h);
     s.u = m.solver.actuation();  // (the step's end: the law is not asked again)
-    m.writeBody(s);
+    m.stepped(s);
     m.ended(s);
     if (*on_step_)
     {
@@ -300,7 +345,7 @@ Summary AdaptiveStepper::advanceTo(State& s, double t_end, const ActuationLaw& l
   stats_.at_min_step += after.at_min_step - before.at_min_step;
   if (!out.ok())
     law(s.natural.t, s.u);
-  m.writeBody(s);
+  m.stepped(s);
   m.ended(s);
   return out;
 }

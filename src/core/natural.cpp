@@ -726,7 +726,67 @@ void naturalFromBody(const NaturalModel& nm, State& s)
     }
 }
 
-void writeBodyPoses(const NaturalModel& nm, State& s)
+void carryBodyFrames(const NaturalModel& nm, State& s)
+{
+  const Model& model = *nm.model;
+  const NaturalState& n = s.natural;
+  if (s.q.size() != model.nq)
+    s.q = model.q0;
+  for (size_t k = 0; k < nm.struts.size(); ++k)
+  {
+    const NaturalStrut& st = nm.struts[k];
+    const int off = model.bodies[st.body].offset;
+    const Vec3 e = naturalNodePosition(nm, st.b, n.x, s.u) - naturalNodePosition(nm, st.a, n.x, s.u);
+    // the frame (unit: as the last carry left it, else normalized)
+    Vec4 theta = s.q.segment<4>(off + 3);
+    const double norm2 = theta.squaredNorm();
+    if (!(norm2 > 0.0))
+      theta = thetaFromZAxis(e);
+    else if (std::abs(norm2 - 1.0) > 1e-12)
+      theta /= std::sqrt(norm2);
+    // turned about its axis by the spin angle integrated since: Theta (cos(phi/2), 0, 0, sin(phi/2)), the turn about
+    // the body's own z axis (a small angle, a step's, by its series to round-off)
+    if (st.spin >= 0)
+    {
+      const double half = 0.5 * (n.x(st.spin) - n.frame_spin(static_cast<Eigen::Index>(k)));
+      if (half != 0.0)
+      {
+        double sin_half, cos_half;
+        if (std::abs(half) < 0.05)
+        {
+          const double h2 = half * half;
+          sin_half = half * (1.0 - h2 / 6.0 * (1.0 - h2 / 20.0 * (1.0 - h2 / 42.0 * (1.0 - h2 / 72.0))));
+          cos_half = 1.0 - h2 / 2.0 * (1.0 - h2 / 12.0 * (1.0 - h2 / 30.0 * (1.0 - h2 / 56.0)));
+        }
+        else
+          sincos(half, &sin_half, &cos_half);
+        const Vec4 t = theta;
+        theta(0) = t(0) * cos_half - t(3) * sin_half;
+        theta(1) = t(1) * cos_half + t(2) * sin_half;
+        theta(2) = t(2) * cos_half - t(1) * sin_half;
+        theta(3) = t(3) * cos_half + t(0) * sin_half;
+      }
+      s.natural.frame_spin(static_cast<Eigen::Index>(k)) = n.x(st.spin);
+    }
+    // then carried along the shortest arc from its z axis onto the new axis: (1 + z.e, z x e) for unit z and e, times
+    // Theta, normalized once
+    const Vec3 z = bodyZAxis(theta);
+    const Vec3 u = e / e.norm();
+    const double c = 1.0 + z.dot(u);
+    Vec4 arc;
+    if (c < 1e-8)
+      arc = shortestArc(z.normalized(), u);
+    else
+    {
+      arc(0) = c;
+      arc.tail<3>() = z.cross(u);
+    }
+    theta = multiply(arc, theta);
+    s.q.segment<4>(off + 3) = theta / theta.norm();
+  }
+}
+
+void writeBodyMotion(const NaturalModel& nm, State& s)
 {
   const Model& model = *nm.model;
   const NaturalState& n = s.natural;
@@ -734,55 +794,34 @@ void writeBodyPoses(const NaturalModel& nm, State& s)
     s.q = model.q0;
   s.qd.setZero(model.nq);
   s.t = n.t;
-  State& out = s;
-  for (size_t k = 0; k < nm.struts.size(); ++k)
+  for (const NaturalStrut& st : nm.struts)
   {
-    const NaturalStrut& st = nm.struts[k];
     const int off = model.bodies[st.body].offset;
     const Vec3 ra = naturalNodePosition(nm, st.a, n.x, s.u), rb = naturalNodePosition(nm, st.b, n.x, s.u);
     const Vec3 va = naturalNodeVelocity(nm, st.a, n.v, s.u), vb = naturalNodeVelocity(nm, st.b, n.v, s.u);
     const Vec3 e = (rb - ra).normalized();
-    out.q.segment<3>(off) = 0.5 * (ra + rb);
-    out.qd.segment<3>(off) = 0.5 * (va + vb);
-    // the frame: turned about its last axis by the spin angle integrated since, then carried along the shortest arc
-    // onto the new axis (the same as carrying it first and turning it about the new axis)
-    Vec4 theta = out.q.segment<4>(off + 3);
-    const double norm = theta.norm();
-    theta = norm > 0.0 ? Vec4(theta / norm) : thetaFromZAxis(e);
-    double spin = 0.0;
-    if (st.spin >= 0)
-    {
-      const double turned = n.x(st.spin) - n.frame_spin(static_cast<Eigen::Index>(k));
-      if (turned != 0.0)
-      {
-        double sin_half, cos_half;
-        sincos(0.5 * turned, &sin_half, &cos_half);
-        Vec4 r;
-        r(0) = cos_half;
-        r.tail<3>() = sin_half * bodyZAxis(theta);
-        theta = multiply(r, theta);
-      }
-      spin = n.v(st.spin);
-    }
-    theta = multiply(shortestArc(bodyZAxis(theta).normalized(), e), theta);
-    theta /= theta.norm();
-    out.q.segment<4>(off + 3) = theta;
+    s.q.segment<3>(off) = 0.5 * (ra + rb);
+    s.qd.segment<3>(off) = 0.5 * (va + vb);
     // Theta_dot = 1/2 L(Theta)^T omega_bar, omega_bar = A(Theta)^T omega, omega = e x e_dot + spin e
+    const Vec4 theta = s.q.segment<4>(off + 3);
     const Vec3 e_dot = (vb - va) / st.length;
-    const Vec3 w = e.cross(e_dot) + spin * e;
+    const Vec3 w = e.cross(e_dot) + (st.spin >= 0 ? n.v(st.spin) : 0.0) * e;
     const Vec4 conj(theta(0), -theta(1), -theta(2), -theta(3));
-    out.qd.segment<4>(off + 3) = 0.5 * lMatrixTransposeTimes(theta, rotate(conj, w));
+    s.qd.segment<4>(off + 3) = 0.5 * lMatrixTransposeTimes(theta, rotate(conj, w));
   }
   for (size_t i = 0; i < model.bodies.size(); ++i)
     if (nm.node_of_body[i] >= 0)
     {
       const int off = model.bodies[i].offset;
-      out.q.segment<3>(off) = naturalNodePosition(nm, nm.node_of_body[i], n.x, s.u);
-      out.qd.segment<3>(off) = naturalNodeVelocity(nm, nm.node_of_body[i], n.v, s.u);
+      s.q.segment<3>(off) = naturalNodePosition(nm, nm.node_of_body[i], n.x, s.u);
+      s.qd.segment<3>(off) = naturalNodeVelocity(nm, nm.node_of_body[i], n.v, s.u);
     }
-  for (const NaturalStrut& st : nm.struts)
-    if (st.spin >= 0)
-      s.natural.frame_spin(&st - nm.struts.data()) = n.x(st.spin);
+}
+
+void writeBodyPoses(const NaturalModel& nm, State& s)
+{
+  carryBodyFrames(nm, s);
+  writeBodyMotion(nm, s);
 }
 
 NaturalContactInput naturalContactInput(const NaturalModel& nm, const NaturalContactSlot& cs, const Eigen::VectorXd& x,

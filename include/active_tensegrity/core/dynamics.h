@@ -56,6 +56,14 @@ public:
   /// The energy of s and the powers acting on it (energy.h's account).
   EnergyPoint energyAt(const State& s);
 
+  /// With `defer` true, step and tryStep leave the body poses (State::q, qd) to writePoses and mark the state
+  /// (NaturalState::poses_pending): a loop that reads them at some steps only saves writing them at the others. The
+  /// struts' frames are carried at every step (natural.h, carryBodyFrames), so the poses are the same either way. Off
+  /// by default.
+  void deferPoses(bool defer);
+  /// Writes the body poses of s when a step deferred them (nothing otherwise).
+  void writePoses(State& s);
+
   /// Counts of the solver's work since construction or resetTimings (StepTimings: iterations, factorizations,
   /// analyses, the most contacts touching at an accepted step's end, the time in step calls).
   const StepTimings& timings() const;

@@ -165,7 +165,12 @@ Eigen::VectorXd naturalToBodyCoordinates(const NaturalModel& nm, const Eigen::Ve
 /// (nodes at the struts' ends, spin rates from the angular velocities; accelerations and multipliers zero).
 /// carriesNaturalOf: whether s carries natural coordinates of nm's layout whose strut centres and point masses are
 /// q's (and their velocities qd's) bit for bit, as writeBodyPoses left them.
+/// writeBodyPoses is carryBodyFrames (the frames alone, in q's Euler parameters) then writeBodyMotion (the rest, from
+/// the frames q carries): a loop that reads the poses at some steps only carries the frames at every step and writes
+/// the rest when read, with the same poses as writing them at every step.
 void writeBodyPoses(const NaturalModel& nm, State& s);
+void carryBodyFrames(const NaturalModel& nm, State& s);
+void writeBodyMotion(const NaturalModel& nm, State& s);
 void naturalFromBody(const NaturalModel& nm, State& s);
 bool carriesNaturalOf(const NaturalModel& nm, const State& s);
 

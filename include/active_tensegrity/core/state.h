@@ -31,6 +31,9 @@ struct NaturalState
   /// A static equilibrium (StaticSolver): velocities and accelerations zero, no contact memory; the dynamics
   /// starts from it by initializing (DynamicsSolver::initialize).
   bool equilibrium = false;
+  /// State::q and qd are not yet written from x and v (DynamicsSolver::deferPoses; DynamicsSolver::writePoses writes
+  /// them).
+  bool poses_pending = false;
   /// The impact speed slot remembers (0: not touching).
   double contactSpeed(int slot) const;
 };
