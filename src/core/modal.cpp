@@ -8,7 +8,7 @@
 
 #include <Eigen/Dense>
 
-#include "active_tensegrity/core/mechanics.h"
+#include "active_tensegrity/core/natural.h"
 #include "active_tensegrity/core/statics.h"
 #include "active_tensegrity/core/text.h"
 
@@ -23,12 +23,10 @@ ModalAnalysis naturalModes(const Model& model, const State& state, int count)
   if (f == 0 || count <= 0)
     return out;
 
-  // M_r = N^T M N: positive definite, every body having a mass and the spin being locked
-  const System system(model);
-  BlockSparseMatrix jac = system.makeMatrix();
-  jac.setZero();
-  system.addMass(state.q, jac, 1.0);
-  Eigen::MatrixXd mr = r.basis.transpose() * (coordinateBlock(jac, model.nq) * r.basis);
+  // M_r = N^T M N with the natural coordinates' constant mass matrix (no spin rates): positive definite, every strut
+  // and point mass having a mass
+  const NaturalModel nm = buildNaturalModel(model, false);
+  Eigen::MatrixXd mr = r.basis.transpose() * (nm.mass * r.basis);
   mr = 0.5 * (mr + mr.transpose());
   Eigen::GeneralizedSelfAdjointEigenSolver<Eigen::MatrixXd> eig(r.stiffness, mr);
   if (eig.info() != Eigen::Success)

@@ -1432,8 +1432,9 @@ private:
                                       " coordinates, the scene has " + std::to_string(model_.nq) + ", got " + modal);
     const int free = freeCoordinates(model_, model_.q0);
     if (free == 0)
-      root_.fail("analysis.type", "a modal analysis needs a coordinate the constraints leave free; they hold all " +
-                                      std::to_string(model_.nq) + " (spin locks included), got " + modal);
+      root_.fail("analysis.type", "a modal analysis needs a node that the pins and struts leave free to move; they "
+                                  "hold every node, got " +
+                                      modal);
   }
 
   /// A dynamic run's steps and output rows stay countable, and no step is shorter than solver.dt_min.

@@ -232,7 +232,10 @@ struct StaticSolver::Impl
   {
     State b;
     b.q = naturalToBodyCoordinates(nm, x, u);
+    b.qd.setZero(b.q.size());
     b.u = u;
+    b.natural.x = x;  // (its own coordinates: reduceStructure takes them as they are)
+    b.natural.v.setZero(x.size());
     return b;
   }
 };

@@ -10,42 +10,13 @@
 
 #include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/cable.h"
-#include "active_tensegrity/core/constraints.h"
 #include "active_tensegrity/core/kinematics.h"
-#include "active_tensegrity/core/mechanics.h"
+#include "active_tensegrity/core/natural.h"
 #include "active_tensegrity/core/svd.h"
 #include "active_tensegrity/core/text.h"
 
 namespace active_tensegrity::core
 {
-std::vector<Constraint> spinLocks(const Model& model)
-{
-  std::vector<Constraint> locks;
-  for (size_t i = 0; i < model.bodies.size(); ++i)
-  {
-    const Body& b = model.bodies[i];
-    if (b.kind != BodyKind::kStrut)
-      continue;
-    Constraint c;
-    c.kind = Constraint::Kind::kSpinLock;
-    c.name = b.name + ".spin_lock";
-    c.body = static_cast<int>(i);
-    c.coefficients = spinLockCoefficients(model.q0.segment<4>(b.offset + 3));
-    locks.push_back(c);
-  }
-  return locks;
-}
-
-Eigen::VectorXd leastSquaresMultipliers(const System& system, const Eigen::VectorXd& q, const ActuationValues& u)
-{
-  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(system.nq());
-  Eigen::VectorXd F;
-  system.appliedForce(q, zero, u, F, nullptr, 0.0, 0.0);
-  system.contactForce(q, zero, {}, ContactMode::kStatic, F, nullptr, 0.0, 0.0);
-  const Eigen::MatrixXd jt = system.constraintJacobianDense(q).transpose();
-  return jt.colPivHouseholderQr().solve(F);
-}
-
 namespace
 {
 /// Absolute floor of positive definiteness (N/m): an all-slack structure's roundoff is not a stiffness.
@@ -53,129 +24,17 @@ constexpr double kDefinitenessFloor = 1e-9;
 /// Relative stretch below which a tension-only element counts as slack.
 constexpr double kFreeLengthTolerance = 1e-12;
 
-/// One spin lock per strut about its axis at q (statics' locks refer to the model's initial orientation).
-std::vector<Constraint> spinLocksAt(const Model& model, const Eigen::VectorXd& q)
-{
-  std::vector<Constraint> locks = spinLocks(model);
-  for (Constraint& c : locks)
-    c.coefficients = spinLockCoefficients(thetaOf(q, model.bodies[c.body]));
-  return locks;
-}
-
 /// Orthonormal basis of null(a) (columns), from a column-pivoted QR of a^T.
 Eigen::MatrixXd nullSpace(const Eigen::MatrixXd& a)
 {
   const int n = static_cast<int>(a.cols());
-  if (a.rows() == 0)
+  if (a.rows() == 0 || n == 0)
     return Eigen::MatrixXd::Identity(n, n);
   Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(a.transpose());
   qr.setThreshold(kRankTolerance);
   const int rank = static_cast<int>(qr.rank());
   const Eigen::MatrixXd q = qr.householderQ();
   return q.rightCols(n - rank);
-}
-
-/// Phi_q of a system at q (n_lambda x nq), sparse.
-Eigen::SparseMatrix<double> constraintJacobian(const System& system, const Eigen::VectorXd& q)
-{
-  BlockSparseMatrix m = system.makeMatrix();
-  m.setZero();
-  system.addConstraintJacobian(q, m);
-  const int nq = system.nq();
-  std::vector<Eigen::Triplet<double>> entries;
-  const Eigen::SparseMatrix<double>& s = m.matrix();
-  for (int k = 0; k < s.outerSize(); ++k)
-    for (Eigen::SparseMatrix<double>::InnerIterator it(s, k); it; ++it)
-      if (it.row() >= nq && it.col() < nq && it.value() != 0.0)
-        entries.emplace_back(static_cast<int>(it.row()) - nq, static_cast<int>(it.col()), it.value());
-  Eigen::SparseMatrix<double> out(system.nLambda(), nq);
-  out.setFromTriplets(entries.begin(), entries.end());
-  return out;
-}
-
-/// null(Phi_q) in two stages, so that the dense work is on the rows that couple bodies only: each body's own
-/// rows (its norm and spin lock, pins and drives on it alone) give a small local basis T_b of its coordinates;
-/// the coupling rows Phi_g (ball joints) are then taken on the product of the local bases, A = Phi_g T.
-struct MotionSpace
-{
-  std::vector<Eigen::MatrixXd> local;  // T_b, nq_b x t_b, orthonormal columns
-  std::vector<int> offset;             // first column of T_b in T
-  Eigen::MatrixXd coupling;            // A = Phi_g T
-  int size = 0;                        // columns of T
-
-  /// N0 = T Z for a basis Z of null(A) (orthonormal when Z is: T's blocks are).
-  Eigen::MatrixXd expand(const Model& model, const Eigen::MatrixXd& z) const
-  {
-    Eigen::MatrixXd n0 = Eigen::MatrixXd::Zero(model.nq, z.cols());
-    for (size_t b = 0; b < local.size(); ++b)
-      n0.middleRows(model.bodies[b].offset, local[b].rows()) = local[b] * z.middleRows(offset[b], local[b].cols());
-    return n0;
-  }
-};
-
-MotionSpace motionSpace(const Model& model, const System& system, const Eigen::SparseMatrix<double>& phi_q)
-{
-  // each row: the body it alone acts on, or -1 (coupling) and then its row among the coupling rows
-  const int n_rows = static_cast<int>(phi_q.rows());
-  std::vector<int> row_body(n_rows, -1), coupling_row(n_rows, -1);
-  int n_coupling = 0;
-  for (size_t c = 0; c < system.constraints().size(); ++c)
-  {
-    const Constraint& con = system.constraints()[c];
-    const ConstraintBodies bodies = constraintKind(con.kind).bodies(con);
-    for (int k = 0; k < con.rows(); ++k)
-    {
-      const int row = system.constraintRow(static_cast<int>(c)) + k;
-      if (bodies.count == 1)
-        row_body[row] = bodies.body[0];
-      else
-        coupling_row[row] = n_coupling++;
-    }
-  }
-  std::vector<int> col_body(model.nq);
-  for (size_t b = 0; b < model.bodies.size(); ++b)
-    for (int i = 0; i < model.bodies[b].nq; ++i)
-      col_body[model.bodies[b].offset + i] = static_cast<int>(b);
-
-  // local bases from each body's own rows
-  std::vector<Eigen::MatrixXd> own(model.bodies.size());
-  std::vector<std::vector<int>> own_rows(model.bodies.size());
-  for (int r = 0; r < n_rows; ++r)
-    if (row_body[r] >= 0)
-      own_rows[row_body[r]].push_back(r);
-  for (size_t b = 0; b < model.bodies.size(); ++b)
-    own[b] = Eigen::MatrixXd::Zero(own_rows[b].size(), model.bodies[b].nq);
-  for (int k = 0; k < phi_q.outerSize(); ++k)
-    for (Eigen::SparseMatrix<double>::InnerIterator it(phi_q, k); it; ++it)
-    {
-      const int b = row_body[it.row()];
-      if (b < 0)
-        continue;
-      const auto at = std::find(own_rows[b].begin(), own_rows[b].end(), static_cast<int>(it.row()));
-      own[b](at - own_rows[b].begin(), it.col() - model.bodies[b].offset) += it.value();
-    }
-  MotionSpace m;
-  for (size_t b = 0; b < model.bodies.size(); ++b)
-  {
-    m.local.push_back(nullSpace(own[b]));
-    m.offset.push_back(m.size);
-    m.size += static_cast<int>(m.local.back().cols());
-  }
-  // the coupling rows on T
-  m.coupling = Eigen::MatrixXd::Zero(n_coupling, m.size);
-  for (int k = 0; k < phi_q.outerSize(); ++k)
-    for (Eigen::SparseMatrix<double>::InnerIterator it(phi_q, k); it; ++it)
-    {
-      const int g = coupling_row[it.row()];
-      if (g < 0)
-        continue;
-      const int b = col_body[it.col()];
-      if (m.local[b].cols() == 0)
-        continue;  // a body with no motion of its own (and Eigen's row() of an empty matrix offsets a null pointer)
-      m.coupling.row(g).segment(m.offset[b], m.local[b].cols()) +=
-          it.value() * m.local[b].row(it.col() - model.bodies[b].offset);
-    }
-  return m;
 }
 
 /// Orthonormal basis of the orthogonal complement of the orthonormal columns of z in R^n.
@@ -188,69 +47,40 @@ Eigen::MatrixXd complement(const Eigen::MatrixXd& z, int n)
   return q.rightCols(n - z.cols());
 }
 
-/// The material points whose displacements define the node metric: every node of the model, then every strut
-/// end and point mass that no node on a body stands at (models built in code need not name them).
-std::vector<PointRef> metricPoints(const Model& model, const Eigen::VectorXd& q)
+/// The natural nodes whose displacements define the node metric: the node of every node of the model (-1 for a point
+/// of the ground), then every strut end and point mass that no node of the model stands at.
+std::vector<int> metricNodes(const NaturalModel& nm)
 {
-  std::vector<PointRef> points;
-  std::vector<Vec3> placed;
-  for (const Node& n : model.nodes)
+  const Model& model = *nm.model;
+  std::vector<int> nodes;
+  const auto nodeOf = [&](const PointRef& p)
   {
-    points.push_back(n.point);
-    if (n.point.body >= 0)
-      placed.push_back(pointPosition(model, n.point, q));
-  }
+    if (p.body < 0)
+      return -1;
+    const int strut = nm.strut_of_body[static_cast<size_t>(p.body)];
+    if (strut >= 0)
+      return p.local.z() < 0.0 ? nm.struts[static_cast<size_t>(strut)].a : nm.struts[static_cast<size_t>(strut)].b;
+    return nm.node_of_body[static_cast<size_t>(p.body)];
+  };
+  for (const Node& n : model.nodes)
+    nodes.push_back(nodeOf(n.point));
+  const auto add = [&](int node)
+  {
+    if (node >= 0 && std::find(nodes.begin(), nodes.end(), node) == nodes.end())
+      nodes.push_back(node);
+  };
   for (size_t b = 0; b < model.bodies.size(); ++b)
   {
-    const Body& body = model.bodies[b];
-    std::vector<Vec3> locals;
-    if (body.kind == BodyKind::kStrut)
-      locals = { Vec3(0.0, 0.0, -0.5 * body.length), Vec3(0.0, 0.0, 0.5 * body.length) };
-    else
-      locals = { Vec3::Zero() };
-    for (const Vec3& local : locals)
+    const int strut = nm.strut_of_body[b];
+    if (strut >= 0)
     {
-      const PointRef ref{ static_cast<int>(b), local };
-      const Vec3 p = pointPosition(model, ref, q);
-      const bool known = std::any_of(placed.begin(), placed.end(),
-                                     [&](const Vec3& x) { return (x - p).norm() <= 1e-9 * (1.0 + p.norm()); });
-      if (!known)
-      {
-        points.push_back(ref);
-        placed.push_back(p);
-      }
+      add(nm.struts[static_cast<size_t>(strut)].a);
+      add(nm.struts[static_cast<size_t>(strut)].b);
     }
+    else
+      add(nm.node_of_body[b]);
   }
-  return points;
-}
-
-/// Adds dir^T B_P (the derivative of dir . p along q) into row.
-void addPointGradient(const Model& model, const PointKinematics& k, const Vec3& dir, Eigen::RowVectorXd& row)
-{
-  if (k.body < 0)
-    return;
-  row.segment(model.bodies[k.body].offset, k.nq) += dir.transpose() * k.jac.leftCols(k.nq);
-}
-
-/// dl/dq of a cable (sum over its segments; a zero-length segment contributes nothing).
-Eigen::RowVectorXd lengthGradient(const Model& model, const Cable& cable, const Eigen::VectorXd& q,
-                                  const Eigen::VectorXd& zero)
-{
-  Eigen::RowVectorXd row = Eigen::RowVectorXd::Zero(model.nq);
-  std::vector<PointKinematics> kin(cable.points.size());
-  for (size_t j = 0; j < cable.points.size(); ++j)
-    pointKinematics(model, cable.points[j], q, zero, false, kin[j]);
-  for (size_t s = 0; s + 1 < kin.size(); ++s)
-  {
-    const Vec3 d = kin[s + 1].p - kin[s].p;
-    const double len = d.norm();
-    if (!(len > 0.0))
-      continue;
-    const Vec3 n = d / len;
-    addPointGradient(model, kin[s + 1], n, row);
-    addPointGradient(model, kin[s], -n, row);
-  }
-  return row;
+  return nodes;
 }
 
 ActuationValues actuationOf(const Model& model, const State& state)
@@ -258,43 +88,66 @@ ActuationValues actuationOf(const Model& model, const State& state)
   return state.u.size() == model.actuators.size() ? state.u : ActuationValues(model.actuators.size());
 }
 
-/// The applied and static contact forces at (q, u), velocities zero; with jac, K = -dF/dq added into it.
-void staticForce(const System& system, const Eigen::VectorXd& q, const ActuationValues& u, Eigen::VectorXd& F,
-                 BlockSparseMatrix* jac)
+/// The natural coordinates of a state: its own when it carries them (an equilibrium of the statics), else formed
+/// from its body poses.
+Eigen::VectorXd naturalPositions(const NaturalModel& nm, const State& state)
 {
-  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(system.nq());
-  system.appliedForce(q, zero, u, F, jac, 1.0, 0.0);
-  system.contactForce(q, zero, {}, ContactMode::kStatic, F, jac, 1.0, 0.0);
+  if (state.natural.x.size() == nm.coordinates && carriesNaturalOf(nm, state))
+    return state.natural.x;
+  State s = state;
+  s.qd.setZero(s.q.size());  // (at rest)
+  s.u = actuationOf(*nm.model, state);
+  naturalFromBody(nm, s);
+  return s.natural.x;
 }
+}  // namespace
 
-ReducedStructure reduce(const Model& model, const State& state, const System& system, const ActuationValues& u)
+ReducedStructure reduceStructure(const Model& model, const State& state)
 {
-  const int nq = model.nq;
-  const Eigen::VectorXd& q = state.q;
-  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(nq);
+  if (model.nq > kMaxStructureCoordinates)
+    throw std::invalid_argument(std::to_string(model.nq) + " coordinates, more than the limit of " +
+                                std::to_string(kMaxStructureCoordinates));
+  if (state.q.size() != model.nq)
+    throw std::invalid_argument("the state has " + std::to_string(state.q.size()) + " coordinates, the model " +
+                                std::to_string(model.nq));
+  const NaturalModel nm = buildNaturalModel(model, false);
+  const ActuationValues u = actuationOf(model, state);
+  const Eigen::VectorXd x = naturalPositions(nm, state);
+  const int n = nm.coordinates, rows = static_cast<int>(nm.struts.size() + nm.rows.size());
+  NaturalSolver solver(nm, model.solver);
   ReducedStructure out;
 
-  // the node map P and the motions the constraints allow
-  const std::vector<PointRef> points = metricPoints(model, q);
-  const int n_points = static_cast<int>(points.size());
+  // the forces (the residual at zero multipliers is -F) and the rows' Jacobian G
+  solver.assembleStatic(x, Eigen::VectorXd::Zero(rows), u, true);
+  const Eigen::VectorXd F = -solver.staticResidual().head(n);
+  const Eigen::SparseMatrix<double> g = solver.assembledRows();
+
+  // the node map P (each free node's three coordinates; fixed and driven nodes and the ground none) and the motions
+  // the rows allow
+  const std::vector<int> nodes = metricNodes(nm);
+  const int n_points = static_cast<int>(nodes.size());
   out.node_rows = 3 * static_cast<int>(model.nodes.size());
   std::vector<Eigen::Triplet<double>> entries;
+  std::vector<Vec3> position(nodes.size(), Vec3::Zero());
+  std::vector<bool> on_body(nodes.size(), false);
   for (int i = 0; i < n_points; ++i)
   {
-    const PointKinematics k = pointKinematics(model, points[i], q, zero, false);
-    for (int r = 0; r < 3; ++r)
-      for (int c = 0; c < k.nq; ++c)
-        entries.emplace_back(3 * i + r, model.bodies[k.body].offset + c, k.jac(r, c));
+    if (nodes[i] < 0)
+      continue;
+    on_body[i] = true;
+    position[i] = naturalNodePosition(nm, nodes[i], x, u);
+    const int column = nm.nodes[static_cast<size_t>(nodes[i])].column;
+    if (column >= 0)
+      for (int r = 0; r < 3; ++r)
+        entries.emplace_back(3 * i + r, column + r, 1.0);
   }
-  out.node_map.resize(3 * n_points, nq);
+  out.node_map.resize(3 * n_points, n);
   out.node_map.setFromTriplets(entries.begin(), entries.end());
-  const Eigen::SparseMatrix<double> phi_q = constraintJacobian(system, q);
-  const MotionSpace space = motionSpace(model, system, phi_q);
-  const Eigen::MatrixXd n0 = space.expand(model, nullSpace(space.coupling));  // orthonormal
+  const Eigen::MatrixXd n0 = nullSpace(Eigen::MatrixXd(g));  // orthonormal
   const int f = static_cast<int>(n0.cols());
 
   // orthonormal in the node metric: N = N0 V D^(-1/2) with (P N0)^T (P N0) = V D V^T
-  out.basis.resize(nq, f);
+  out.basis.resize(n, f);
   if (f > 0)
   {
     const Eigen::MatrixXd pn0 = out.node_map * n0;
@@ -306,11 +159,27 @@ ReducedStructure reduce(const Model& model, const State& state, const System& sy
   }
   const Eigen::MatrixXd pn = out.node_map * out.basis;
 
-  // the compatibility matrix C N and its rank
+  // the compatibility matrix C N (dl/dx of each tension element: its segments' unit vectors at their free nodes) and
+  // its rank
   const int members = static_cast<int>(model.cables.size());
-  Eigen::MatrixXd c(members, nq);
+  Eigen::MatrixXd c = Eigen::MatrixXd::Zero(members, n);
   for (int i = 0; i < members; ++i)
-    c.row(i) = lengthGradient(model, model.cables[i], q, zero);
+  {
+    const std::vector<int>& points = nm.cable_nodes[static_cast<size_t>(i)];
+    for (size_t k = 0; k + 1 < points.size(); ++k)
+    {
+      const Vec3 d = naturalNodePosition(nm, points[k + 1], x, u) - naturalNodePosition(nm, points[k], x, u);
+      const double len = d.norm();
+      if (!(len > 0.0))
+        continue;
+      for (const auto& [node, sign] : { std::make_pair(points[k + 1], 1.0), std::make_pair(points[k], -1.0) })
+      {
+        const int column = nm.nodes[static_cast<size_t>(node)].column;
+        if (column >= 0)
+          c.row(i).segment<3>(column) += (sign / len) * d.transpose();
+      }
+    }
+  }
   out.compatibility = c * out.basis;
   Eigen::MatrixXd motions = Eigen::MatrixXd::Identity(f, f);  // null(C N)
   double sigma_max = 0.0;
@@ -330,19 +199,19 @@ ReducedStructure reduce(const Model& model, const State& state, const System& sy
   {
     Vec3 centre = Vec3::Zero();
     int moving = 0;
-    for (const PointRef& p : points)
-      if (p.body >= 0)
+    for (int i = 0; i < n_points; ++i)
+      if (on_body[i])
       {
-        centre += pointPosition(model, p, q);
+        centre += position[i];
         ++moving;
       }
     centre /= std::max(1, moving);
     Eigen::MatrixXd w = Eigen::MatrixXd::Zero(3 * n_points, 6);
     for (int i = 0; i < n_points; ++i)
-      if (points[i].body >= 0)
+      if (on_body[i])
       {
         w.block<3, 3>(3 * i, 0).setIdentity();
-        w.block<3, 3>(3 * i, 3) = -skew(pointPosition(model, points[i], q) - centre);
+        w.block<3, 3>(3 * i, 3) = -skew(position[i] - centre);
       }
     const Svd fields = jacobiSvd(w, Eigen::ComputeThinU);
     const int k = static_cast<int>((fields.singular.array() > kRankTolerance * fields.singular(0)).count());
@@ -372,39 +241,38 @@ ReducedStructure reduce(const Model& model, const State& state, const System& sy
     out.mechanisms = motions * d.u.rightCols(motions.cols() - inside);
   }
 
-  // the force residual with least-squares multipliers: -F + Phi_q^T lambda is minus the part of F in
-  // null(Phi_q) (the orthogonal complement of the range of Phi_q^T), N0 N0^T F with N0 orthonormal
-  BlockSparseMatrix jac = system.makeMatrix();
-  jac.setZero();
-  Eigen::VectorXd F;
-  staticForce(system, q, u, F, &jac);
+  // the force residual with least-squares multipliers: -F + G^T lambda is minus the part of F in null(G) (the
+  // orthogonal complement of the range of G^T), N0 N0^T F with N0 orthonormal
   out.residual = (n0 * (n0.transpose() * F)).lpNorm<Eigen::Infinity>();
 
-  // the tangent stiffness on the manifold, with the state's multipliers or the least-squares ones
-  if (state.lambda.size() == system.nLambda() && state.lambda.any())
-    out.lambda = state.lambda;
-  else
+  // the tangent stiffness on the manifold, with the state's multipliers (an equilibrium of the statics) or the
+  // least-squares ones
+  if (state.natural.equilibrium && state.natural.lambda.size() == rows && state.natural.lambda.any() &&
+      state.natural.x.size() == n && state.natural.x == x)
+    out.lambda = state.natural.lambda;
+  else if (rows > 0)
   {
-    // normal equations Phi_q Phi_q^T lambda = Phi_q F (sparse): the rows are well conditioned, redundant
-    // rows make them singular and send it to the dense solve below
-    const Eigen::SparseMatrix<double> normal = phi_q * phi_q.transpose();
+    // normal equations G G^T lambda = G F (sparse): the rows are well conditioned, redundant rows make them singular
+    // and send it to the dense solve
+    const Eigen::SparseMatrix<double> normal = g * g.transpose();
     Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> ldlt(normal);
     if (ldlt.info() == Eigen::Success)
-      out.lambda = ldlt.solve(phi_q * F);
-    // a consistent system (F less its residual lies in the range of Phi_q^T): else the dense solve
-    Eigen::VectorXd reaction;
-    if (out.lambda.size() == system.nLambda() && out.lambda.allFinite())
-      system.constraintForce(q, out.lambda, reaction);
-    if (reaction.size() == 0 ||
-        (reaction - F).lpNorm<Eigen::Infinity>() > 2.0 * out.residual + 1e-9 * (1.0 + F.lpNorm<Eigen::Infinity>()))
-      out.lambda = leastSquaresMultipliers(system, q, u);
+      out.lambda = ldlt.solve(g * F);
+    if (out.lambda.size() != rows || !out.lambda.allFinite() ||
+        (Eigen::VectorXd(g.transpose() * out.lambda) - F).lpNorm<Eigen::Infinity>() >
+            2.0 * out.residual + 1e-9 * (1.0 + F.lpNorm<Eigen::Infinity>()))
+      out.lambda = Eigen::MatrixXd(g.transpose()).colPivHouseholderQr().solve(F);
   }
-  system.addLambdaHessian(q, out.lambda, jac, 1.0);
-  const Eigen::MatrixXd kr = out.basis.transpose() * (coordinateBlock(jac, nq) * out.basis);
+  else
+    out.lambda = Eigen::VectorXd();
+  solver.assembleStatic(x, out.lambda.size() == rows ? out.lambda : Eigen::VectorXd::Zero(rows), u, true);
+  const Eigen::MatrixXd kr = out.basis.transpose() * (solver.assembledMatrix().topLeftCorner(n, n) * out.basis);
   out.stiffness = 0.5 * (kr + kr.transpose());
   return out;
 }
 
+namespace
+{
 /// Eigenvalues of the symmetric a (ascending; empty for an empty a).
 Eigen::VectorXd symmetricEigenvalues(const Eigen::MatrixXd& a)
 {
@@ -414,34 +282,9 @@ Eigen::VectorXd symmetricEigenvalues(const Eigen::MatrixXd& a)
 }
 }  // namespace
 
-Eigen::SparseMatrix<double> coordinateBlock(const BlockSparseMatrix& m, int nq)
-{
-  std::vector<Eigen::Triplet<double>> entries;
-  const Eigen::SparseMatrix<double>& s = m.matrix();
-  for (int k = 0; k < s.outerSize(); ++k)
-    for (Eigen::SparseMatrix<double>::InnerIterator it(s, k); it; ++it)
-      if (it.row() < nq && it.col() < nq)
-        entries.emplace_back(static_cast<int>(it.row()), static_cast<int>(it.col()), it.value());
-  Eigen::SparseMatrix<double> out(nq, nq);
-  out.setFromTriplets(entries.begin(), entries.end());
-  return out;
-}
-
 Eigen::MatrixXd rigidComplement(const ReducedStructure& r)
 {
   return complement(r.rigid, static_cast<int>(r.basis.cols()));
-}
-
-ReducedStructure reduceStructure(const Model& model, const State& state)
-{
-  if (model.nq > kMaxStructureCoordinates)
-    throw std::invalid_argument(std::to_string(model.nq) + " coordinates, more than the limit of " +
-                                std::to_string(kMaxStructureCoordinates));
-  if (state.q.size() != model.nq)
-    throw std::invalid_argument("the state has " + std::to_string(state.q.size()) + " coordinates, the model " +
-                                std::to_string(model.nq));
-  const System system(model, spinLocksAt(model, state.q));
-  return reduce(model, state, system, actuationOf(model, state));
 }
 
 StiffnessSpectrum stiffnessSpectrum(const Model& model, const State& state, int max_coordinates)
@@ -542,13 +385,21 @@ double structureSize(const Model& model, const Eigen::VectorXd& q)
 
 int freeCoordinates(const Model& model, const Eigen::VectorXd& q)
 {
-  const System system(model, spinLocksAt(model, q));
-  const MotionSpace space = motionSpace(model, system, constraintJacobian(system, q));
-  if (space.coupling.rows() == 0)
-    return space.size;
-  Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(space.coupling);
+  const NaturalModel nm = buildNaturalModel(model, false);
+  State s;
+  s.q = q;
+  s.qd.setZero(model.nq);
+  s.u = ActuationValues(model.actuators.size());
+  naturalFromBody(nm, s);
+  NaturalSolver solver(nm, model.solver);
+  solver.assembleStatic(s.natural.x,
+                        Eigen::VectorXd::Zero(static_cast<Eigen::Index>(nm.struts.size() + nm.rows.size())), s.u, true);
+  const Eigen::MatrixXd g = solver.assembledRows();
+  if (g.rows() == 0 || g.cols() == 0)
+    return nm.coordinates;
+  Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(g);
   qr.setThreshold(kRankTolerance);
-  return space.size - static_cast<int>(qr.rank());
+  return nm.coordinates - static_cast<int>(qr.rank());
 }
 
 std::vector<std::string> startWarnings(const Model& model_in, const State& state)

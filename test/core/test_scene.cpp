@@ -1042,7 +1042,7 @@ TEST(SceneModal, BadModalInputIsRefusedNamingKeyAndValue)
   EXPECT_NO_THROW(loadSceneFromString(pinned, "pinned.yaml"));
   EXPECT_TRUE(refused([&] { loadSceneFromString(pinned, "pinned.yaml", { parseOverride("analysis.type=modal") }); },
                       "analysis.type",
-                      { "--set analysis.type=modal (on pinned.yaml)", "leave free", "all 21", "'modal'" }));
+                      { "--set analysis.type=modal (on pinned.yaml)", "leave free", "every node", "'modal'" }));
   // the dense analysis is bounded: 1001 point masses, 3003 coordinates
   std::string extra;
   for (int i = 0; i < 1001; ++i)

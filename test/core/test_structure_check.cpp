@@ -16,8 +16,9 @@
 #include <Eigen/Dense>
 
 #include "active_tensegrity/core/analysis.h"
+#include "active_tensegrity/core/natural.h"
 #include "active_tensegrity/core/scene.h"
-#include "active_tensegrity/oracle/body_statics.h"
+#include "active_tensegrity/core/statics.h"
 #include "active_tensegrity/core/structure_check.h"
 #include "active_tensegrity/core/svd.h"
 #include "test_models.h"
@@ -53,12 +54,12 @@ std::string edited(const std::string& name, const std::vector<std::pair<std::str
   return text;
 }
 
-/// The equilibrium of a model at actuation `value` (0: the start), as the body coordinates' BodyStaticSolver leaves
-/// it: with the multipliers of the body coordinates' constraints, which these checks read.
+/// The equilibrium of a model at actuation `value` (0: the start), as the statics leave it: with its natural
+/// coordinates and multipliers, which these checks read.
 State equilibrium(const Model& model, double value = 0.0, int steps = 20)
 {
   State s = initialState(model);
-  BodyStaticSolver solver(model, model.solver);
+  StaticSolver solver(model, model.solver);
   EXPECT_TRUE(solver.solve(s, s.u).ok());
   if (value > 0.0)
   {
@@ -70,34 +71,65 @@ State equilibrium(const Model& model, double value = 0.0, int steps = 20)
   return s;
 }
 
-/// The constraints the reduced coordinates respect: the model's, and a spin lock per strut at q's orientation.
-std::vector<Constraint> locksAt(const Model& model, const Eigen::VectorXd& q)
+/// The statics' natural coordinates of a model (the free nodes' positions, no spin rates): the rows Phi, their
+/// projection, and the potential energy (cables, springs, gravity, loads, static contact) at rest under u.
+struct NaturalProbe
 {
-  std::vector<Constraint> locks = spinLocks(model);
-  for (Constraint& c : locks)
-    c.coefficients = spinLockCoefficients(thetaOf(q, model.bodies[c.body]));
-  return locks;
-}
-
-/// q moved back onto Phi = 0 by Gauss-Newton steps of least norm.
-Eigen::VectorXd project(const System& system, Eigen::VectorXd q, const ActuationValues& u)
-{
-  Eigen::VectorXd phi;
-  for (int it = 0; it < 20; ++it)
+  NaturalProbe(const Model& model, const ActuationValues& given)
+    : nm(buildNaturalModel(model, false))
+    , solver(nm, model.solver)
+    , u(given)
+    , rows(static_cast<int>(nm.struts.size() + nm.rows.size()))
   {
-    system.constraintValue(q, u, phi);
-    if (phi.lpNorm<Eigen::Infinity>() < 1e-15)
-      break;
-    q -= system.constraintJacobianDense(q).completeOrthogonalDecomposition().solve(phi);
+    for (ActuationValue& a : u)
+      a.rate = a.accel = 0.0;
   }
-  return q;
-}
+  Eigen::VectorXd positions(const State& s) const
+  {
+    State c = s;
+    if (!(c.natural.x.size() == nm.coordinates && carriesNaturalOf(nm, c)))
+      naturalFromBody(nm, c);
+    return c.natural.x;
+  }
+  /// x moved back onto Phi = 0 by Gauss-Newton steps of least norm.
+  Eigen::VectorXd project(Eigen::VectorXd x)
+  {
+    for (int it = 0; it < 20; ++it)
+    {
+      solver.assembleStatic(x, Eigen::VectorXd::Zero(rows), u, true);
+      const Eigen::VectorXd phi = solver.staticResidual().tail(rows);
+      if (phi.lpNorm<Eigen::Infinity>() < 1e-15)
+        break;
+      x -= Eigen::MatrixXd(solver.assembledRows()).completeOrthogonalDecomposition().solve(phi);
+    }
+    return x;
+  }
+  double potential(const Eigen::VectorXd& x)
+  {
+    NaturalState st;
+    st.x = x;
+    st.v = Eigen::VectorXd::Zero(x.size());
+    st.lambda = Eigen::VectorXd::Zero(rows);
+    solver.staticContacts(x, u, st.contacts);
+    const EnergyPoint e = solver.energyAt(st, u);
+    return e.elastic + e.gravity;
+  }
+  /// The body poses of x (centres, axes; no spin).
+  Eigen::VectorXd bodyPoses(const Eigen::VectorXd& x) const
+  {
+    return naturalToBodyCoordinates(nm, x, u);
+  }
+  NaturalModel nm;
+  NaturalSolver solver;
+  ActuationValues u;
+  int rows;
+};
 
-/// d^2 V / ds^2 at s = 0 along the manifold curve s -> project(q + s N v), by central differences of
+/// d^2 V / ds^2 at s = 0 along the manifold curve s -> project(x + s N v), by central differences of
 /// step h (Richardson-extrapolated from h and 2h).
-double energyCurvature(const System& system, const State& s, const Eigen::VectorXd& dq, double h)
+double energyCurvature(NaturalProbe& probe, const Eigen::VectorXd& x, const Eigen::VectorXd& dx, double h)
 {
-  const auto v = [&](double t) { return system.potentialEnergy(project(system, s.q + t * dq, s.u), s.u); };
+  const auto v = [&](double t) { return probe.potential(probe.project(x + t * dx)); };
   const double v0 = v(0.0);
   const double d1 = (v(h) - 2.0 * v0 + v(-h)) / (h * h);
   const double d2 = (v(2.0 * h) - 2.0 * v0 + v(-2.0 * h)) / (4.0 * h * h);
@@ -110,7 +142,8 @@ double energyCurvature(const System& system, const State& s, const Eigen::Vector
 void checkCurvature(const Model& model, const State& s, int random_directions, double h = 1e-4, double tol = 1e-5)
 {
   const ReducedStructure r = reduceStructure(model, s);
-  const System system(model, locksAt(model, s.q));
+  NaturalProbe probe(model, s.u);
+  const Eigen::VectorXd x = probe.positions(s);
   std::mt19937 rng(7);
   std::vector<Eigen::VectorXd> directions;
   for (int k = 0; k < r.mechanisms.cols(); ++k)
@@ -121,7 +154,7 @@ void checkCurvature(const Model& model, const State& s, int random_directions, d
   for (const Eigen::VectorXd& v : directions)
   {
     const double exact = v.dot(r.stiffness * v);
-    const double fd = energyCurvature(system, s, r.basis * v, h);
+    const double fd = energyCurvature(probe, x, r.basis * v, h);
     EXPECT_LT(std::abs(fd - exact) / (std::abs(exact) + 1e-7 * scale), tol)
         << model.name << ": v^T K_r v " << exact << ", finite differences " << fd;
   }
@@ -302,7 +335,8 @@ TEST(StructureCheck, ResidualOffTheEquilibriumIsTheReducedStiffnessTimesTheMove)
   const Model m = loadScene(scenePath("prism_pinned.yaml"));
   const State eq = equilibrium(m);
   const ReducedStructure red = reduceStructure(m, eq);
-  const System system(m, locksAt(m, eq.q));
+  NaturalProbe probe(m, eq.u);
+  const Eigen::VectorXd x = probe.positions(eq);
   std::mt19937 rng(3);
   const Eigen::VectorXd v = randomVector(static_cast<int>(red.basis.cols()), 1.0, rng).normalized();
   const Eigen::MatrixXd& n = red.basis;
@@ -310,8 +344,8 @@ TEST(StructureCheck, ResidualOffTheEquilibriumIsTheReducedStiffnessTimesTheMove)
   for (double e : { 1e-5, 1e-6 })
   {
     State moved = eq;
-    moved.q = project(system, eq.q + e * n * v, eq.u);
-    moved.lambda.resize(0);
+    moved.natural = NaturalState();  // (the poses of the moved coordinates)
+    moved.q = probe.bodyPoses(probe.project(x + e * n * v));
     const StructureReport r = checkStructure(m, moved);
     const double predicted = e * per_metre.lpNorm<Eigen::Infinity>();
     EXPECT_GT(r.equilibrium_residual, 0.0);
@@ -325,10 +359,19 @@ TEST(StructureCheck, GivenMultipliersAndLeastSquaresOnesGiveTheSameStiffnessAtAn
   const Model m = loadScene(scenePath("quadruplex.yaml"));
   const State eq = equilibrium(m, 0.5, 25);
   State bare = eq;
-  bare.lambda.resize(0);
+  bare.natural = NaturalState();  // (its body poses alone: coordinates from q, least-squares multipliers)
   const ReducedStructure given = reduceStructure(m, eq), fitted = reduceStructure(m, bare);
-  ASSERT_EQ(given.lambda.size(), eq.lambda.size());
-  EXPECT_LT((given.stiffness - fitted.stiffness).cwiseAbs().maxCoeff(), 1e-6 * given.stiffness.cwiseAbs().maxCoeff());
+  ASSERT_EQ(given.lambda.size(), eq.natural.lambda.size());
+  EXPECT_EQ(given.lambda, eq.natural.lambda);
+  // the multipliers fitted to the forces are the equilibrium's (to the size of its residual), and the stiffness is the
+  // same: compared by its eigenvalues, as the two bases of null(G), from coordinates that differ by round-off, may
+  // differ by a rotation
+  ASSERT_EQ(fitted.lambda.size(), given.lambda.size());
+  EXPECT_LT((fitted.lambda - given.lambda).lpNorm<Eigen::Infinity>(), 1e-6 * given.lambda.lpNorm<Eigen::Infinity>());
+  const Eigen::VectorXd k_given = Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(given.stiffness).eigenvalues();
+  const Eigen::VectorXd k_fitted = Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(fitted.stiffness).eigenvalues();
+  ASSERT_EQ(k_given.size(), k_fitted.size());
+  EXPECT_LT((k_given - k_fitted).cwiseAbs().maxCoeff(), 1e-6 * k_given.cwiseAbs().maxCoeff());
 }
 
 TEST(StructureCheck, ReducedStiffnessIsTheEnergyCurvatureAlongTheManifold)

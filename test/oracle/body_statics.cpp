@@ -12,6 +12,33 @@
 
 namespace active_tensegrity::core
 {
+std::vector<Constraint> spinLocks(const Model& model)
+{
+  std::vector<Constraint> locks;
+  for (size_t i = 0; i < model.bodies.size(); ++i)
+  {
+    const Body& b = model.bodies[i];
+    if (b.kind != BodyKind::kStrut)
+      continue;
+    Constraint c;
+    c.kind = Constraint::Kind::kSpinLock;
+    c.name = b.name + ".spin_lock";
+    c.body = static_cast<int>(i);
+    c.coefficients = spinLockCoefficients(model.q0.segment<4>(b.offset + 3));
+    locks.push_back(c);
+  }
+  return locks;
+}
+
+Eigen::VectorXd leastSquaresMultipliers(const System& system, const Eigen::VectorXd& q, const ActuationValues& u)
+{
+  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(system.nq());
+  Eigen::VectorXd F;
+  system.appliedForce(q, zero, u, F, nullptr, 0.0, 0.0);
+  system.contactForce(q, zero, {}, ContactMode::kStatic, F, nullptr, 0.0, 0.0);
+  const Eigen::MatrixXd jt = system.constraintJacobianDense(q).transpose();
+  return jt.colPivHouseholderQr().solve(F);
+}
 
 namespace
 {

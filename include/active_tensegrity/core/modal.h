@@ -30,10 +30,10 @@ struct NaturalMode
   double eigenvalue = 0.0;    // omega^2, 1/s^2 (negative: the equilibrium is unstable along the mode)
   double omega = 0.0;         // rad/s, sqrt(eigenvalue); -sqrt(-eigenvalue) for a negative eigenvalue
   double frequency_hz = 0.0;  // omega / (2 pi), negative like omega
-  /// dq = N phi, scaled so that the largest node displacement is 1 (its sign: that displacement's largest
-  /// component is positive)
+  /// dx = N phi in natural coordinates (the free nodes' positions, buildNaturalModel(model, false)), scaled so that
+  /// the largest node displacement is 1 (its sign: that displacement's largest component is positive)
   Eigen::VectorXd shape;
-  std::vector<Vec3> node_displacements;  // P dq per Model::nodes (zero at ground points; below 1e-12, 0)
+  std::vector<Vec3> node_displacements;  // P dx per Model::nodes (zero at ground points; below 1e-12, 0)
 };
 
 struct ModalAnalysis

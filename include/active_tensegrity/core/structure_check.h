@@ -2,12 +2,12 @@
 /// structure in the sense of Pellegrino and Calladine (1986), adapted to rigid struts, and the tangent
 /// stiffness on the constraint manifold.
 ///
-/// With q the state and Phi the model's constraints plus one spin lock per strut (taken at the state's own
-/// orientation, so that the locked motion is the spin about the strut's current axis):
-///   N      an orthonormal basis of null(Phi_q) in the node metric G = P^T P (N^T P^T P N = I), P = dp/dq the
+/// In natural coordinates x (the free nodes' positions: strut ends, point masses; statics' layout, no spin rates), with
+/// Phi the rows (one length row per strut, the pins and drives) and G = Phi_x:
+///   N      an orthonormal basis of null(G) in the node metric P^T P (N^T P^T P N = I), P = dp/dx the
 ///          displacements of every node (strut ends, point masses) per coordinate; reduced quantities are then
 ///          in metres and N/m;
-///   C      the compatibility matrix, one row dl_i/dq per tension element (a sliding cable is one member
+///   C      the compatibility matrix, one row dl_i/dx per tension element (a sliding cable is one member
 ///          with its total length), taken in the reduced coordinates: C N; A = (C N)^T is the equilibrium matrix;
 ///   r      rank(C N) (singular values above kRankTolerance times the largest);
 ///   s      = b - r self-stress states, b the tension elements (StructureReport::tension_members);
@@ -15,7 +15,7 @@
 ///   rigid-body modes: the rigid motions of the whole structure (node fields u_i = t + w x x_i) that the
 ///          constraints allow and that stretch no member, counted by the rank of their node fields;
 ///   m      = dim null(C N) - rigid-body modes, the infinitesimal mechanisms;
-///   K_t    = K + d(Phi_q^T lambda)/dq (K = -dF/dq: cables, springs, loads, gravity, static contact),
+///   K_t    = K + d(G^T lambda)/dx (K = -dF/dx: cables, springs, loads, gravity, static contact),
 ///          K_r = N^T K_t N symmetrized: the second derivative of the potential energy along the constraint
 ///          manifold at an equilibrium.
 #pragma once
@@ -26,7 +26,6 @@
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
 
-#include "active_tensegrity/core/block_sparse.h"
 #include "active_tensegrity/core/model.h"
 #include "active_tensegrity/core/state.h"
 
@@ -43,8 +42,8 @@ constexpr double kDefinitenessTolerance = 1e-8;
 /// The linearization of a model about a state on its constraint manifold (see the header comment).
 struct ReducedStructure
 {
-  Eigen::MatrixXd basis;                 // N, nq x f
-  Eigen::SparseMatrix<double> node_map;  // P, 3 n_points x nq: the model's nodes first (Model::nodes order), then
+  Eigen::MatrixXd basis;                 // N, x (natural coordinates, buildNaturalModel(model, false)) x f
+  Eigen::SparseMatrix<double> node_map;  // P, 3 n_points x x: the model's nodes first (Model::nodes order), then
                                          // strut ends no node stands at; ground points give zero rows
   int node_rows = 0;                     // rows of P that belong to Model::nodes (3 per node)
   Eigen::MatrixXd compatibility;         // C N, tension elements x f (Model::cables order)
@@ -52,7 +51,7 @@ struct ReducedStructure
   Eigen::MatrixXd rigid;                 // f x (rigid-body modes): orthonormal basis of the rigid-body modes
   Eigen::MatrixXd mechanisms;            // f x m: orthonormal basis of the mechanisms (null(C N) minus the rigid modes)
   Eigen::VectorXd lambda;                // the multipliers used (the state's, or least squares)
-  double residual = 0.0;                 // N: max norm of -F + Phi_q^T lambda with least-squares lambda
+  double residual = 0.0;                 // N: max norm of -F + G^T lambda with least-squares lambda
   int rank = 0;                          // rank of C N
 };
 
@@ -62,7 +61,7 @@ struct StructureReport
   bool checked = false;  // false when refused (too many coordinates): `note` says why
   std::string note;
   int coordinates = 0;       // nq
-  int free_coordinates = 0;  // f = dim null(Phi_q), spin locks included
+  int free_coordinates = 0;  // f = dim null(G): the node motions the struts and pins allow
   int members = 0;           // every member: struts + tension_members
   int struts = 0;            // rigid struts
   int tension_members = 0;   // tension elements (cables, springs; a sliding cable counts once): the b of the
@@ -85,13 +84,13 @@ struct StructureReport
   /// tension-only elements carrying no tension at the state: slack, or within 1e-12 (relative) of their free
   /// length, where round-off alone decides whether they are taut
   std::vector<std::string> slack_cables;
-  double equilibrium_residual = 0.0;  // N: max norm of -F + Phi_q^T lambda with least-squares lambda
+  double equilibrium_residual = 0.0;  // N: max norm of -F + G^T lambda with least-squares lambda
 };
 
-/// The linearization of `model` about `state` (q; lambda when its size matches the model's constraints plus
-/// one spin lock per strut, else least-squares multipliers; u, zero when its size does not match the
-/// actuators). Velocities are taken as zero. Throws std::invalid_argument above kMaxStructureCoordinates
-/// coordinates, or when a motion the constraints allow moves no node.
+/// The linearization of `model` about `state` (its natural coordinates when it carries them, else those of q; the
+/// multipliers of an equilibrium of the statics at those coordinates, else least-squares ones; u, zero when its size
+/// does not match the actuators). Velocities are taken as zero. Throws std::invalid_argument above
+/// kMaxStructureCoordinates coordinates, or when a motion the constraints allow moves no node.
 ReducedStructure reduceStructure(const Model& model, const State& state);
 
 /// Orthonormal basis (f x (f - rigid-body modes)) of the complement of the rigid-body modes in the reduced
@@ -108,15 +107,6 @@ struct StiffnessSpectrum
   double tolerance = 0.0;     // tol: kDefinitenessTolerance times the largest magnitude, at least 1e-9 N/m
 };
 
-/// One spin-lock row per strut, (conj(Theta0) (x) Theta)_z = 0 with Theta0 the model's initial
-/// orientation: the constraints an analysis in body coordinates about an equilibrium adds so that a strut's
-/// spin about its own axis, which no element resists, is not a degree of freedom.
-std::vector<Constraint> spinLocks(const Model& model);
-
-/// Multipliers that best satisfy the force equations at a given q (least squares), for checks of
-/// equilibrium and initial actuation forces.
-Eigen::VectorXd leastSquaresMultipliers(const System& system, const Eigen::VectorXd& q, const ActuationValues& u = {});
-
 /// StiffnessSpectrum of `state`; not computed for a model of more than `max_coordinates` coordinates.
 StiffnessSpectrum stiffnessSpectrum(const Model& model, const State& state, int max_coordinates);
 
@@ -124,14 +114,11 @@ StiffnessSpectrum stiffnessSpectrum(const Model& model, const State& state, int 
 /// "skipped: N coordinates, more than the limit of 3000") a model above kMaxStructureCoordinates.
 StructureReport checkStructure(const Model& model, const State& state);
 
-/// The coordinates' block (nq x nq) of a [q; lambda] matrix such as System::makeMatrix() gives.
-Eigen::SparseMatrix<double> coordinateBlock(const BlockSparseMatrix& m, int nq);
-
 /// The size of a structure at q (m): the diagonal of the box around its nodes (Model::nodes, fixed ones
 /// included); 0 for a single node. What an error or a drift is judged against ("far above its size").
 double structureSize(const Model& model, const Eigen::VectorXd& q);
 
-/// dim null(Phi_q) at q, spin locks included: the coordinates the constraints leave free.
+/// dim null(G) at q (natural coordinates, no spin rates): the node motions the struts and pins leave free.
 int freeCoordinates(const Model& model, const Eigen::VectorXd& q);
 
 /// What a run says about its start (runAnalysis, runModal): one warning each when the start is not in

@@ -20,6 +20,14 @@
 
 namespace active_tensegrity::core
 {
+/// One spin-lock row per strut, (conj(Theta0) (x) Theta)_z = 0 with Theta0 the model's initial
+/// orientation: the constraints an analysis in body coordinates about an equilibrium adds so that a strut's
+/// spin about its own axis, which no element resists, is not a degree of freedom.
+std::vector<Constraint> spinLocks(const Model& model);
+
+/// Multipliers that best satisfy the force equations at a given q (least squares), for checks of
+/// equilibrium and initial actuation forces.
+Eigen::VectorXd leastSquaresMultipliers(const System& system, const Eigen::VectorXd& q, const ActuationValues& u = {});
 
 class BodyStaticSolver
 {
