@@ -957,6 +957,10 @@ NaturalSolver::NaturalSolver(const NaturalModel& nm, const SolverOptions& option
     gamma_ = options.newmark_gamma;
   }
   mass_scale_ = nm.mass.coeffs().size() > 0 ? nm.mass.coeffs().cwiseAbs().maxCoeff() : 1.0;
+  for (const std::vector<int>& nodes : nm.cable_nodes)
+    cable_driven_.push_back(
+        std::any_of(nodes.begin(), nodes.end(),
+                    [&](int n) { return nm.nodes[static_cast<size_t>(n)].kind == NaturalNode::Kind::kDriven; }));
 }
 
 void NaturalSolver::forces(const Eigen::VectorXd& x, const Eigen::VectorXd& v, bool tangents)
@@ -996,9 +1000,10 @@ void NaturalSolver::forces(const Eigen::VectorXd& x, const Eigen::VectorXd& v, b
   }
   // a spinning strut's gyroscopic moment -J_a w_s e_dot on its transverse motion, as the couple
   // F_b = -F_a = (J_a / L^3) w_s u x u_dot at its nodes (no work)
+  const auto driven = [&](int node) { return nm_.nodes[static_cast<size_t>(node)].kind == NaturalNode::Kind::kDriven; };
   for (const NaturalStrut& st : nm_.struts)
   {
-    if (st.spin < 0 || v(st.spin) == 0.0)
+    if (st.spin < 0 || v(st.spin) == 0.0 || (driven_only_ && !driven(st.a) && !driven(st.b)))
       continue;
     const double c = model_.bodies[st.body].inertia.z() / (st.length * st.length * st.length), ws = v(st.spin);
     const Vec3 u = pos_[st.b] - pos_[st.a];
@@ -1035,6 +1040,8 @@ void NaturalSolver::forces(const Eigen::VectorXd& x, const Eigen::VectorXd& v, b
   }
   for (size_t ci = 0; ci < model_.cables.size(); ++ci)
   {
+    if (driven_only_ && !cable_driven_[ci])
+      continue;
     const Cable& cable = model_.cables[ci];
     const std::vector<int>& nodes = nm_.cable_nodes[ci];
     const int count = static_cast<int>(nodes.size());
@@ -1235,9 +1242,11 @@ void NaturalSolver::drivenReactions(const NaturalState& s, const ActuationValues
   held_force_.assign(nm_.nodes.size(), Vec3::Zero());
   reaction_along_.assign(nm_.nodes.size(), 0.0);
   held_ = &held_force_;
+  driven_only_ = true;  // (f_ is left partial: the next forces() forms it whole)
   u_ = u;
   forces(s.x, s.v, false);
   held_ = nullptr;
+  driven_only_ = false;
   // (the contacts at driven nodes: only their reactions are formed here)
   const auto driven = [&](int node) { return node >= 0 && nm_.nodes[node].kind == NaturalNode::Kind::kDriven; };
   for (const Listed& l : listed_)
@@ -2071,27 +2080,20 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
       entries_.k_weight = bh2;
       entries_.c_weight = gh;
     }
-    {
-      const ScopeTimer timer(stats_.forces_time);
-      forces(x_, v_, build);
-    }
-    {
-      const ScopeTimer timer(stats_.contact_time);
-      contactForces(x_, v_, build);
-    }
+    // (the parts timed one after the other, one clock reading between each two)
+    LapTimer laps;
+    forces(x_, v_, build);
+    laps.lap(stats_.forces_time);
+    contactForces(x_, v_, build);
+    laps.lap(stats_.contact_time);
     residual_.head(n) = -f_;
     residual_.head(n).noalias() += nm_.mass * acc_;  // (no temporary for the product)
-    {
-      const ScopeTimer timer(stats_.constraints_time);
-      constraintRows(x_, lambda_, bh2, bh2, build);
-    }
+    constraintRows(x_, lambda_, bh2, bh2, build);
+    laps.lap(stats_.constraints_time);
     if (build)
     {
-      bool factorized = false;
-      {
-        const ScopeTimer timer(stats_.factorization_time);
-        factorized = factorize(n + m);
-      }
+      const bool factorized = factorize(n + m);
+      laps.lap(stats_.factorization_time);
       if (!factorized)
       {
         out.status = SolveStatus::kSingular;
@@ -2108,10 +2110,8 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
       freshMatrix(previous);
     }
     rhs_ = -residual_;
-    {
-      const ScopeTimer timer(stats_.solve_time);
-      solve(rhs_, correction_);
-    }
+    solve(rhs_, correction_);
+    laps.lap(stats_.solve_time);
     ++out.iterations;
     ++stats_.iterations;
     if (!correction_.allFinite())

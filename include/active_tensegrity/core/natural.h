@@ -427,6 +427,8 @@ private:
       (*held_)[static_cast<size_t>(i)] += f;
   }
   std::vector<Vec3>* held_ = nullptr;  // forces() collects the fixed and driven nodes' forces here when set
+  bool driven_only_ = false;           // forces() then forms only what acts on a driven node (drivenReactions)
+  std::vector<char> cable_driven_;     // per cable: it runs through a driven node
   std::vector<Vec3> held_force_;
   // the adaptive steps' energy check: the energy where the step starts, whether contacts touched there
   EnergyPoint start_energy_;

@@ -114,4 +114,21 @@ private:
   std::chrono::steady_clock::time_point start_;
 };
 
+/// Times consecutive parts with one clock reading between each two: lap(sum) adds the time since the last lap (or
+/// the construction) to sum.
+class LapTimer
+{
+public:
+  LapTimer() : last_(std::chrono::steady_clock::now()) {}
+  void lap(double& sum)
+  {
+    const std::chrono::steady_clock::time_point now = std::chrono::steady_clock::now();
+    sum += std::chrono::duration<double>(now - last_).count();
+    last_ = now;
+  }
+
+private:
+  std::chrono::steady_clock::time_point last_;
+};
+
 }  // namespace active_tensegrity::core
