@@ -125,8 +125,8 @@ SimNode::SimNode(ros::NodeHandle& nh, ros::NodeHandle& pnh, SimParams params, co
   , model_(std::move(model))
   , solver_(model_, model_.solver)
   , controller_(model_, core::initialState(model_).u)
-  , builder_(model_, params_.frame_id, params_.markers, params_.tf_prefix)
   , loop_params_(params_)
+  , builder_(model_, params_.frame_id, params_.markers, params_.tf_prefix)
   , diagnostics_(nh, pnh)
 {
   state_ = core::initialState(model_);
@@ -137,11 +137,13 @@ SimNode::SimNode(ros::NodeHandle& nh, ros::NodeHandle& pnh, SimParams params, co
   // simulated stamps start at the wall time of the start (a date in bags and tools, never time 0)
   stamp_origin_ = ros::WallTime::now().toSec();
 
-  contacts_pub_ = pnh.advertise<active_tensegrity::ContactArray>("contacts", 10);
-  cables_pub_ = pnh.advertise<active_tensegrity::CableArray>("cables", 10);
-  struts_pub_ = pnh.advertise<active_tensegrity::StrutArray>("struts", 10);
-  actuators_pub_ = pnh.advertise<sensor_msgs::JointState>("actuators", 10);
-  markers_pub_ = pnh.advertise<visualization_msgs::MarkerArray>("markers", 10);
+  const auto kQueue = static_cast<uint32_t>(params_.queue_size);
+  contacts_pub_ = pnh.advertise<active_tensegrity::ContactArray>("contacts", kQueue);
+  cables_pub_ = pnh.advertise<active_tensegrity::CableArray>("cables", kQueue);
+  struts_pub_ = pnh.advertise<active_tensegrity::StrutArray>("struts", kQueue);
+  actuators_pub_ = pnh.advertise<sensor_msgs::JointState>("actuators", kQueue);
+  markers_pub_ = pnh.advertise<visualization_msgs::MarkerArray>("markers", kQueue);
+  tf_pub_ = nh.advertise<tf2_msgs::TFMessage>("/tf", kQueue);
   status_pub_ = pnh.advertise<active_tensegrity::SimStatus>("status", 10, true);
   if (params_.publish_clock)
     clock_pub_ = nh.advertise<rosgraph_msgs::Clock>("/clock", 10);
@@ -256,6 +258,7 @@ void SimNode::diagnoseSimulation(diagnostic_updater::DiagnosticStatusWrapper& d)
   d.add("real_time_factor", running() ? rtf_ : 0.0);
   d.add("requested_real_time_factor", params_.real_time_factor);
   d.add("publish_share", publish_share_);
+  d.add("publish_wait_share", publish_wait_share_);
   d.add("solver_status", solver_status_);
   d.add("active_contacts", contacts_);
   d.add("pushes", acting_pushes_.size());
@@ -940,23 +943,96 @@ void SimNode::publishStatus()
   status_pub_.publish(s);
 }
 
-void SimNode::publishState(core::State& state, const ros::Time& stamp,
-                           const std::vector<core::ContactPairState>* contacts)
+SimNode::~SimNode()
 {
-  if (loop_params_.publish_clock)
+  {
+    const std::lock_guard<std::mutex> lock(out_mutex_);
+    stop_publishing_ = true;
+  }
+  out_cv_.notify_all();
+  if (publisher_.joinable())
+    publisher_.join();
+}
+
+double SimNode::send(Outgoing&& out)
+{
+  std::unique_lock<std::mutex> lock(out_mutex_);
+  double waited = 0.0;
+  if (outgoing_.size() >= kPublishQueue)
+  {
+    const WallClock::time_point t0 = WallClock::now();
+    out_cv_.wait(lock, [this] { return outgoing_.size() < kPublishQueue || stop_publishing_; });
+    waited = seconds(WallClock::now() - t0);
+  }
+  outgoing_.push_back(std::move(out));
+  lock.unlock();
+  out_cv_.notify_all();
+  return waited;
+}
+
+void SimNode::publishLoop()
+{
+  for (;;)
+  {
+    Outgoing out;
+    {
+      std::unique_lock<std::mutex> lock(out_mutex_);
+      out_cv_.wait(lock, [this] { return !outgoing_.empty() || stop_publishing_; });
+      if (outgoing_.empty())
+        return;  // (stopping, and every publication made went out)
+      out = std::move(outgoing_.front());
+      outgoing_.pop_front();
+    }
+    out_cv_.notify_all();
+    const WallClock::time_point t0 = WallClock::now();
+    publish(out);
+    const double busy = seconds(WallClock::now() - t0);
+    const std::lock_guard<std::mutex> lock(out_mutex_);
+    publishing_busy_ += busy;
+  }
+}
+
+void SimNode::publish(Outgoing& out)
+{
+  if (out.options)
+    builder_.setOptions(*out.options);
+  if (out.clear_markers)
+  {
+    builder_.clearMarkers();
+    markers_missed_ = false;  // (the missed ones are of the state before the reset)
+  }
+  if (out.markers_now)
+    next_markers_ = WallClock::time_point::min();
+  if (out.kind == Outgoing::Kind::kMissedMarkers)
+  {
+    if (!markers_missed_)
+      return;
+    markers_missed_ = false;
+    markers_pub_.publish(
+        builder_.build(last_published_, last_stamp_, last_have_contacts_ ? &last_contacts_ : nullptr).markers);
+    return;
+  }
+  if (out.publish_clock)
   {
     rosgraph_msgs::Clock c;
-    c.clock = stamp;
+    c.clock = out.stamp;
     clock_pub_.publish(c);
   }
+  if (out.kind == Outgoing::Kind::kClock)
+    return;
   // markers are for rviz, which draws at screen rates: at most marker_rate per wall second (with every
   // publication they were about 40 % of the node's publishing time on the tower)
   const WallClock::time_point now = WallClock::now();
-  const bool markers = loop_params_.marker_rate <= 0.0 || now >= next_markers_;
-  solver_.formActuatorForces(state);  // (the actuators' efforts; a step leaves them unformed)
-  const Snapshot snap = builder_.build(state, stamp, contacts, markers);
-  published_contacts_ = snap.contacts.contacts.size();
-  tf_.sendTransform(snap.transforms);
+  const bool markers = out.marker_rate <= 0.0 || now >= next_markers_;
+  const std::vector<core::ContactPairState>* contacts = out.have_contacts ? &out.contacts : nullptr;
+  const Snapshot snap = builder_.build(out.state, out.stamp, contacts, markers);
+  {
+    const std::lock_guard<std::mutex> lock(out_mutex_);
+    published_contacts_ = snap.contacts.contacts.size();
+  }
+  tf2_msgs::TFMessage tf;
+  tf.transforms = snap.transforms;
+  tf_pub_.publish(tf);
   contacts_pub_.publish(snap.contacts);
   cables_pub_.publish(snap.cables);
   struts_pub_.publish(snap.struts);
@@ -965,26 +1041,16 @@ void SimNode::publishState(core::State& state, const ros::Time& stamp,
   if (markers)
   {
     markers_pub_.publish(snap.markers);
-    if (loop_params_.marker_rate > 0.0)
-      next_markers_ = now + wallSpan(1.0 / loop_params_.marker_rate);
+    if (out.marker_rate > 0.0)
+      next_markers_ = now + wallSpan(1.0 / out.marker_rate);
   }
   else
   {
-    std::swap(last_published_, state);  // (the caller's copy, not used after this)
-    last_have_contacts_ = contacts != nullptr;
-    if (contacts)
-      last_contacts_ = *contacts;
-    last_stamp_ = stamp;
+    std::swap(last_published_, out.state);
+    std::swap(last_contacts_, out.contacts);
+    last_have_contacts_ = out.have_contacts;
+    last_stamp_ = out.stamp;
   }
-}
-
-void SimNode::publishMissedMarkers()
-{
-  if (!markers_missed_)
-    return;
-  markers_missed_ = false;
-  markers_pub_.publish(
-      builder_.build(last_published_, last_stamp_, last_have_contacts_ ? &last_contacts_ : nullptr).markers);
 }
 
 void SimNode::run()
@@ -992,15 +1058,21 @@ void SimNode::run()
   const double dt = model_.solver.dt;
   const core::ActuationLaw law =
       core::ActuationLaw::writing([this](double t, core::ActuationValues& u) { controller_.values(t, u); });
+  publisher_ = std::thread([this] { publishLoop(); });
 
   // pacing: simulated time since (pace_wall, pace_sim) runs at real_time_factor
   WallClock::time_point pace_wall = WallClock::now();
   double pace_sim = 0.0;
-  // real-time factor and publishing share over windows of about a second
+  // real-time factor, publishing share and the stepping's wait for publishing over windows of about a second
   WallClock::time_point window_wall = pace_wall;
-  double window_sim = 0.0, window_publish = 0.0;
+  double window_sim = 0.0, window_wait = 0.0;
   double next_publish = 0.0;
   bool was_running = false;
+  // whether the markers the last publication went without were asked for since the simulation stopped
+  bool missed_asked = false;
+  // what goes with the next publication: new marker options, fresh markers after a reset, markers at once
+  std::optional<MarkerOptions> options;
+  bool clear_markers = false, markers_now = false;
   // with ~max_publish_wall_rate: the wall time before which the data topics do not go again
   WallClock::time_point next_data = WallClock::time_point::min();
 
@@ -1015,21 +1087,26 @@ void SimNode::run()
       diagnostics_.force_update();  // (takes the mutex itself)
       next_diagnostics = WallClock::now() + std::chrono::seconds(1);
     }
-    core::State to_publish;
-    ros::Time to_stamp;
-    bool publish_now = false;
-    // the state's contacts as the solver formed them, copied here: publishing runs outside the mutex, when a
-    // callback may re-initialize the solver (~reset)
-    std::vector<core::ContactPairState> to_contacts;
-    bool have_contacts = false;
-    bool clock_only = false;
+    std::optional<Outgoing> out;
+    const auto outgoing = [&](Outgoing::Kind kind)
+    {
+      out.emplace();
+      out->kind = kind;
+      out->options = std::move(options);
+      options.reset();
+      out->clear_markers = std::exchange(clear_markers, false);
+      out->markers_now = std::exchange(markers_now, false);
+      out->marker_rate = loop_params_.marker_rate;
+      out->publish_clock = loop_params_.publish_clock;
+    };
+    bool idle = false;
     {
       std::unique_lock<std::mutex> lock(mutex_);
       if (loop_params_epoch_ != params_epoch_)
       {
         loop_params_ = params_;
         loop_params_epoch_ = params_epoch_;
-        builder_.setOptions(loop_params_.markers);
+        options = loop_params_.markers;
       }
       if (repace_)
       {
@@ -1041,134 +1118,104 @@ void SimNode::run()
       if (clear_markers_)
       {
         // after a reset: fresh markers, publish at once, pace from the new start
-        builder_.clearMarkers();
+        clear_markers = true;
         clear_markers_ = false;
-        markers_missed_ = false;  // (the missed ones are of the state before the reset)
         next_publish = state_.t;
         was_running = false;
+        missed_asked = true;  // (the missed ones are of the state before the reset)
       }
       if (!running())
       {
         was_running = false;
-        lock.unlock();
-        publishMissedMarkers();
-        std::this_thread::sleep_for(std::chrono::milliseconds(20));
-        continue;
-      }
-      if (!was_running)
-      {
-        // (re)start: pace from here, publish at once (markers too)
-        pace_wall = window_wall = WallClock::now();
-        next_markers_ = WallClock::time_point::min();
-        pace_sim = window_sim = state_.t;
-        window_publish = 0.0;
-        next_publish = std::min(next_publish, state_.t);
-        was_running = true;
-      }
-      const double period = 1.0 / loop_params_.publish_rate;
-      if (state_.t >= next_publish - 1e-9 * dt)
-      {
-        next_publish = state_.t + period;
-        // (with a wall-rate cap, a publication due before the cap allows is left out)
-        const WallClock::time_point now = WallClock::now();
-        if (loop_params_.max_publish_wall_rate <= 0.0 || now >= next_data)
+        idle = true;
+        if (!missed_asked)
         {
-          if (loop_params_.max_publish_wall_rate > 0.0)
-            next_data = now + wallSpan(1.0 / loop_params_.max_publish_wall_rate);
-          to_publish = state_;
-          to_stamp = stamp(state_.t);
-          publish_now = true;
-          if (const std::vector<core::ContactPairState>* c = solver_.contactsAt(state_))
-          {
-            to_contacts = *c;
-            have_contacts = true;
-          }
-        }
-        else if (loop_params_.publish_clock)
-        {
-          // /clock goes on at the publish rate (nodes on simulated time need it)
-          to_stamp = stamp(state_.t);
-          clock_only = true;
+          outgoing(Outgoing::Kind::kMissedMarkers);
+          missed_asked = true;
         }
       }
       else
       {
-        const core::State before = state_;
-        const WallClock::time_point wall_before = WallClock::now();
-        const double push_end = applyPushes();
-        core::Summary s;
-        if (stepper_)
+        missed_asked = false;
+        if (!was_running)
         {
-          // to the next publish time (or the end of a push), in the steps the error control allows
-          const long accepted = stepper_->stats().accepted;
-          s = stepper_->advanceTo(state_, std::min(next_publish, push_end), law);
-          steps_ += static_cast<uint64_t>(stepper_->stats().accepted - accepted);
+          // (re)start: pace from here, publish at once (markers too)
+          pace_wall = window_wall = WallClock::now();
+          markers_now = true;
+          pace_sim = window_sim = state_.t;
+          window_wait = 0.0;
+          {
+            const std::lock_guard<std::mutex> out_lock(out_mutex_);
+            publishing_busy_ = 0.0;
+          }
+          next_publish = std::min(next_publish, state_.t);
+          was_running = true;
+        }
+        const double period = 1.0 / loop_params_.publish_rate;
+        if (state_.t >= next_publish - 1e-9 * dt)
+        {
+          next_publish = state_.t + period;
+          // (with a wall-rate cap, a publication due before the cap allows is left out)
+          const WallClock::time_point now = WallClock::now();
+          if (loop_params_.max_publish_wall_rate <= 0.0 || now >= next_data)
+          {
+            if (loop_params_.max_publish_wall_rate > 0.0)
+              next_data = now + wallSpan(1.0 / loop_params_.max_publish_wall_rate);
+            outgoing(Outgoing::Kind::kState);
+            out->state = state_;
+            solver_.formActuatorForces(out->state);  // (the actuators' efforts; a step leaves them unformed)
+            out->stamp = stamp(state_.t);
+            if (const std::vector<core::ContactPairState>* c = solver_.contactsAt(state_))
+            {
+              out->contacts = *c;
+              out->have_contacts = true;
+            }
+          }
+          else if (loop_params_.publish_clock)
+          {
+            // /clock goes on at the publish rate (nodes on simulated time need it)
+            outgoing(Outgoing::Kind::kClock);
+            out->stamp = stamp(state_.t);
+          }
         }
         else
-        {
-          // t = k dt exactly (no drift from summing steps)
-          const double t_next = static_cast<double>(steps_ + 1) * dt;
-          s = solver_.step(state_, t_next - state_.t, law);
-          ++steps_;
-          if (s.ok())
-            state_.t = t_next;
-        }
-        step_cuts_ += s.step_cuts;
-        if (!s.ok() || !finite(state_))
-        {
-          // the solver keeps the last good state when a step fails; never publish a non-finite one
-          if (!finite(state_))
-            state_ = before;
-          failed_ = true;
-          solver_status_ = s.ok() ? "non_finite" : core::toString(s.status);
-          message_ = s.ok() ? "non-finite state" : s.message;
-          ROS_ERROR_STREAM("tensegrity_sim: the solver failed at t = " << state_.t << " s (" << solver_status_ << ": "
-                                                                       << message_
-                                                                       << "); paused at the last good step, call "
-                                                                          "~reset to start again");
-          publishStatus();
-          continue;
-        }
-        const bool moving = controller_.moving(state_.t);
-        if (moving && !was_moving_)
-        {
-          motion_start_sim_ = before.t;
-          motion_start_wall_ = wall_before;
-        }
-        else if (!moving && was_moving_)
-        {
-          last_motion_sim_ = state_.t - motion_start_sim_;
-          last_motion_wall_ = std::chrono::duration<double>(WallClock::now() - motion_start_wall_).count();
-        }
-        was_moving_ = moving;
+          stepOnce(dt, next_publish, law);
       }
     }
 
-    if (clock_only)
+    if (out)
     {
-      rosgraph_msgs::Clock c;
-      c.clock = to_stamp;
-      clock_pub_.publish(c);
-    }
-    if (publish_now)
-    {
-      const WallClock::time_point t0 = WallClock::now();
-      publishState(to_publish, to_stamp, have_contacts ? &to_contacts : nullptr);
-      window_publish += seconds(WallClock::now() - t0);
+      const bool state = out->kind == Outgoing::Kind::kState;
+      const double t = out->state.t;
+      window_wait += send(std::move(*out));
       const double wall = seconds(WallClock::now() - window_wall);
-      if (wall >= 1.0)
+      if (state && wall >= 1.0)
       {
+        double busy = 0.0;
+        size_t contacts = 0;
+        {
+          const std::lock_guard<std::mutex> out_lock(out_mutex_);
+          busy = std::exchange(publishing_busy_, 0.0);
+          contacts = published_contacts_;
+        }
         const std::lock_guard<std::mutex> lock(mutex_);
-        rtf_ = (to_publish.t - window_sim) / wall;
-        contacts_ = published_contacts_;
-        publish_share_ = window_publish / wall;
+        rtf_ = (t - window_sim) / wall;
+        contacts_ = contacts;
+        publish_share_ = busy / wall;
+        publish_wait_share_ = window_wait / wall;
         window_wall = WallClock::now();
-        window_sim = to_publish.t;
-        window_publish = 0.0;
+        window_sim = t;
+        window_wait = 0.0;
         publishStatus();
       }
+    }
+    if (idle)
+    {
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
       continue;
     }
+    if (out)
+      continue;
 
     if (loop_params_.real_time_factor > 0.0)
     {
@@ -1182,6 +1229,58 @@ void SimNode::run()
         std::this_thread::sleep_until(due);
     }
   }
+}
+
+void SimNode::stepOnce(double dt, double next_publish, const core::ActuationLaw& law)
+{
+  const core::State before = state_;
+  const WallClock::time_point wall_before = WallClock::now();
+  const double push_end = applyPushes();
+  core::Summary s;
+  if (stepper_)
+  {
+    // to the next publish time (or the end of a push), in the steps the error control allows
+    const long accepted = stepper_->stats().accepted;
+    s = stepper_->advanceTo(state_, std::min(next_publish, push_end), law);
+    steps_ += static_cast<uint64_t>(stepper_->stats().accepted - accepted);
+  }
+  else
+  {
+    // t = k dt exactly (no drift from summing steps)
+    const double t_next = static_cast<double>(steps_ + 1) * dt;
+    s = solver_.step(state_, t_next - state_.t, law);
+    ++steps_;
+    if (s.ok())
+      state_.t = t_next;
+  }
+  step_cuts_ += s.step_cuts;
+  if (!s.ok() || !finite(state_))
+  {
+    // the solver keeps the last good state when a step fails; never publish a non-finite one
+    if (!finite(state_))
+      state_ = before;
+    failed_ = true;
+    solver_status_ = s.ok() ? "non_finite" : core::toString(s.status);
+    message_ = s.ok() ? "non-finite state" : s.message;
+    ROS_ERROR_STREAM("tensegrity_sim: the solver failed at t = " << state_.t << " s (" << solver_status_ << ": "
+                                                                 << message_
+                                                                 << "); paused at the last good step, call "
+                                                                    "~reset to start again");
+    publishStatus();
+    return;
+  }
+  const bool moving = controller_.moving(state_.t);
+  if (moving && !was_moving_)
+  {
+    motion_start_sim_ = before.t;
+    motion_start_wall_ = wall_before;
+  }
+  else if (!moving && was_moving_)
+  {
+    last_motion_sim_ = state_.t - motion_start_sim_;
+    last_motion_wall_ = std::chrono::duration<double>(WallClock::now() - motion_start_wall_).count();
+  }
+  was_moving_ = moving;
 }
 
 int runSimNode()

@@ -162,6 +162,11 @@ SimParams loadSimParams(const ros::NodeHandle& nh)
   if (p.frame_id.find('/') == 0)
     throw ParamError("~frame_id must not start with '/' (tf2 frames have no leading slash), got " +
                      core::quoted(p.frame_id));
+  const double queue = number(nh, "queue_size", p.queue_size);
+  if (!(queue >= 1.0 && queue <= 100000.0 && queue == std::floor(queue)))
+    throw ParamError("~queue_size must be a whole number of messages from 1 to 100000, got " +
+                     core::shortestNumber(queue));
+  p.queue_size = static_cast<int>(queue);
   p.start_paused = boolean(nh, "start_paused", p.start_paused);
   p.adaptive = boolean(nh, "adaptive", p.adaptive);
   return p;
@@ -263,6 +268,7 @@ void writeSimParams(ros::NodeHandle& nh, const SimParams& p)
   nh.setParam("publish_clock", p.publish_clock);
   nh.setParam("frame_id", p.frame_id);
   nh.setParam("tf_prefix", p.tf_prefix);
+  nh.setParam("queue_size", p.queue_size);
   nh.setParam("start_paused", p.start_paused);
   nh.setParam("adaptive", p.adaptive);
 }
@@ -278,6 +284,7 @@ std::string SimParams::describe() const
     << "marker_rate: " << marker_rate
     << (marker_rate == 0.0 ? " (markers with every publication)" : " Hz (wall time, at most)") << "\n"
     << "publish_clock: " << (publish_clock ? "true" : "false") << "\n"
+    << "queue_size: " << queue_size << " messages per subscriber (data topics and /tf)\n"
     << "frame_id: " << frame_id << "\n"
     << "tf_prefix: " << (tf_prefix.empty() ? "(none: frames are the bodies' names)" : tf_prefix) << "\n"
     << "max_publish_wall_rate: " << max_publish_wall_rate

@@ -381,6 +381,8 @@ class TestSimNode(unittest.TestCase):
             (["_publish_rate:=-5.0"], "~publish_rate must be > 0"),
             (["_marker_rate:=-1"], "~marker_rate must be >= 0 Hz of wall time (0 = with every publication), got -1"),
             (["_real_time_factor:=fast"], "~real_time_factor must be a number"),
+            (["_queue_size:=0"], "~queue_size must be a whole number of messages from 1 to 100000, got 0"),
+            (["_queue_size:=2.5"], "~queue_size must be a whole number of messages from 1 to 100000, got 2.5"),
             (["_scene:=package://active_tensegrity/config/scenes/prism.yaml", "_overrides:={solver.dt: -1}"],
              "dt"),
         ]

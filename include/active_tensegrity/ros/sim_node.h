@@ -7,10 +7,14 @@
 
 #include <atomic>
 #include <chrono>
+#include <condition_variable>
+#include <deque>
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
+#include <thread>
 #include <utility>
 
 #include <actionlib/server/simple_action_server.h>
@@ -20,7 +24,7 @@
 #include <ros/ros.h>
 #include <std_srvs/SetBool.h>
 #include <std_srvs/Trigger.h>
-#include <tf2_ros/transform_broadcaster.h>
+#include <tf2_msgs/TFMessage.h>
 #include <trajectory_msgs/JointTrajectory.h>
 
 #include "active_tensegrity/ActuationCommand.h"
@@ -47,8 +51,10 @@ public:
   /// std::runtime_error when the initial state cannot be made consistent.
   SimNode(ros::NodeHandle& nh, ros::NodeHandle& private_nh, SimParams params, core::Model model);
 
-  /// Steps and publishes until ROS shuts down (callbacks run on another thread meanwhile).
+  /// Steps until ROS shuts down; the messages go out from a publishing thread of their own meanwhile, and the
+  /// callbacks run on the spinner's threads.
   void run();
+  ~SimNode();
 
 private:
   using WallClock = std::chrono::steady_clock;
@@ -100,14 +106,41 @@ private:
   void diagnoseSimulation(diagnostic_updater::DiagnosticStatusWrapper& status);
   void diagnoseCommands(diagnostic_updater::DiagnosticStatusWrapper& status);
   void diagnosePlanner(diagnostic_updater::DiagnosticStatusWrapper& status);
-  /// Builds and publishes every topic for `state` (loop thread only); ~markers only when due (~marker_rate),
-  /// else the state is kept in last_published_ for publishMissedMarkers. `contacts`: the state's active contacts
-  /// as the solver formed them, copied under the mutex (the solver is not touched here: a ~reset re-initializes
-  /// it from a callback thread meanwhile), or null.
-  void publishState(core::State& state, const ros::Time& stamp, const std::vector<core::ContactPairState>* contacts);
-  /// The markers of the last published state, when its publication went without them (loop thread only:
-  /// when the simulation stops, so that rviz shows where it stopped).
-  void publishMissedMarkers();
+  /// One publication for the publishing thread, in the order the loop made them: a state's topics, /clock alone
+  /// (a publication the wall-rate cap left out), or the markers the last publication went without (the simulation
+  /// stopped, so that rviz shows where).
+  struct Outgoing
+  {
+    enum class Kind
+    {
+      kState,
+      kClock,
+      kMissedMarkers
+    };
+    Kind kind = Kind::kState;
+    core::State state;  // (actuator forces formed by the loop thread, which owns the solver)
+    ros::Time stamp;
+    // the state's active contacts as the solver formed them, copied under the mutex
+    std::vector<core::ContactPairState> contacts;
+    bool have_contacts = false;
+    bool clear_markers = false;            // a ~reset came before this: fresh markers
+    bool markers_now = false;              // a (re)start: markers with this publication whatever ~marker_rate
+    std::optional<MarkerOptions> options;  // new marker options, from this publication on
+    double marker_rate = 0.0;
+    bool publish_clock = false;
+  };
+  /// Loop thread: hands a publication to the publishing thread; waits while kPublishQueue are waiting (the
+  /// subscribers set the pace then: no publication is dropped). Returns the seconds it waited.
+  double send(Outgoing&& out);
+  /// The publishing thread: takes publications in order until stop_publishing_.
+  void publishLoop();
+  /// Publishing thread: builds and publishes `out`'s topics; ~markers only when due (~marker_rate), else the
+  /// state is kept in last_published_ for the markers a stop asks for.
+  void publish(Outgoing& out);
+  static constexpr size_t kPublishQueue = 4;
+  /// One stepping (mutex held): to the next publication (adaptive steps) or one step of dt; a failure pauses the
+  /// simulation at the last good state.
+  void stepOnce(double dt, double next_publish, const core::ActuationLaw& law);
   /// Fills and publishes ~status (mutex held).
   void publishStatus();
   ros::Time stamp(double t) const;
@@ -126,13 +159,13 @@ private:
   core::DynamicsSolver solver_;
   std::unique_ptr<core::AdaptiveStepper> stepper_;  // with ~adaptive (a new one at every reset)
   core::ActuationController controller_;
-  MessageBuilder builder_;
-  // (loop thread only) the parameters the loop and publishing read: a copy of params_ made under the mutex when
-  // a live change (params_epoch_) came
+  // (loop thread only) the parameters the loop reads: a copy of params_ made under the mutex when a live change
+  // (params_epoch_) came
   SimParams loop_params_;
   uint64_t loop_params_epoch_ = 0;
-  size_t published_contacts_ = 0;  // active contacts of the last publication
-  // (loop thread only) when ~markers may go next; the last publication's state when it went without them
+  // (publishing thread only) the messages' builder; when ~markers may go next; the last publication's state when
+  // it went without them
+  MessageBuilder builder_;
   WallClock::time_point next_markers_ = WallClock::time_point::min();
   bool markers_missed_ = false;
   core::State last_published_;
@@ -190,12 +223,22 @@ private:
   std::vector<Push> pushes_;
   uint64_t next_push_id_ = 1;
   std::vector<uint64_t> acting_pushes_;  // the ids whose loads the solver has
-  double rtf_ = 0.0, publish_share_ = 0.0;
+  double rtf_ = 0.0, publish_share_ = 0.0, publish_wait_share_ = 0.0;
+
+  // between the loop and the publishing thread: the publications waiting, the publishing thread's busy time and
+  // the active contacts of the last publication it made
+  std::mutex out_mutex_;
+  std::condition_variable out_cv_;
+  std::deque<Outgoing> outgoing_;
+  bool stop_publishing_ = false;
+  double publishing_busy_ = 0.0;  // s, since the loop last took it
+  size_t published_contacts_ = 0;
+  std::thread publisher_;
 
   ros::Publisher contacts_pub_, cables_pub_, struts_pub_, actuators_pub_, markers_pub_, status_pub_, clock_pub_;
   ros::Subscriber actuation_sub_, trajectory_sub_, wrench_sub_;
   ros::ServiceServer reset_srv_, pause_srv_, plan_srv_, apply_wrench_srv_, clear_wrenches_srv_;
-  tf2_ros::TransformBroadcaster tf_;
+  ros::Publisher tf_pub_;  // (tf2's broadcaster with the queue of ~queue_size)
   diagnostic_updater::Updater diagnostics_;
   boost::recursive_mutex reconfigure_mutex_;
   std::unique_ptr<dynamic_reconfigure::Server<active_tensegrity::SimConfig>> reconfigure_;

@@ -29,6 +29,9 @@ struct SimParams
   double marker_rate = 30.0;              // ~markers at most this often, Hz of wall time (0: every publication)
   double max_publish_wall_rate = 0.0;     // data topics and tf at most this often, Hz of wall time (0: no cap)
   bool publish_clock = false;             // /clock from the simulation (stamps in simulated time)
+  /// the publishers' queue of the data topics and /tf, messages per subscriber: a subscriber that keeps up on
+  /// average takes every message when bursts of publications come faster than it takes them
+  int queue_size = 1000;
   std::string frame_id = "world";
   /// prefixed to every body's tf frame ("robot_a" gives robot_a/S1); default: the node's namespace without
   /// its leading slash (empty in the root namespace: frames are the bodies' names)
