@@ -921,10 +921,24 @@ ContactPairState naturalContact(const NaturalModel& nm, const NaturalContactSlot
 
 namespace
 {
-constexpr double kNearFloor = 1e-4;        // m: the least motion the near pairs allow for
-constexpr double kRateFloor = 0.05;        // the least contraction rate assumed of modified Newton
-constexpr int kFullNewtonFrom = 8;         // a step's iterations from this one on build their own matrix (full Newton)
-constexpr int kDenseMost = 160;            // Newton matrices up to this size are factorized dense, larger ones sparse
+constexpr double kNearFloor = 1e-4;  // m: the least motion the near pairs allow for
+constexpr double kRateFloor = 0.05;  // the least contraction rate assumed of modified Newton
+constexpr int kFullNewtonFrom = 8;   // a step's iterations from this one on build their own matrix (full Newton)
+constexpr int kDenseMost = 160;      // Newton matrices up to this size are factorized dense, larger ones sparse
+// Static pivots (docs/physics.md, "Linear solves"): the constraint rows' shift, kStaticShift phi^2 / d. Measured on
+// the 504-strut lattice's Newton matrix, the factors' solve leaves a relative residual of about 5e-5: modified Newton
+// cannot tell them from exact ones.
+constexpr double kStaticShift = 1e-6;
+constexpr int kStaticPivotSkip = 4;  // after a refused factorization, this many use the sparse LU
+// The check of a factorization: A 1 solved comes back within this of 1 (the largest contraction rate modified Newton
+// keeps a matrix for); refined, within kStaticRefinedCheck.
+constexpr double kStaticCheck = 0.5;
+constexpr double kStaticRefinedCheck = 1e-8;
+// The refined solve: at most kRefineMost corrections, ending at one below kRefineRoundOff of the solution, or at one
+// that shrank less than half (round-off), which passes when the smallest was below kRefineStalled of the solution.
+constexpr int kRefineMost = 8;
+constexpr double kRefineRoundOff = 1e-14;
+constexpr double kRefineStalled = 1e-10;
 constexpr int kDirectPairsMost = 64;       // up to this many strut pairs are checked without the broad phase
 constexpr double kListMarginLeast = 2e-3;  // m: the least margin of the listed contacts
 constexpr double kListMarginSteps = 8.0;   // the margin in steps' motions
@@ -1409,9 +1423,10 @@ void NaturalSolver::contactsAt(const NaturalState& s, std::vector<ContactPairSta
   }
 }
 
-bool NaturalSolver::factorize(int size)
+bool NaturalSolver::factorize(int size, Pivots pivots)
 {
   scaled_ = false;
+  static_mode_ = false;
   dense_mode_ = entries_.to_dense;
   if (dense_mode_)
   {
@@ -1428,11 +1443,36 @@ bool NaturalSolver::factorize(int size)
                     std::equal(pattern_inner_.begin(), pattern_inner_.end(), sparse_.innerIndexPtr());
   if (!same)
   {
-    sparse_lu_.analyzePattern(sparse_);
     pattern_outer_.assign(sparse_.outerIndexPtr(), sparse_.outerIndexPtr() + sparse_.outerSize() + 1);
     pattern_inner_.assign(sparse_.innerIndexPtr(), sparse_.innerIndexPtr() + nnz);
     pattern_ready_ = true;
+    lu_analysed_ = false;
+    const Eigen::SparseMatrix<double> t = sparse_.transpose();
+    pattern_symmetric_ = t.nonZeros() == nnz &&
+                         std::equal(pattern_outer_.begin(), pattern_outer_.end(), t.outerIndexPtr()) &&
+                         std::equal(pattern_inner_.begin(), pattern_inner_.end(), t.innerIndexPtr());
     ++stats_.analyses;
+  }
+  if (pivots != Pivots::kPartial)
+  {
+    if (static_skip_ > 0)
+      --static_skip_;
+    else if (factorizeStaticPivot(pivots == Pivots::kStaticRefined))
+    {
+      ++stats_.static_pivots;
+      return true;
+    }
+    else
+    {
+      // refused: the sparse LU for this and the next kStaticPivotSkip factorizations
+      ++stats_.static_pivot_refusals;
+      static_skip_ = kStaticPivotSkip;
+    }
+  }
+  if (!lu_analysed_)
+  {
+    sparse_lu_.analyzePattern(sparse_);
+    lu_analysed_ = true;
   }
   sparse_lu_.factorize(sparse_);
   if (sparse_lu_.info() != Eigen::Success)
@@ -1441,6 +1481,69 @@ bool NaturalSolver::factorize(int size)
     return false;
   }
   return true;
+}
+
+bool NaturalSolver::factorizeStaticPivot(bool refined)
+{
+  // static pivots need a symmetric pattern: where the values leave it unsymmetric (a friction tangent's one-sided
+  // entries), the union with the transpose's pattern, the added entries zero
+  if (!pattern_symmetric_)
+    symmetric_ = sparse_ + 0.0 * Eigen::SparseMatrix<double>(sparse_.transpose());
+  const Eigen::SparseMatrix<double>& a = pattern_symmetric_ ? sparse_ : symmetric_;
+  const int n = nm_.coordinates;
+  const Eigen::Index size = a.rows();
+  shifted_rows_.clear();
+  for (int r = n; r < size; ++r)
+    shifted_rows_.push_back(r);
+  // delta = kStaticShift phi^2 / d, phi the constraint rows' largest entry and d the largest diagonal entry: the
+  // constraint block's Schur complement is about phi^2 / d at its smallest
+  const double diag = a.diagonal().head(n).cwiseAbs().maxCoeff();
+  double phi = 0.0;
+  for (const int r : shifted_rows_)  // (column r holds row r's entries: the pattern is symmetric)
+    for (Eigen::SparseMatrix<double>::InnerIterator it(a, r); it; ++it)
+      phi = std::max(phi, std::abs(it.value()));
+  if (!(diag > 0.0) || !(phi > 0.0) || !std::isfinite(diag) || !std::isfinite(phi))
+    return false;
+  if (!static_lu_.factorize(a, shifted_rows_, -kStaticShift * phi * phi / diag))
+    return false;
+  static_mode_ = true;
+  static_refined_ = refined;
+  // the check: A 1 solved comes back near 1 (within what modified Newton keeps a matrix for; refined, to round-off)
+  check_b_ = a * Eigen::VectorXd::Ones(size);
+  bool ok = false;
+  if (refined)
+    ok = solveRefined(check_b_, check_x_) && (check_x_.array() - 1.0).abs().maxCoeff() <= kStaticRefinedCheck;
+  else
+  {
+    static_lu_.solve(check_b_, check_x_);
+    ok = check_x_.allFinite() && (check_x_.array() - 1.0).abs().maxCoeff() <= kStaticCheck;
+  }
+  static_mode_ = ok;
+  return ok;
+}
+
+bool NaturalSolver::solveRefined(const Eigen::VectorXd& rhs, Eigen::VectorXd& out)
+{
+  const Eigen::SparseMatrix<double>& a = pattern_symmetric_ ? sparse_ : symmetric_;
+  static_lu_.solve(rhs, out);
+  double previous = std::numeric_limits<double>::infinity();
+  for (int k = 0; k < kRefineMost; ++k)
+  {
+    refine_r_ = rhs;
+    refine_r_.noalias() -= a * out;
+    static_lu_.solve(refine_r_, refine_d_);
+    out += refine_d_;
+    const double size = refine_d_.lpNorm<Eigen::Infinity>();
+    const double scale = out.lpNorm<Eigen::Infinity>();
+    if (!std::isfinite(size))
+      return false;
+    if (size <= kRefineRoundOff * scale)
+      return true;
+    if (size > 0.5 * previous)
+      return previous <= kRefineStalled * scale;
+    previous = size;
+  }
+  return previous <= kRefineStalled * out.lpNorm<Eigen::Infinity>();
 }
 
 Eigen::VectorXd NaturalSolver::solve(const Eigen::VectorXd& rhs)
@@ -1459,8 +1562,12 @@ void NaturalSolver::solve(const Eigen::VectorXd& rhs, Eigen::VectorXd& out)
   }
   if (dense_mode_)
     out = dense_lu_.solve(rhs);
-  else
+  else if (!static_mode_)
     out = sparse_lu_.solve(rhs);
+  else if (!static_refined_)
+    static_lu_.solve(rhs, out);
+  else if (!solveRefined(rhs, out))
+    out.setConstant(std::numeric_limits<double>::quiet_NaN());  // (a non-finite correction: the step is cut)
 }
 
 int NaturalSolver::firstPassedThrough() const
@@ -1691,9 +1798,9 @@ bool NaturalSolver::factorizeStatic()
 
 int NaturalSolver::determinantSign()
 {
-  if (!dense_mode_)
-    return static_cast<int>(sparse_lu_.signDeterminant());
-  return core::determinantSign(dense_lu_);
+  if (dense_mode_)
+    return core::determinantSign(dense_lu_);
+  return static_mode_ ? static_lu_.determinantSign() : static_cast<int>(sparse_lu_.signDeterminant());
 }
 
 Eigen::MatrixXd NaturalSolver::assembledMatrix() const
@@ -2092,7 +2199,9 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
     laps.lap(stats_.constraints_time);
     if (build)
     {
-      const bool factorized = factorize(n + m);
+      // (modified Newton's matrix may be an approximation; full Newton's is refined to round-off at every solve)
+      const bool factorized = factorize(
+          n + m, it >= kFullNewtonFrom || !options_.reuse_jacobian ? Pivots::kStaticRefined : Pivots::kStatic);
       laps.lap(stats_.factorization_time);
       if (!factorized)
       {

@@ -39,6 +39,7 @@
 #include "active_tensegrity/core/actuation_law.h"
 #include "active_tensegrity/core/energy.h"
 #include "active_tensegrity/core/model.h"
+#include "active_tensegrity/core/static_lu.h"
 #include "active_tensegrity/core/state.h"
 #include "active_tensegrity/core/summary.h"
 
@@ -200,8 +201,10 @@ struct NaturalStats
   long steps = 0;
   long iterations = 0;
   long factorizations = 0;
-  long analyses = 0;             // orderings and symbolic analyses of a sparse Newton matrix (a new pattern)
-  long contact_evaluations = 0;  // pair evaluations in contact (force, with or without tangents)
+  long analyses = 0;               // orderings and symbolic analyses of a sparse Newton matrix (a new pattern)
+  long static_pivots = 0;          // sparse Newton matrices factorized with static pivots (the rest: sparse LU)
+  long static_pivot_refusals = 0;  // static-pivot factorizations that failed their check (then the sparse LU)
+  long contact_evaluations = 0;    // pair evaluations in contact (force, with or without tangents)
   long rejected_error = 0, rejected_onset = 0, rejected_solver = 0, rejected_energy = 0;
   // adaptive steps (advanceTo): accepted, of them at dt_min with their checks still failing, the smallest and largest
   long accepted = 0, at_min_step = 0;
@@ -411,8 +414,22 @@ private:
           add(static_cast<int>(it.row()), static_cast<int>(it.col()), it.value());
     }
   };
-  /// Factorizes the matrix of `entries_` (size x size): dense when small, else sparse; false when singular.
-  bool factorize(int size);
+  /// How a sparse Newton matrix is factorized: with partial pivoting (sparse LU), or with static pivots (faster, the
+  /// constraint rows shifted: an approximation, kept for modified Newton) and optionally refined to round-off at
+  /// every solve.
+  enum class Pivots
+  {
+    kPartial,
+    kStatic,
+    kStaticRefined
+  };
+  /// Factorizes the matrix of `entries_` (size x size): dense when small, else sparse as `pivots` asks (static pivots
+  /// fall back to the sparse LU when their check fails); false when singular.
+  bool factorize(int size, Pivots pivots = Pivots::kPartial);
+  /// The static-pivot factorization of sparse_ and its check; false when refused.
+  bool factorizeStaticPivot(bool refined);
+  /// A solve with the refined static pivots; false when the refinement does not reach round-off.
+  bool solveRefined(const Eigen::VectorXd& rhs, Eigen::VectorXd& out);
   Eigen::VectorXd solve(const Eigen::VectorXd& rhs);
 
   std::vector<NaturalLoad> external_;  // setExternalLoads
@@ -450,8 +467,19 @@ private:
   Eigen::SparseMatrix<double> sparse_;
   Eigen::PartialPivLU<Eigen::MatrixXd> dense_lu_;
   Eigen::SparseLU<Eigen::SparseMatrix<double>> sparse_lu_;
-  std::vector<int> pattern_outer_, pattern_inner_;  // the pattern sparse_lu_ analysed
-  bool pattern_ready_ = false;
+  std::vector<int> pattern_outer_, pattern_inner_;  // the pattern of the last sparse matrix
+  bool pattern_ready_ = false;                      // ... recorded
+  bool lu_analysed_ = false;                        // sparse_lu_ analysed that pattern
+  bool pattern_symmetric_ = false;                  // that pattern is symmetric
+  // static pivots: their factors (of sparse_, or of symmetric_ where sparse_'s pattern is not symmetric), in use for
+  // the last factorization, refined at every solve; the factorizations left to the sparse LU after a refusal; the
+  // shifted rows (the constraint rows); the check's and the refinement's work
+  StaticPivotLU static_lu_;
+  Eigen::SparseMatrix<double> symmetric_;
+  bool static_mode_ = false, static_refined_ = false;
+  int static_skip_ = 0;
+  std::vector<int> shifted_rows_;
+  Eigen::VectorXd check_b_, check_x_, refine_r_, refine_d_;
   bool dense_mode_ = true;
   Eigen::VectorXd residual_, rhs_, correction_, acc_, lambda_, x_, v_;
   ActuationValues u_end_, u_onset_;  // an adaptive step's end, and a refused onset's start (advance)

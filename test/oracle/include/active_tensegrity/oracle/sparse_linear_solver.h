@@ -10,7 +10,7 @@
 #include <Eigen/SparseLU>
 
 #include "active_tensegrity/oracle/body_block_solver.h"
-#include "active_tensegrity/oracle/static_lu.h"
+#include "active_tensegrity/core/static_lu.h"
 
 #include "active_tensegrity/core/dense_lu.h"
 
