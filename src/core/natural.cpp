@@ -929,7 +929,11 @@ constexpr int kDenseMost = 160;      // Newton matrices up to this size are fact
 // the 504-strut lattice's Newton matrix, the factors' solve leaves a relative residual of about 5e-5: modified Newton
 // cannot tell them from exact ones.
 constexpr double kStaticShift = 1e-6;
-constexpr int kStaticPivotSkip = 4;  // after a refused factorization, this many use the sparse LU
+constexpr int kStaticPivotSkip = 4;
+// Dense factorizations of a dynamic step are inverted while they serve, on average, at least kInverseSolves times
+// their size in solves (the break-even, measured at 80 unknowns: about 42 solves); the average's weight of the last.
+constexpr double kInverseSolves = 0.75;
+constexpr double kSolvesAverage = 0.25;  // after a refused factorization, this many use the sparse LU
 // The check of a factorization: A 1 solved comes back within this of 1 (the largest contraction rate modified Newton
 // keeps a matrix for); refined, within kStaticRefinedCheck.
 constexpr double kStaticCheck = 0.5;
@@ -1427,10 +1431,27 @@ bool NaturalSolver::factorize(int size, Pivots pivots)
 {
   scaled_ = false;
   static_mode_ = false;
+  use_inverse_ = false;
+  solves_per_factor_ =
+      kSolvesAverage * static_cast<double>(solves_since_factor_) + (1.0 - kSolvesAverage) * solves_per_factor_;
+  solves_since_factor_ = 0;
   dense_mode_ = entries_.to_dense;
   if (dense_mode_)
   {
     dense_lu_.compute(entries_.dense);
+    // modified Newton's: inverted when the factorizations have been serving more solves than the inverse costs (about
+    // size / 2); full Newton's keep the LU's more accurate solves. In place: the inverse's own expression allocates
+    if (pivots == Pivots::kStatic && solves_per_factor_ >= kInverseSolves * size)
+    {
+      // P (P A = L U), then L and U solved in place (the row of P I holding column i's one is P's index of i)
+      dense_inverse_.setZero(size, size);
+      const auto& p = dense_lu_.permutationP().indices();
+      for (int i = 0; i < size; ++i)
+        dense_inverse_(p(i), i) = 1.0;
+      dense_lu_.matrixLU().triangularView<Eigen::UnitLower>().solveInPlace(dense_inverse_);
+      dense_lu_.matrixLU().triangularView<Eigen::Upper>().solveInPlace(dense_inverse_);
+      use_inverse_ = true;
+    }
     return true;
   }
   sparse_.resize(size, size);
@@ -1560,7 +1581,10 @@ void NaturalSolver::solve(const Eigen::VectorXd& rhs, Eigen::VectorXd& out)
     out = col_scale_.cwiseProduct(dense_lu_.solve(row_scale_.cwiseProduct(rhs)));
     return;
   }
-  if (dense_mode_)
+  ++solves_since_factor_;
+  if (use_inverse_)
+    out.noalias() = dense_inverse_ * rhs;
+  else if (dense_mode_)
     out = dense_lu_.solve(rhs);
   else if (!static_mode_)
     out = sparse_lu_.solve(rhs);
@@ -1791,6 +1815,7 @@ bool NaturalSolver::factorizeStatic()
   // round-off otherwise
   equilibrate(entries_.dense, row_scale_, col_scale_, equilibrated_);
   dense_mode_ = true;
+  use_inverse_ = false;
   dense_lu_.compute(equilibrated_);
   scaled_ = true;
   return regular(dense_lu_);
