@@ -9,6 +9,7 @@
 #include "active_tensegrity/core/dynamics.h"
 #include "active_tensegrity/core/broad_phase.h"
 #include "active_tensegrity/core/contact.h"
+#include "active_tensegrity/core/contact_search.h"
 #include "active_tensegrity/core/geometry.h"
 #include "active_tensegrity/core/kinematics.h"
 #include "active_tensegrity/core/statics.h"

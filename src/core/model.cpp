@@ -141,4 +141,43 @@ std::vector<StrutPair> Model::checkedPairList(std::vector<int>* slots) const
   return out;
 }
 
+int Model::findNode(const std::string& n) const
+{
+  for (size_t i = 0; i < nodes.size(); ++i)
+    if (nodes[i].name == n)
+      return static_cast<int>(i);
+  return -1;
+}
+
+int Model::findBody(const std::string& n) const
+{
+  for (size_t i = 0; i < bodies.size(); ++i)
+    if (bodies[i].name == n)
+      return static_cast<int>(i);
+  return -1;
+}
+
+int Model::findActuator(const std::string& n) const
+{
+  for (size_t i = 0; i < actuators.size(); ++i)
+    if (actuators[i].name == n)
+      return static_cast<int>(i);
+  return -1;
+}
+
+void finalizeModel(Model& model)
+{
+  int offset = 0;
+  for (Body& b : model.bodies)
+  {
+    b.nq = b.kind == BodyKind::kStrut ? 7 : 3;
+    b.offset = offset;
+    offset += b.nq;
+  }
+  model.nq = offset;
+  model.n_lambda = 0;
+  for (const Constraint& c : model.constraints)
+    model.n_lambda += c.rows();
+}
+
 }  // namespace active_tensegrity::core

@@ -20,7 +20,6 @@
 
 #include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/contact.h"
-#include "active_tensegrity/core/mechanics.h"
 #include "active_tensegrity/core/modal.h"
 #include "active_tensegrity/core/structure_check.h"
 #include "active_tensegrity/core/text.h"

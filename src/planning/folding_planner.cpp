@@ -47,7 +47,6 @@
 #include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/contact.h"
 #include "active_tensegrity/core/dynamics.h"
-#include "active_tensegrity/core/mechanics.h"
 #include "active_tensegrity/core/modal.h"
 #include "active_tensegrity/core/statics.h"
 #include "active_tensegrity/core/text.h"
@@ -626,7 +625,6 @@ DynamicPeaks simulate(const core::Model& model, const core::State& start, const 
     return peaks;
   }
   core::DynamicsSolver solver(dyn, dyn.solver);
-  const core::System system(dyn);
   double mass = 0.0;
   for (const core::Body& b : dyn.bodies)
     mass += b.mass;
@@ -699,7 +697,7 @@ DynamicPeaks simulate(const core::Model& model, const core::State& start, const 
       }
       continue;
     }
-    const double kinetic = system.kineticEnergy(s.q, s.qd);
+    const double kinetic = solver.energyAt(s).kinetic;
     window.kinetic = std::max(window.kinetic, kinetic);
     window.quiet = window.quiet && (mass <= 0.0 || std::sqrt(2.0 * kinetic / mass) < r.rest_speed);
     if (s.t - window_start >= rest_window - 0.5 * dt)

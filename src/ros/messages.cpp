@@ -7,7 +7,6 @@
 
 #include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/contact.h"
-#include "active_tensegrity/core/mechanics.h"
 
 namespace active_tensegrity::ros_layer
 {

@@ -13,7 +13,6 @@
 
 #include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/contact.h"
-#include "active_tensegrity/core/mechanics.h"
 #include "active_tensegrity/core/structure_check.h"
 #include "active_tensegrity/core/text.h"
 

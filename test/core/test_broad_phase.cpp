@@ -20,7 +20,7 @@
 #include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/broad_phase.h"
 #include "active_tensegrity/core/contact.h"
-#include "active_tensegrity/core/mechanics.h"
+#include "active_tensegrity/core/contact_search.h"
 #include "test_models.h"
 
 using namespace active_tensegrity::test;

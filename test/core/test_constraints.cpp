@@ -7,7 +7,7 @@
 
 #include <gtest/gtest.h>
 
-#include "active_tensegrity/core/constraints.h"
+#include "active_tensegrity/oracle/constraints.h"
 #include "fd_check.h"
 #include "test_models.h"
 

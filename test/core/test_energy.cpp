@@ -12,6 +12,7 @@
 #include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/energy.h"
 #include "active_tensegrity/core/scene.h"
+#include "active_tensegrity/oracle/energy_meter.h"
 #include "test_models.h"
 
 using namespace active_tensegrity::test;

@@ -5,7 +5,7 @@
 #include <cmath>
 #include <random>
 
-#include "active_tensegrity/core/mechanics.h"
+#include "active_tensegrity/oracle/mechanics.h"
 #include "active_tensegrity/core/model.h"
 
 namespace active_tensegrity::test

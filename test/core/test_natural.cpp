@@ -15,6 +15,7 @@
 #include "active_tensegrity/oracle/body_statics.h"
 #include "active_tensegrity/core/statics.h"
 #include "active_tensegrity/oracle/body_dynamics.h"
+#include "active_tensegrity/oracle/energy_meter.h"
 #include "test_models.h"
 
 using namespace active_tensegrity::core;

@@ -17,7 +17,7 @@
 
 #include <gtest/gtest.h>
 
-#include "active_tensegrity/core/mechanics.h"
+#include "active_tensegrity/oracle/mechanics.h"
 #include "active_tensegrity/core/scene.h"
 #include "active_tensegrity/core/state.h"
 #include "active_tensegrity/core/text.h"

@@ -20,6 +20,7 @@
 #include "active_tensegrity/core/natural.h"
 #include "active_tensegrity/core/scene.h"
 #include "active_tensegrity/core/statics.h"
+#include "active_tensegrity/oracle/mechanics.h"
 #include "cli.h"
 #include "lattice.h"
 

@@ -36,28 +36,6 @@ struct EnergyPoint
   double scale() const;
 };
 
-/// The energy of `state` (positions, velocities, multipliers and actuation values at state.t). `contacts`: the
-/// active contacts of the state (DynamicsSolver::contactsAt, activeContacts) with their forces; their elastic
-/// energy and dissipated power are summed, no other slot is evaluated.
-EnergyPoint energyPoint(const System& system, const State& state, const std::vector<ContactPairState>& contacts);
-
-/// energyPoint for a sequence of states (every step of a run): the cables' point slots are found once and the
-/// points' motion comes from frames formed once per state (no allocation once sized).
-class EnergyMeter
-{
-public:
-  explicit EnergyMeter(const System& system);
-  /// energyPoint(system, state, contacts), the same number.
-  EnergyPoint at(const State& state, const std::vector<ContactPairState>& contacts);
-
-private:
-  const System& system_;
-  BodyFrames frames_;
-  std::vector<PointSlot> slots_;  // every cable's points, cable by cable
-  std::vector<int> first_;        // each cable's first slot
-  Eigen::VectorXd rhs_;           // the velocity constraints' right-hand side
-};
-
 /// The energy one step of h took from a to b that no force accounts for (J, the trapezoidal rule over the
 /// powers): positive when the integrator dissipated it, negative when it gained energy.
 double stepNumericalDissipation(const EnergyPoint& a, const EnergyPoint& b, double h);

@@ -1,6 +1,6 @@
 /// Kinematics of material points: world position and velocity of a point fixed on a body (or on the
-/// ground) and their derivatives with respect to the coordinates. What force elements (cable.h),
-/// constraints (constraints.h) and the assembly (mechanics.h) build on.
+/// ground) and their derivatives with respect to the coordinates, in the body coordinates: what the outputs' force
+/// evaluations (cable.h, contact.h) and the test oracle's assembly build on.
 #pragma once
 
 #include <vector>

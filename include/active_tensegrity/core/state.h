@@ -6,7 +6,10 @@
 
 #include <Eigen/Core>
 
-#include "active_tensegrity/core/mechanics.h"
+#include "active_tensegrity/core/contact.h"
+#include "active_tensegrity/core/kinematics.h"
+#include "active_tensegrity/core/model.h"
+#include "active_tensegrity/core/slot_values.h"
 #include "active_tensegrity/core/summary.h"
 
 namespace active_tensegrity::core

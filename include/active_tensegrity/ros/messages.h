@@ -14,6 +14,7 @@
 #include "active_tensegrity/CableArray.h"
 #include "active_tensegrity/StrutArray.h"
 #include "active_tensegrity/ContactArray.h"
+#include "active_tensegrity/core/cable.h"
 #include "active_tensegrity/core/model.h"
 #include "active_tensegrity/core/state.h"
 

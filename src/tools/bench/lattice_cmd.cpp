@@ -14,6 +14,7 @@
 #include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/dynamics.h"
 #include "active_tensegrity/core/scene.h"
+#include "active_tensegrity/oracle/mechanics.h"
 #include "../cli.h"
 #include "../lattice.h"
 #include "bench.h"

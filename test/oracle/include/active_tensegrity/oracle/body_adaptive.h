@@ -9,6 +9,7 @@
 #include "active_tensegrity/core/adaptive.h"
 #include "active_tensegrity/core/energy.h"
 #include "active_tensegrity/oracle/body_dynamics.h"
+#include "active_tensegrity/oracle/energy_meter.h"
 
 namespace active_tensegrity::core
 {

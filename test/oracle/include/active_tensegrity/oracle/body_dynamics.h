@@ -17,6 +17,7 @@
 #include "active_tensegrity/oracle/sparse_linear_solver.h"
 #include "active_tensegrity/core/state.h"
 #include "active_tensegrity/core/summary.h"
+#include "active_tensegrity/oracle/mechanics.h"
 
 namespace active_tensegrity::core
 {

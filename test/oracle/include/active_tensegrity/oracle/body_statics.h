@@ -11,7 +11,7 @@
 #include <string>
 #include <vector>
 
-#include "active_tensegrity/core/mechanics.h"
+#include "active_tensegrity/oracle/mechanics.h"
 #include "active_tensegrity/oracle/reduced_linear_solver.h"
 #include "active_tensegrity/core/state.h"
 #include "active_tensegrity/core/statics.h"

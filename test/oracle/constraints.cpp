@@ -1,4 +1,4 @@
-#include "active_tensegrity/core/constraints.h"
+#include "active_tensegrity/oracle/constraints.h"
 
 #include <stdexcept>
 #include <string>
