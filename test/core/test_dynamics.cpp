@@ -2,6 +2,7 @@
 // invariants (energy, angular momentum, quaternion norm), a closed-form pendulum period, the
 // measured order of accuracy of each integrator, and a clean failure status.
 #include <algorithm>
+#include <chrono>
 #include <numeric>
 #include <cmath>
 #include <cstdio>
@@ -860,6 +861,27 @@ TEST(LinearSolver, WithApproximationsSuspendedStaticPivotsAreRefinedToRoundOffOr
   EXPECT_EQ(fallback.staticPivotRefusals(), 1);
   fallback.solve(b, x);
   EXPECT_LT((unstable * x - b).lpNorm<Eigen::Infinity>(), 1e-8 * (1.0 + x.lpNorm<Eigen::Infinity>()));
+}
+
+TEST(PartTimers, AgreeWithTheSteadyClock)
+{
+  // the part timers' clock (the time-stamp counter where it is invariant) against steady_clock over the same spin of
+  // 20 ms: a wrong rate (or a counter that does not count wall time) shows as a ratio far from 1; the two readings
+  // of each clock are a few nanoseconds apart, so a preemption lengthens both intervals alike
+  double scoped = 0.0, lapped = 0.0;
+  std::chrono::steady_clock::duration spun{};
+  {
+    const ScopeTimer scope(scoped);
+    LapTimer laps;
+    const auto t0 = std::chrono::steady_clock::now();
+    while (std::chrono::steady_clock::now() - t0 < std::chrono::milliseconds(20)) {}
+    spun = std::chrono::steady_clock::now() - t0;
+    laps.lap(lapped);
+  }
+  const double wall = std::chrono::duration<double>(spun).count();
+  EXPECT_NEAR(scoped / wall, 1.0, 0.02) << scoped << " s against " << wall << " s";
+  EXPECT_NEAR(lapped / wall, 1.0, 0.02) << lapped << " s against " << wall << " s";
+  EXPECT_GT(partSeconds(), 0.0);
 }
 
 TEST(StaticPivotLU, SolvesANonsymmetricMatrixWithSymmetricPatternExactlyAndReportsAZeroPivot)

@@ -209,9 +209,9 @@ struct NaturalStats
   // adaptive steps (advanceTo): accepted, of them at dt_min with their checks still failing, the smallest and largest
   long accepted = 0, at_min_step = 0;
   double h_min = 0.0, h_max = 0.0;
-  // wall time (s) in dynamic steps' parts (steady_clock around each): applied forces and their tangents; contact
-  // (listing, forces and tangents, the pass-through check, the end's contacts); constraint rows; factorizations;
-  // triangular solves
+  // wall time (s) in dynamic steps' parts (summary.h's part timers around each): applied forces and their tangents;
+  // contact (listing, forces and tangents, the pass-through check, the end's contacts); constraint rows;
+  // factorizations; triangular solves
   double forces_time = 0.0, contact_time = 0.0, constraints_time = 0.0, factorization_time = 0.0, solve_time = 0.0;
 };
 
