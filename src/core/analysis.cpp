@@ -37,9 +37,7 @@ double actuationForce(const Model& model, const State& state, int actuator)
     force -= state.lambda(row);
   }
   for (int c : model.actuators[actuator].cables)
-    force += evaluateCable(model, model.cables[c], state.q, state.qd, state.u, model.damping_enabled, nullptr, nullptr,
-                           0.0, 0.0)
-                 .tension;
+    force += evaluateCable(model, model.cables[c], state.q, state.qd, state.u, model.damping_enabled, nullptr).tension;
   return force;
 }
 
@@ -120,8 +118,7 @@ std::vector<CableState> cableStates(const Model& model, const State& state)
   std::vector<CableState> out;
   out.reserve(model.cables.size());
   for (const Cable& c : model.cables)
-    out.push_back(
-        evaluateCable(model, c, state.q, state.qd, state.u, model.damping_enabled, nullptr, nullptr, 0.0, 0.0));
+    out.push_back(evaluateCable(model, c, state.q, state.qd, state.u, model.damping_enabled, nullptr));
   return out;
 }
 
@@ -883,8 +880,7 @@ RunResult run(const Model& model, const std::function<void(const State&)>& user_
     {
       const size_t i = *it;
       const Cable& c = model.cables[i];
-      const CableState cable =
-          evaluateCable(model, c, s.q, s.qd, s.u, model.damping_enabled, nullptr, nullptr, 0.0, 0.0);
+      const CableState cable = evaluateCable(model, c, s.q, s.qd, s.u, model.damping_enabled, nullptr);
       const double stress = cable.tension / c.area;
       if (!(stress > c.yield_strength))
       {

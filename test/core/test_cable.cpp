@@ -36,8 +36,7 @@ Model cableModel()
   m.cables.push_back(winch);
   // soft and strongly damped, stretched 0.2 m at q0: fast shortening clamps it slack
   Cable soft = makeCable("soft", PointRef{ 0, Vec3(0.0, 0.0, -0.6) }, PointRef{ 2, Vec3::Zero() }, 50.0, 0.0, 40.0);
-  soft.rest_length =
-      evaluateCable(m, soft, m.q0, Eigen::VectorXd::Zero(m.nq), {}, false, nullptr, nullptr, 0.0, 0.0).length - 0.2;
+  soft.rest_length = evaluateCable(m, soft, m.q0, Eigen::VectorXd::Zero(m.nq), {}, false, nullptr).length - 0.2;
   m.cables.push_back(soft);
   return m;
 }
@@ -45,7 +44,7 @@ Model cableModel()
 CableState evaluate(const Model& m, const Cable& c, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
                     const ActuationValues& u, bool damping, Eigen::VectorXd* F = nullptr)
 {
-  return evaluateCable(m, c, q, qd, u, damping, F, nullptr, 0.0, 0.0);
+  return evaluateCable(m, c, q, qd, u, damping, F);
 }
 
 double energy(const Model& m, const Cable& c, const Eigen::VectorXd& q, const ActuationValues& u)

@@ -228,7 +228,7 @@ TEST(QuadruplexScene, CableRestLengthsGiveTheTablePrestress)
     EXPECT_NEAR(c.area, M_PI * 1e-4, 1e-15);
     EXPECT_TRUE(c.tension_only);
     // physics: the cable carries exactly its prestress in the initial configuration
-    const CableState s = evaluateCable(m, c, m.q0, qd, {}, false, nullptr, nullptr, 0.0, 0.0);
+    const CableState s = evaluateCable(m, c, m.q0, qd, {}, false, nullptr);
     EXPECT_NEAR(s.length, l, 1e-12);
     EXPECT_NEAR(s.tension, tension, 1e-9 * tension);
   }
@@ -413,7 +413,7 @@ TEST(MiniScene, CablesAndSpringsCarryTheirPrestressInitially)
     const bool spring = name[0] == 'K';
     EXPECT_NEAR(c.rest_length, spring ? l - tension / 500.0 : l / (1.0 + tension / ea), 1e-12);
     EXPECT_NEAR(c.stiffness, spring ? 500.0 : ea / c.rest_length, 1e-9);
-    const CableState s = evaluateCable(m, c, m.q0, qd, {}, false, nullptr, nullptr, 0.0, 0.0);
+    const CableState s = evaluateCable(m, c, m.q0, qd, {}, false, nullptr);
     EXPECT_NEAR(s.length, l, 1e-12);
     EXPECT_NEAR(s.tension, tension, 1e-9 * tension);
   }

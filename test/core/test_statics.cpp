@@ -68,8 +68,7 @@ TEST(Quadruplex, PrestressedGeometryIsInEquilibrium)
     const bool at_b = cb.body == strut && cb.local == model.nodes[p5].point.local;
     if (!at_a && !at_b)
       continue;
-    const CableState cs =
-        evaluateCable(model, c, model.q0, Eigen::VectorXd::Zero(model.nq), {}, false, nullptr, nullptr, 0, 0);
+    const CableState cs = evaluateCable(model, c, model.q0, Eigen::VectorXd::Zero(model.nq), {}, false, nullptr);
     const Vec3 pa = pointKinematics(model, ca, model.q0, Eigen::VectorXd::Zero(model.nq)).p;
     const Vec3 pb = pointKinematics(model, cb, model.q0, Eigen::VectorXd::Zero(model.nq)).p;
     pull += cs.tension * (at_a ? (pb - pa) : (pa - pb)).normalized();

@@ -496,8 +496,8 @@ void BodyStaticSolver::parameterDerivative(const Eigen::VectorXd& q, double w, E
     for (const Cable& c : model.cables)
       if (c.actuator >= 0 && path_u_end_[c.actuator].value != path_u_start_[c.actuator].value)
       {
-        evaluateCable(model, c, q, zero_q_, plus, model.damping_enabled, &fplus_, nullptr, 0.0, 0.0);
-        evaluateCable(model, c, q, zero_q_, minus, model.damping_enabled, &fminus_, nullptr, 0.0, 0.0);
+        evaluateCable(model, c, q, zero_q_, plus, model.damping_enabled, &fplus_);
+        evaluateCable(model, c, q, zero_q_, minus, model.damping_enabled, &fminus_);
       }
   }
   else

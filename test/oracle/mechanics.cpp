@@ -1,5 +1,7 @@
 #include "active_tensegrity/oracle/mechanics.h"
 
+#include "active_tensegrity/oracle/cable_tangents.h"
+
 #include <algorithm>
 #include <cmath>
 #include <string>
@@ -83,7 +85,7 @@ void System::appliedForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, c
       F.segment<3>(b.offset) += b.mass * model_.gravity;
   if (jac)
     for (const Cable& c : model_.cables)
-      evaluateCable(model_, c, q, qd, u, model_.damping_enabled, &F, jac, k_weight, c_weight);
+      evaluateCableTangents(model_, c, q, qd, u, model_.damping_enabled, &F, jac, k_weight, c_weight);
   else if (!model_.cables.empty())
   {
     // a residual without tangents: each strut's frame once, then every cable point from it
@@ -348,7 +350,7 @@ double System::potentialEnergy(const Eigen::VectorXd& q, const ActuationValues& 
     }
   }
   for (const Cable& c : model_.cables)
-    e += cablePotentialEnergy(c, evaluateCable(model_, c, q, zero, u, false, nullptr, nullptr, 0.0, 0.0));
+    e += cablePotentialEnergy(c, evaluateCable(model_, c, q, zero, u, false, nullptr));
   return e;
 }
 

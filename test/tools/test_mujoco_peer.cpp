@@ -62,7 +62,7 @@ void expectCablesAsOurs(const at::Model& model, tools::MujocoPeer& peer)
   for (size_t i = 0; i < model.cables.size(); ++i)
   {
     const at::CableState ours =
-        at::evaluateCable(model, model.cables[i], s.q, s.qd, s.u, model.damping_enabled, nullptr, nullptr, 0.0, 0.0);
+        at::evaluateCable(model, model.cables[i], s.q, s.qd, s.u, model.damping_enabled, nullptr);
     EXPECT_NEAR(peer.cableLength(static_cast<int>(i)), ours.length, 1e-12) << model.cables[i].name;
     EXPECT_NEAR(peer.cableTension(static_cast<int>(i)), ours.tension, 1e-9 * (1.0 + ours.tension))
         << model.cables[i].name;

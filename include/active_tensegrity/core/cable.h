@@ -21,7 +21,6 @@
 
 #include <Eigen/Core>
 
-#include "active_tensegrity/core/block_sparse.h"
 #include "active_tensegrity/core/kinematics.h"
 #include "active_tensegrity/core/model.h"
 
@@ -44,12 +43,10 @@ struct CableState
 /// unless `damping`. What evaluateCable applies once it has l and l_dot from the points.
 CableState cableLaw(const Cable& cable, double length, double rate, const ActuationValues& u, bool damping);
 
-/// Evaluates one cable (two points or sliding through several) at (q, qd) under actuation u (empty:
-/// no pull-in); adds its generalized force into F (if not null) and k_weight * K + c_weight * C into
-/// jac (if not null). K and C are exact (material, geometric and damping parts).
+/// Evaluates one cable (two points or sliding through several) at (q, qd) under actuation u (empty: no pull-in) and
+/// adds its generalized force into F (if not null). (Its exact tangents in these coordinates are the test oracle's.)
 CableState evaluateCable(const Model& model, const Cable& cable, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
-                         const ActuationValues& u, bool damping, Eigen::VectorXd* F, BlockSparseMatrix* jac,
-                         double k_weight, double c_weight);
+                         const ActuationValues& u, bool damping, Eigen::VectorXd* F = nullptr);
 /// The cable's state alone at its point slots (`points`, as many as the cable has), the points' motion from frames
 /// formed at (q, qd).
 CableState evaluateCable(const Cable& cable, const PointSlot* points, const BodyFrames& frames,

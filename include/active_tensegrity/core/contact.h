@@ -43,8 +43,6 @@
 
 namespace active_tensegrity::core
 {
-class BlockSparseMatrix;
-
 /// How the normal force is evaluated: with Lankarani-Nikravesh damping and friction (dynamics), or
 /// Hertz's law alone (statics: no velocities, no friction).
 enum class ContactMode

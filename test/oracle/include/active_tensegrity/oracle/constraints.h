@@ -28,7 +28,7 @@
 
 #include <Eigen/Core>
 
-#include "active_tensegrity/core/block_sparse.h"
+#include "active_tensegrity/oracle/block_sparse.h"
 #include "active_tensegrity/core/kinematics.h"
 #include "active_tensegrity/core/model.h"
 

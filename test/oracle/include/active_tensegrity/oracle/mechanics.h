@@ -13,7 +13,7 @@
 
 #include <Eigen/Core>
 
-#include "active_tensegrity/core/block_sparse.h"
+#include "active_tensegrity/oracle/block_sparse.h"
 #include "active_tensegrity/core/broad_phase.h"
 #include "active_tensegrity/core/cable.h"
 #include "active_tensegrity/oracle/constraints.h"

@@ -7,7 +7,7 @@
 #include <Eigen/Core>
 #include <Eigen/QR>
 
-#include "active_tensegrity/core/block_sparse.h"
+#include "active_tensegrity/oracle/block_sparse.h"
 #include "active_tensegrity/oracle/sparse_linear_solver.h"
 
 namespace active_tensegrity::core

@@ -1,4 +1,4 @@
-#include "active_tensegrity/core/block_sparse.h"
+#include "active_tensegrity/oracle/block_sparse.h"
 
 #include <algorithm>
 #include <stdexcept>
