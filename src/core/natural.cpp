@@ -938,11 +938,6 @@ constexpr double kSolvesAverage = 0.25;  // after a refused factorization, this 
 // keeps a matrix for); refined, within kStaticRefinedCheck.
 constexpr double kStaticCheck = 0.5;
 constexpr double kStaticRefinedCheck = 1e-8;
-// The refined solve: at most kRefineMost corrections, ending at one below kRefineRoundOff of the solution, or at one
-// that shrank less than half (round-off), which passes when the smallest was below kRefineStalled of the solution.
-constexpr int kRefineMost = 8;
-constexpr double kRefineRoundOff = 1e-14;
-constexpr double kRefineStalled = 1e-10;
 constexpr int kDirectPairsMost = 64;       // up to this many strut pairs are checked without the broad phase
 constexpr double kListMarginLeast = 2e-3;  // m: the least margin of the listed contacts
 constexpr double kListMarginSteps = 8.0;   // the margin in steps' motions
@@ -1545,26 +1540,7 @@ bool NaturalSolver::factorizeStaticPivot(bool refined)
 
 bool NaturalSolver::solveRefined(const Eigen::VectorXd& rhs, Eigen::VectorXd& out)
 {
-  const Eigen::SparseMatrix<double>& a = pattern_symmetric_ ? sparse_ : symmetric_;
-  static_lu_.solve(rhs, out);
-  double previous = std::numeric_limits<double>::infinity();
-  for (int k = 0; k < kRefineMost; ++k)
-  {
-    refine_r_ = rhs;
-    refine_r_.noalias() -= a * out;
-    static_lu_.solve(refine_r_, refine_d_);
-    out += refine_d_;
-    const double size = refine_d_.lpNorm<Eigen::Infinity>();
-    const double scale = out.lpNorm<Eigen::Infinity>();
-    if (!std::isfinite(size))
-      return false;
-    if (size <= kRefineRoundOff * scale)
-      return true;
-    if (size > 0.5 * previous)
-      return previous <= kRefineStalled * scale;
-    previous = size;
-  }
-  return previous <= kRefineStalled * out.lpNorm<Eigen::Infinity>();
+  return static_lu_.solveRefined(pattern_symmetric_ ? sparse_ : symmetric_, rhs, out, refine_r_, refine_d_);
 }
 
 Eigen::VectorXd NaturalSolver::solve(const Eigen::VectorXd& rhs)

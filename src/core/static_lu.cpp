@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include <Eigen/OrderingMethods>
 
@@ -225,6 +226,32 @@ void StaticPivotLU::solve(const Eigen::VectorXd& b, Eigen::VectorXd& x) const
   x.resize(n);
   for (int i = 0; i < n; ++i)
     x[i] = t_[perm_[i]];
+}
+
+bool StaticPivotLU::solveRefined(const Eigen::SparseMatrix<double>& a, const Eigen::VectorXd& b, Eigen::VectorXd& x,
+                                 Eigen::VectorXd& r, Eigen::VectorXd& d) const
+{
+  constexpr int kRefineMost = 8;
+  constexpr double kRefineRoundOff = 1e-14;
+  constexpr double kRefineStalled = 1e-10;
+  solve(b, x);
+  double previous = std::numeric_limits<double>::infinity();
+  for (int k = 0; k < kRefineMost; ++k)
+  {
+    r = b;
+    r.noalias() -= a * x;
+    solve(r, d);
+    x += d;
+    const double size = d.lpNorm<Eigen::Infinity>();
+    if (!std::isfinite(size))
+      return false;
+    if (size <= kRefineRoundOff * x.lpNorm<Eigen::Infinity>())
+      return true;
+    if (size > 0.5 * previous)
+      return previous <= kRefineStalled * x.lpNorm<Eigen::Infinity>();
+    previous = size;
+  }
+  return previous <= kRefineStalled * x.lpNorm<Eigen::Infinity>();
 }
 
 }  // namespace active_tensegrity::core

@@ -41,15 +41,8 @@ constexpr int kBodyBlockPauseMost = 256;
 /// step instead of 3.75.
 constexpr int kBodyBlockSkipLarge = 1;
 constexpr int kBodyBlockDoublingsMost = 8;
-/// The refined static pivots: at most this many corrections per solve (they shrink about 1e-5 each: three
-/// reach round-off) ...
-constexpr int kRefineMost = 8;
-/// ... stopping at a correction this small against the solution, or at one that shrank less than half (round-off:
-/// on the 504-strut lattice the corrections go 3e-6, 2e-11, 9e-14, 1e-13), which passes when the smallest so far
-/// is below kRefineStalled against the solution.
-constexpr double kRefineRoundOff = 1e-14;
-constexpr double kRefineStalled = 1e-10;
-/// Their factorization check: A 1 refined must come back within this of 1.
+/// The refined static pivots (StaticPivotLU::solveRefined): their factorization check, A 1 refined must come back
+/// within this of 1.
 constexpr double kRefineCheck = 1e-8;
 
 bool hasSymmetricPattern(const Eigen::SparseMatrix<double>& a)
@@ -108,24 +101,7 @@ bool SparseLinearSolver::factorizeStaticPivot(const Eigen::SparseMatrix<double>&
 
 bool SparseLinearSolver::solveRefined(const Eigen::VectorXd& b, Eigen::VectorXd& x) const
 {
-  static_lu_.solve(b, x);
-  double previous = std::numeric_limits<double>::infinity();
-  for (int k = 0; k < kRefineMost; ++k)
-  {
-    refine_r_ = b;
-    refine_r_.noalias() -= refine_a_ * x;
-    static_lu_.solve(refine_r_, refine_d_);
-    x += refine_d_;
-    const double size = refine_d_.lpNorm<Eigen::Infinity>();
-    if (!std::isfinite(size))
-      return false;
-    if (size <= kRefineRoundOff * x.lpNorm<Eigen::Infinity>())
-      return true;
-    if (size > 0.5 * previous)
-      return previous <= kRefineStalled * x.lpNorm<Eigen::Infinity>();
-    previous = size;
-  }
-  return previous <= kRefineStalled * x.lpNorm<Eigen::Infinity>();
+  return static_lu_.solveRefined(refine_a_, b, x, refine_r_, refine_d_);
 }
 
 void SparseLinearSolver::distrustBodyBlocks()
