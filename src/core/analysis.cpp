@@ -37,7 +37,7 @@ double actuationForce(const Model& model, const State& state, int actuator)
     force -= state.lambda(row);
   }
   for (int c : model.actuators[actuator].cables)
-    force += evaluateCable(model, model.cables[c], state.q, state.qd, state.u, model.damping_enabled, nullptr).tension;
+    force += evaluateCable(model, model.cables[c], state.q, state.qd, state.u, model.damping_enabled).tension;
   return force;
 }
 
@@ -118,7 +118,7 @@ std::vector<CableState> cableStates(const Model& model, const State& state)
   std::vector<CableState> out;
   out.reserve(model.cables.size());
   for (const Cable& c : model.cables)
-    out.push_back(evaluateCable(model, c, state.q, state.qd, state.u, model.damping_enabled, nullptr));
+    out.push_back(evaluateCable(model, c, state.q, state.qd, state.u, model.damping_enabled));
   return out;
 }
 
@@ -396,7 +396,7 @@ void appendActiveContacts(const Model& model, const std::vector<int>& slots, con
   for (int i : slots)
   {
     const double v0 = state.contactSpeed(i);
-    const ContactPairState st = evaluateContact(model, i, state.q, state.qd, v0, mode, nullptr);
+    const ContactPairState st = evaluateContact(model, i, state.q, state.qd, v0, mode);
     if (st.active)
       out.push_back(st);
   }
@@ -880,7 +880,7 @@ RunResult run(const Model& model, const std::function<void(const State&)>& user_
     {
       const size_t i = *it;
       const Cable& c = model.cables[i];
-      const CableState cable = evaluateCable(model, c, s.q, s.qd, s.u, model.damping_enabled, nullptr);
+      const CableState cable = evaluateCable(model, c, s.q, s.qd, s.u, model.damping_enabled);
       const double stress = cable.tension / c.area;
       if (!(stress > c.yield_strength))
       {

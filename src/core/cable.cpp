@@ -21,14 +21,12 @@ double elasticTension(const Cable& cable, const CableState& s)
   const double stretch = s.length - s.rest_length;
   return storesEnergy(cable, stretch) ? s.stiffness * stretch : 0.0;
 }
-/// A cable's state and, when `force`, its forces -T w_j at its points (dl/dp_j = w_j = n_{j-1} - n_j, n_k the
-/// unit vector of segment k), with the points' motion and the force application supplied by the caller:
-/// motion(j, p, v) and apply(j, f).
-template <class Motion, class Apply>
-CableState cableForces(const Cable& cable, int m, const ActuationValues& u, bool damping, bool force, Motion&& motion,
-                       Apply&& apply)
+/// A cable's state from its points' motion, supplied by the caller: motion(j, p, v).
+template <class Motion>
+CableState cableState(const Cable& cable, const ActuationValues& u, bool damping, Motion&& motion)
 {
-  std::array<Vec3, Cable::kMaxPoints> p, v, n;
+  std::array<Vec3, Cable::kMaxPoints> p, v;
+  const int m = static_cast<int>(cable.points.size());
   for (int j = 0; j < m; ++j)
     motion(j, p[j], v[j]);
   double length = 0.0, rate = 0.0;
@@ -36,19 +34,11 @@ CableState cableForces(const Cable& cable, int m, const ActuationValues& u, bool
   {
     const Vec3 d = p[k + 1] - p[k];
     const double seg = d.norm();
-    n[k] = seg > 0.0 ? Vec3(d / seg) : Vec3::Zero();
+    const Vec3 n = seg > 0.0 ? Vec3(d / seg) : Vec3::Zero();
     length += seg;
-    rate += n[k].dot(v[k + 1] - v[k]);
+    rate += n.dot(v[k + 1] - v[k]);
   }
-  const CableState s = cableLaw(cable, length, rate, u, damping);
-  if (s.slack || !force)
-    return s;
-  for (int j = 0; j < m; ++j)
-  {
-    const Vec3 w = (j > 0 ? n[j - 1] : Vec3::Zero()) - (j + 1 < m ? n[j] : Vec3::Zero());
-    apply(j, -s.tension * w);
-  }
-  return s;
+  return cableLaw(cable, length, rate, u, damping);
 }
 }  // namespace
 
@@ -80,30 +70,16 @@ CableState cableLaw(const Cable& cable, double length, double rate, const Actuat
 }
 
 CableState evaluateCable(const Model& model, const Cable& cable, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
-                         const ActuationValues& u, bool damping, Eigen::VectorXd* F)
+                         const ActuationValues& u, bool damping)
 {
-  return cableForces(
-      cable, static_cast<int>(cable.points.size()), u, damping, F != nullptr,
-      [&](int j, Vec3& p, Vec3& v) { pointMotion(model, cable.points[j], q, qd, p, v); },
-      [&](int j, const Vec3& f) { addPointForce(model, cable.points[j], q, f, *F); });
-}
-
-CableState evaluateCable(const Cable& cable, const PointSlot* points, const BodyFrames& frames,
-                         const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const ActuationValues& u, bool damping,
-                         PointForceSum& sum, Eigen::VectorXd& F)
-{
-  return cableForces(
-      cable, static_cast<int>(cable.points.size()), u, damping, true,
-      [&](int j, Vec3& p, Vec3& v) { frames.motion(points[j], q, qd, p, v); },
-      [&](int j, const Vec3& f) { sum.add(points[j], f, F); });
+  return cableState(cable, u, damping,
+                    [&](int j, Vec3& p, Vec3& v) { pointMotion(model, cable.points[j], q, qd, p, v); });
 }
 
 CableState evaluateCable(const Cable& cable, const PointSlot* points, const BodyFrames& frames,
                          const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const ActuationValues& u, bool damping)
 {
-  return cableForces(
-      cable, static_cast<int>(cable.points.size()), u, damping, false,
-      [&](int j, Vec3& p, Vec3& v) { frames.motion(points[j], q, qd, p, v); }, [](int, const Vec3&) {});
+  return cableState(cable, u, damping, [&](int j, Vec3& p, Vec3& v) { frames.motion(points[j], q, qd, p, v); });
 }
 
 double cablePotentialEnergy(const Cable& cable, const CableState& s)

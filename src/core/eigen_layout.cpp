@@ -1,6 +1,5 @@
 #include "active_tensegrity/core/eigen_layout.h"
 
-#include "active_tensegrity/core/contact.h"
 #include "active_tensegrity/core/model.h"
 #include "active_tensegrity/core/state.h"
 
@@ -29,7 +28,6 @@ EigenLayout libraryEigenLayout()
   l.max_static_align_bytes = EIGEN_MAX_STATIC_ALIGN_BYTES;
   l.probe = layoutOf(&EigenLayoutProbe::vector);
   l.constraint = layoutOf(&Constraint::coefficients);
-  l.contact_contribution = layoutOf(&ContactContribution::damping);
   l.model = layoutOf(&Model::gravity);
   l.state = layoutOf(&State::lambda);
   return l;

@@ -919,6 +919,99 @@ ContactPairState naturalContact(const NaturalModel& nm, const NaturalContactSlot
   return st;
 }
 
+// ---- contacts at body poses ----------------------------------------------------------------------------
+
+namespace
+{
+// A strut's end nodes a and b (centre -/+ L/2 e), their velocities and its spin rate about e at body poses q and
+// rates qd (none: at rest). omega = A(Theta) 2 L(Theta) Theta_dot, so the spin e . omega is the body-frame z part.
+void strutEnds(const Body& b, const Eigen::VectorXd& q, const Eigen::VectorXd* qd, Vec3* r, Vec3* v, double& spin)
+{
+  const Vec4 theta = q.segment<4>(b.offset + 3);
+  const Vec3 e = bodyZAxis(theta), c = q.segment<3>(b.offset);
+  const double half = 0.5 * b.length;
+  r[0] = c - half * e;
+  r[1] = c + half * e;
+  if (!qd)
+    return;
+  const Vec3 w_body = 2.0 * lTimes(theta, qd->segment<4>(b.offset + 3));
+  const Vec3 e_dot = rotate(theta, w_body).cross(e);
+  v[0] = qd->segment<3>(b.offset) - half * e_dot;
+  v[1] = qd->segment<3>(b.offset) + half * e_dot;
+  spin = w_body.z();
+}
+
+// the natural coordinates' law on the nodes of contact slot `slot` at body poses; qd null: at rest; no force unless
+// `force`
+ContactPairState contactAtPoses(const Model& model, int slot, const Eigen::VectorXd& q, const Eigen::VectorXd* qd,
+                                double impact_speed, bool force)
+{
+  Vec3 r[4], v[4];
+  for (int i = 0; i < 4; ++i)
+    r[i] = v[i] = Vec3::Zero();
+  double spin[2] = { 0.0, 0.0 };
+  ContactPairState st;
+  st.pair = slot;
+  Vec14 f;
+  if (model.isGroundSlot(slot))
+  {
+    const GroundContact& g = model.groundContactOf(slot);
+    const Body& b = model.bodies[g.body];
+    st.body_a = g.body;
+    st.body_b = -1;
+    GroundConstants gc;
+    gc.radius = g.radius;
+    gc.stiffness = g.stiffness;
+    if (b.kind == BodyKind::kStrut)
+    {
+      gc.strut = true;
+      gc.sphere_end = g.local.z() > 0.0 ? 1 : 0;
+      gc.inv_length = 1.0 / b.length;
+      gc.inv_length2 = gc.inv_length * gc.inv_length;
+      strutEnds(b, q, qd, r, v, spin[0]);
+    }
+    else if (qd)
+      pointMotion(model, PointRef{ g.body, g.local }, q, *qd, r[0], v[0]);
+    else
+      r[0] = pointPosition(model, PointRef{ g.body, g.local }, q);
+    groundKernel(model, gc, r, v, spin, impact_speed, force, f, st);
+    return st;
+  }
+  const auto [body_a, body_b] = model.pairBodies(slot);
+  st.body_a = body_a;
+  st.body_b = body_b;
+  const StrutPair p = model.strutPair(slot);
+  PairConstants pc;
+  const int bodies[2] = { body_a, body_b };
+  for (int k = 0; k < 2; ++k)
+  {
+    const Body& b = model.bodies[bodies[k]];
+    pc.radius[k] = b.radius();
+    pc.inv_length[k] = 1.0 / b.length;
+    pc.inv_length2[k] = pc.inv_length[k] * pc.inv_length[k];
+    pc.scale += 0.5 * b.length;
+    strutEnds(b, q, qd, r + 2 * k, v + 2 * k, spin[k]);
+  }
+  pc.stiffness90 = p.stiffness90;
+  pc.core_stiffness90 = p.core_stiffness90;
+  pc.core_gap = p.core_gap;
+  pc.floor_sin = std::sin(model.contact.min_crossing_angle);
+  pairKernel(model, pc, r, v, spin, impact_speed, force, f, st);
+  return st;
+}
+}  // namespace
+
+ContactPairState contactGeometry(const Model& model, int pair, const Eigen::VectorXd& q)
+{
+  return contactAtPoses(model, pair, q, nullptr, 0.0, false);
+}
+
+ContactPairState evaluateContact(const Model& model, int pair, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                                 double impact_speed, ContactMode mode)
+{
+  return contactAtPoses(model, pair, q, mode == ContactMode::kDynamic ? &qd : nullptr, impact_speed, true);
+}
+
 namespace
 {
 constexpr double kNearFloor = 1e-4;  // m: the least motion the near pairs allow for

@@ -361,7 +361,7 @@ StructureReport checkStructure(const Model& model, const State& state)
   for (const Cable& c : model.cables)
   {
     // an element at its free length to round-off (lengths from q carry a few ulps) carries nothing either
-    const CableState st = evaluateCable(model, c, state.q, zero, u, false, nullptr);
+    const CableState st = evaluateCable(model, c, state.q, zero, u, false);
     if (c.tension_only && (st.slack || st.length - st.rest_length <= kFreeLengthTolerance * st.rest_length))
       report.slack_cables.push_back(c.name);
   }

@@ -253,8 +253,8 @@ void MessageBuilder::addMarkers(const core::State& state, const std::vector<core
     Marker& into = cables[i].slack ? slack : taut;
     for (size_t k = 0; k + 1 < cable.points.size(); ++k)
     {
-      into.points.push_back(point(core::pointKinematics(model_, cable.points[k], q, state.qd).p));
-      into.points.push_back(point(core::pointKinematics(model_, cable.points[k + 1], q, state.qd).p));
+      into.points.push_back(point(core::pointPosition(model_, cable.points[k], q)));
+      into.points.push_back(point(core::pointPosition(model_, cable.points[k + 1], q)));
       if (!cables[i].slack)
       {
         into.colors.push_back(colour);

@@ -393,7 +393,7 @@ std::vector<bool> MujocoPeer::Impl::mapDrivenNodes()
       if (j != i && isGuideOf(model.constraints[j], c))
         guide = static_cast<int>(j);
     const core::Body& body = model.bodies[c.a.body];
-    const Vec3 p0 = core::pointKinematics(model, c.a, model.q0, Eigen::VectorXd::Zero(model.nq)).p;
+    const Vec3 p0 = core::pointPosition(model, c.a, model.q0);
     if (body.kind == core::BodyKind::kPointMass)
     {
       if (guide < 0)

@@ -8,6 +8,7 @@
 
 #include <gtest/gtest.h>
 
+#include "active_tensegrity/oracle/body_kinematics.h"
 #include "active_tensegrity/core/cable.h"
 #include "test_models.h"
 
@@ -36,7 +37,7 @@ Model cableModel()
   m.cables.push_back(winch);
   // soft and strongly damped, stretched 0.2 m at q0: fast shortening clamps it slack
   Cable soft = makeCable("soft", PointRef{ 0, Vec3(0.0, 0.0, -0.6) }, PointRef{ 2, Vec3::Zero() }, 50.0, 0.0, 40.0);
-  soft.rest_length = evaluateCable(m, soft, m.q0, Eigen::VectorXd::Zero(m.nq), {}, false, nullptr).length - 0.2;
+  soft.rest_length = evaluateCable(m, soft, m.q0, Eigen::VectorXd::Zero(m.nq), {}, false).length - 0.2;
   m.cables.push_back(soft);
   return m;
 }

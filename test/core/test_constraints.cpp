@@ -7,6 +7,7 @@
 
 #include <gtest/gtest.h>
 
+#include "active_tensegrity/oracle/body_rotation.h"
 #include "active_tensegrity/oracle/constraints.h"
 #include "fd_check.h"
 #include "test_models.h"

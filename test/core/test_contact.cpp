@@ -1,12 +1,13 @@
-// Strut contact (core/contact): the exact tangents of the normal and friction forces against central
-// differences in all 14 coordinates and 14 velocities of a pair (Theta off the unit sphere too), per
-// regime and for random crossings away from the kinks; the stiffness law; special configurations
-// (parallel, end to end, end to side) stay finite and point the right way; friction never adds energy.
+// Strut contact (core/contact, and the oracle's body coordinates): the exact tangents of the normal and friction forces
+// against central differences in all 14 coordinates and 14 velocities of a pair (Theta off the unit sphere too), per
+// regime and for random crossings away from the kinks; the stiffness law; special configurations (parallel, end to end,
+// end to side) stay finite and point the right way; friction never adds energy.
 #include <cmath>
 #include <random>
 
 #include <gtest/gtest.h>
 
+#include "active_tensegrity/oracle/body_contact.h"
 #include "active_tensegrity/core/contact.h"
 #include "active_tensegrity/oracle/mechanics.h"
 #include "fd_check.h"
@@ -652,4 +653,60 @@ TEST(LinearLaw, SeparatingFasterThanTheSpringHoldsNeverPulls)
   EXPECT_EQ(c.force.norm(), 0.0);
   EXPECT_EQ(c.stiffness.norm(), 0.0);
   EXPECT_EQ(c.damping.norm(), 0.0);
+}
+
+namespace
+{
+// the core's evaluation at body poses (the natural coordinates' law on the struts' end nodes and spin rates) against
+// the body coordinates' law: the same state and force
+// rates of unit Euler parameters: each strut's Theta_dot with its part along Theta taken out (poses carry no scaling)
+Eigen::VectorXd onTheUnitSphere(const Model& m, const Eigen::VectorXd& q, Eigen::VectorXd qd)
+{
+  for (const Body& b : m.bodies)
+    if (b.kind == BodyKind::kStrut)
+    {
+      const Vec4 theta = q.segment<4>(b.offset + 3);
+      qd.segment<4>(b.offset + 3) -= theta.dot(qd.segment<4>(b.offset + 3)) * theta;
+    }
+  return qd;
+}
+
+void expectSameContact(const Model& m, int slot, const Eigen::VectorXd& q, const Eigen::VectorXd& qd_any, double v0,
+                       ContactMode mode, const std::string& what)
+{
+  const Eigen::VectorXd qd = onTheUnitSphere(m, q, qd_any);
+  const ContactPairState a = evaluateContact(m, slot, q, qd, v0, mode);
+  const ContactPairState b = evaluateContact(m, slot, q, qd, v0, mode, nullptr);
+  ASSERT_TRUE(b.active) << what;
+  ASSERT_EQ(a.active, b.active) << what;
+  const double scale = std::max(1.0, b.normal_force);
+  EXPECT_NEAR(a.penetration, b.penetration, 1e-12) << what;
+  EXPECT_NEAR(a.penetration_rate, b.penetration_rate, 1e-10) << what;
+  EXPECT_NEAR(a.normal_force, b.normal_force, 1e-9 * scale) << what;
+  EXPECT_NEAR(a.friction_force, b.friction_force, 1e-9 * scale) << what;
+  EXPECT_NEAR(a.slip_speed, b.slip_speed, 1e-10) << what;
+  EXPECT_LT((a.force_on_a - b.force_on_a).norm(), 1e-9 * scale) << what;
+  EXPECT_LT((a.point_a - b.point_a).norm(), 1e-12) << what;
+  EXPECT_EQ(a.body_a, b.body_a) << what;
+  EXPECT_EQ(a.body_b, b.body_b) << what;
+}
+}  // namespace
+
+TEST(ContactAtPoses, AgreesWithTheBodyCoordinatesLawInEveryRegime)
+{
+  std::mt19937 rng(23);
+  const double v0 = 0.5;
+  for (const Model& m : { twoStruts(0.4, 0.6), layeredStruts(0.4, 0.6) })
+    for (int trial = 0; trial < 8; ++trial)
+    {
+      // unit Theta (poses, not Newton iterates); overlaps past the layered struts' sleeves too
+      const Eigen::VectorXd q = crossing(m, 1e-3 * (1 + 4 * trial), rng, false);
+      const std::string what = m.bodies[0].layers.size() > 1 ? "layered " : "plain ";
+      expectSameContact(m, 0, q, Eigen::VectorXd::Zero(m.nq), 0.0, ContactMode::kStatic,
+                        what + std::to_string(trial) + " static");
+      // about held (below v0 = 0.01 m/s), on the ramp and sliding (the rates made tangent to the unit sphere then)
+      for (double slip : { 0.005, 0.05, 0.5 })
+        expectSameContact(m, 0, q, velocitiesWithSlip(m, q, slip, v0, rng), v0, ContactMode::kDynamic,
+                          what + std::to_string(trial) + " slip " + std::to_string(slip));
+    }
 }

@@ -13,6 +13,7 @@
 
 #include <Eigen/SparseCholesky>
 
+#include "active_tensegrity/oracle/body_rotation.h"
 #include "active_tensegrity/core/adaptive.h"
 #include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/dynamics.h"

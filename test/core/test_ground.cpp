@@ -11,6 +11,7 @@
 
 #include <gtest/gtest.h>
 
+#include "active_tensegrity/oracle/body_contact.h"
 #include "active_tensegrity/core/analysis.h"
 #include "active_tensegrity/core/dynamics.h"
 #include "active_tensegrity/core/scene.h"
@@ -587,4 +588,41 @@ TEST(GroundSupport, ModifiedNewtonSettlesTheSixBarAsFullNewtonDoes)
   EXPECT_LT(modified.factorizations, 400 / 4);
   EXPECT_LT(modified.newton_iterations, 3 * 400);
   EXPECT_LT(distance, 1e-6);
+}
+
+TEST(GroundContact, AtPosesAgreesWithTheBodyCoordinatesLaw)
+{
+  // the core's evaluation at body poses (the natural coordinates' law on the strut's end nodes and spin rate)
+  // against the body coordinates' law, about held, on the ramp and sliding, and in statics
+  std::mt19937 rng(29);
+  const Model m = loadSceneFromString(strutScene(0.5, 0.7, 0.6), "strut");
+  const double v0 = 0.8;
+  for (int trial = 0; trial < 6; ++trial)
+  {
+    Eigen::VectorXd q;
+    const int slot = tiltedIntoTheGround(m, 2e-3 * (1.0 + trial), rng, q);
+    ASSERT_GE(slot, 0);
+    q.segment<4>(3).normalize();  // poses: unit Theta
+    for (double slip : { 0.0, 0.005, 0.04, 0.3 })
+    {
+      // (the rates of unit Theta: the part along Theta taken out)
+      Eigen::VectorXd qd = slip > 0.0 ? velocitiesWithSlip(m, slot, q, slip, v0, rng) : Eigen::VectorXd::Zero(m.nq);
+      qd.segment<4>(3) -= q.segment<4>(3).dot(qd.segment<4>(3)) * q.segment<4>(3);
+      for (ContactMode mode : { ContactMode::kStatic, ContactMode::kDynamic })
+      {
+        const std::string what = "trial " + std::to_string(trial) + " slip " + std::to_string(slip) +
+                                 (mode == ContactMode::kStatic ? " static" : " dynamic");
+        const ContactPairState a = evaluateContact(m, slot, q, qd, v0, mode);
+        const ContactPairState b = evaluateContact(m, slot, q, qd, v0, mode, nullptr);
+        ASSERT_TRUE(a.active && b.active) << what;
+        const double scale = std::max(1.0, b.normal_force);
+        EXPECT_NEAR(a.penetration, b.penetration, 1e-12) << what;
+        EXPECT_NEAR(a.normal_force, b.normal_force, 1e-9 * scale) << what;
+        EXPECT_NEAR(a.friction_force, b.friction_force, 1e-9 * scale) << what;
+        EXPECT_LT((a.force_on_a - b.force_on_a).norm(), 1e-9 * scale) << what;
+        EXPECT_EQ(a.body_a, b.body_a) << what;
+        EXPECT_EQ(a.body_b, -1) << what;
+      }
+    }
+  }
 }

@@ -3,6 +3,7 @@
 
 #include <gtest/gtest.h>
 
+#include "active_tensegrity/oracle/body_rotation.h"
 #include "active_tensegrity/core/rotation.h"
 #include "fd_check.h"
 

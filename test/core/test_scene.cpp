@@ -138,7 +138,7 @@ Vec3 nodePosition(const Model& model, const std::string& name, const Eigen::Vect
 {
   const int i = model.findNode(name);
   EXPECT_GE(i, 0) << name;
-  return pointKinematics(model, model.nodes.at(i).point, q, Eigen::VectorXd::Zero(model.nq)).p;
+  return pointPosition(model, model.nodes.at(i).point, q);
 }
 
 // |Phi(q0, u)| with every actuator at `value`
@@ -228,7 +228,7 @@ TEST(QuadruplexScene, CableRestLengthsGiveTheTablePrestress)
     EXPECT_NEAR(c.area, M_PI * 1e-4, 1e-15);
     EXPECT_TRUE(c.tension_only);
     // physics: the cable carries exactly its prestress in the initial configuration
-    const CableState s = evaluateCable(m, c, m.q0, qd, {}, false, nullptr);
+    const CableState s = evaluateCable(m, c, m.q0, qd, {}, false);
     EXPECT_NEAR(s.length, l, 1e-12);
     EXPECT_NEAR(s.tension, tension, 1e-9 * tension);
   }
@@ -413,7 +413,7 @@ TEST(MiniScene, CablesAndSpringsCarryTheirPrestressInitially)
     const bool spring = name[0] == 'K';
     EXPECT_NEAR(c.rest_length, spring ? l - tension / 500.0 : l / (1.0 + tension / ea), 1e-12);
     EXPECT_NEAR(c.stiffness, spring ? 500.0 : ea / c.rest_length, 1e-9);
-    const CableState s = evaluateCable(m, c, m.q0, qd, {}, false, nullptr);
+    const CableState s = evaluateCable(m, c, m.q0, qd, {}, false);
     EXPECT_NEAR(s.length, l, 1e-12);
     EXPECT_NEAR(s.tension, tension, 1e-9 * tension);
   }

@@ -92,15 +92,15 @@ TEST(SlidingCable, LengthIsTheSumOfSegmentsAndOneTensionActsAlongEach)
   const Cable& c = m.cables[0];
   double l = 0.0;
   for (size_t k = 0; k + 1 < c.points.size(); ++k)
-    l += (pointKinematics(m, c.points[k + 1], m.q0, zero).p - pointKinematics(m, c.points[k], m.q0, zero).p).norm();
-  const CableState s = evaluateCable(m, c, m.q0, zero, {}, false, nullptr);
+    l += (pointPosition(m, c.points[k + 1], m.q0) - pointPosition(m, c.points[k], m.q0)).norm();
+  const CableState s = evaluateCable(m, c, m.q0, zero, {}, false);
   EXPECT_NEAR(s.length, l, 1e-12);
   ASSERT_FALSE(s.slack);
   EXPECT_NEAR(s.tension, 5000.0 * (l - 2.0), 1e-9);
   // the force on M1 is T times the sum of the unit vectors towards its two neighbours
-  const Vec3 p1 = pointKinematics(m, c.points[1], m.q0, zero).p;
-  const Vec3 pm = pointKinematics(m, c.points[2], m.q0, zero).p;
-  const Vec3 p3 = pointKinematics(m, c.points[3], m.q0, zero).p;
+  const Vec3 p1 = pointPosition(m, c.points[1], m.q0);
+  const Vec3 pm = pointPosition(m, c.points[2], m.q0);
+  const Vec3 p3 = pointPosition(m, c.points[3], m.q0);
   const System sys(m);
   Eigen::VectorXd F;
   sys.appliedForce(m.q0, zero, {}, F, nullptr, 0, 0);
@@ -119,8 +119,8 @@ TEST(SlidingCable, ThroughCollinearPointsItIsAStraightCable)
   straight.points = { PointRef{ -1, a }, PointRef{ -1, b } };
   Cable through = straight;
   through.points = { PointRef{ -1, a }, PointRef{ 1, Vec3::Zero() }, PointRef{ -1, b } };
-  EXPECT_NEAR(evaluateCable(m, through, m.q0, zero, {}, false, nullptr).tension,
-              evaluateCable(m, straight, m.q0, zero, {}, false, nullptr).tension, 1e-9);
+  EXPECT_NEAR(evaluateCable(m, through, m.q0, zero, {}, false).tension,
+              evaluateCable(m, straight, m.q0, zero, {}, false).tension, 1e-9);
 }
 
 TEST(SlidingCable, TautDampedTangentsMatchFiniteDifferences)
@@ -133,7 +133,7 @@ TEST(SlidingCable, TautDampedTangentsMatchFiniteDifferences)
     const Eigen::VectorXd q = perturbed(m.q0, 0.05, rng);
     const Eigen::VectorXd qd = randomVector(m.nq, 0.5, rng);
     const ActuationValues u = pullIn(0.05 * trial, 0.2);
-    const CableState s = evaluateCable(m, m.cables[0], q, qd, u, true, nullptr);
+    const CableState s = evaluateCable(m, m.cables[0], q, qd, u, true);
     ASSERT_FALSE(s.slack);
     ASSERT_GT(s.length - s.rest_length, 0.1) << "away from the kink";
     ASSERT_NEAR(s.rest_length, 1.5 - 0.05 * trial, 1e-12);
@@ -155,11 +155,11 @@ TEST(SlidingCable, SlackHasNoForceAndNoTangent)
   Eigen::VectorXd F;
   BlockSparseMatrix jac = sys.makeMatrix();
   sys.appliedForce(m.q0, qd, {}, F, &jac, 1, 1);
-  EXPECT_TRUE(evaluateCable(m, m.cables[0], m.q0, qd, {}, true, nullptr).slack);
+  EXPECT_TRUE(evaluateCable(m, m.cables[0], m.q0, qd, {}, true).slack);
   EXPECT_EQ(F.norm(), 0.0);
   EXPECT_EQ(Eigen::MatrixXd(jac.matrix()).norm(), 0.0);
   // and pulling it in far enough makes it taut: the pull-in shortens the rest length
-  EXPECT_FALSE(evaluateCable(m, m.cables[0], m.q0, qd, pullIn(19.0, 0.0), true, nullptr).slack);
+  EXPECT_FALSE(evaluateCable(m, m.cables[0], m.q0, qd, pullIn(19.0, 0.0), true).slack);
 }
 
 namespace
@@ -231,7 +231,7 @@ TEST(SlidingCable, FrictionlessPulleyMatchesClosedFormAndPullInRaisesIt)
     ASSERT_TRUE(r.ok()) << r.message;
     const auto [p, tension] = pulley.closedForm(pull);
     const Eigen::VectorXd zero = Eigen::VectorXd::Zero(m.nq);
-    const CableState cs = evaluateCable(m, m.cables[0], s.q, zero, s.u, false, nullptr);
+    const CableState cs = evaluateCable(m, m.cables[0], s.q, zero, s.u, false);
     EXPECT_LT((s.q.head<3>() - p).norm(), 1e-9) << "pull-in " << pull << ": P at " << s.q.transpose();
     EXPECT_NEAR(cs.tension, tension, 1e-7 * tension) << pull;
     // equal tension on both sides, so the cable's force on the pulley bisects the two segments
@@ -254,8 +254,7 @@ TEST(SlidingCable, UndampedSystemKeepsItsEnergy)
   Model m = slidingModel(1.0, 0.0);
   m.bodies[1].mass = m.bodies[2].mass = 5.0;
   // 0.3 m of stretch (about 1500 N): the cable stays taut through the motion
-  m.cables[0].rest_length =
-      evaluateCable(m, m.cables[0], m.q0, Eigen::VectorXd::Zero(m.nq), {}, false, nullptr).length - 0.3;
+  m.cables[0].rest_length = evaluateCable(m, m.cables[0], m.q0, Eigen::VectorXd::Zero(m.nq), {}, false).length - 0.3;
   SolverOptions opt;
   opt.dt = 2e-4;
   opt.newmark_gamma = 0.5;
@@ -280,7 +279,7 @@ TEST(SlidingCable, UndampedSystemKeepsItsEnergy)
     const Summary r = solver.step(s, opt.dt, law);
     ASSERT_TRUE(r.ok()) << r.message;
     max_dev = std::max(max_dev, std::abs(energy() - e0) / e0);
-    const double t = evaluateCable(m, m.cables[0], s.q, s.qd, s.u, false, nullptr).tension;
+    const double t = evaluateCable(m, m.cables[0], s.q, s.qd, s.u, false).tension;
     min_tension = std::min(min_tension, t);
     max_spin = std::max(max_spin, s.qd.segment<4>(3).norm());
     max_tension = std::max(max_tension, t);

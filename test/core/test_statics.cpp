@@ -68,9 +68,9 @@ TEST(Quadruplex, PrestressedGeometryIsInEquilibrium)
     const bool at_b = cb.body == strut && cb.local == model.nodes[p5].point.local;
     if (!at_a && !at_b)
       continue;
-    const CableState cs = evaluateCable(model, c, model.q0, Eigen::VectorXd::Zero(model.nq), {}, false, nullptr);
-    const Vec3 pa = pointKinematics(model, ca, model.q0, Eigen::VectorXd::Zero(model.nq)).p;
-    const Vec3 pb = pointKinematics(model, cb, model.q0, Eigen::VectorXd::Zero(model.nq)).p;
+    const CableState cs = evaluateCable(model, c, model.q0, Eigen::VectorXd::Zero(model.nq), {}, false);
+    const Vec3 pa = pointPosition(model, ca, model.q0);
+    const Vec3 pb = pointPosition(model, cb, model.q0);
     pull += cs.tension * (at_a ? (pb - pa) : (pa - pb)).normalized();
   }
   const Vec3 axis = rotationMatrix(model.q0.segment<4>(model.bodies[strut].offset + 3)).col(2);

@@ -61,7 +61,6 @@ TEST(DownstreamLayout, SameLayoutAsTheLibrary)
   EXPECT_EQ(EIGEN_MAX_STATIC_ALIGN_BYTES, library.max_static_align_bytes);
   expectSame("EigenLayoutProbe", layoutHere(&at::EigenLayoutProbe::vector), library.probe);
   expectSame("Constraint", layoutHere(&at::Constraint::coefficients), library.constraint);
-  expectSame("ContactContribution", layoutHere(&at::ContactContribution::damping), library.contact_contribution);
   expectSame("Model", layoutHere(&at::Model::gravity), library.model);
   expectSame("State", layoutHere(&at::State::lambda), library.state);
 }

@@ -1,3 +1,4 @@
+#include "active_tensegrity/oracle/body_contact.h"
 #include "active_tensegrity/oracle/body_dynamics.h"
 
 #include <algorithm>

@@ -1,3 +1,5 @@
+#include "active_tensegrity/oracle/body_kinematics.h"
+#include "active_tensegrity/oracle/body_rotation.h"
 #include "active_tensegrity/oracle/cable_tangents.h"
 
 #include <array>

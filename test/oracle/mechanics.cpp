@@ -1,3 +1,5 @@
+#include "active_tensegrity/oracle/body_kinematics.h"
+#include "active_tensegrity/oracle/body_rotation.h"
 #include "active_tensegrity/oracle/mechanics.h"
 
 #include "active_tensegrity/oracle/cable_tangents.h"
@@ -350,7 +352,7 @@ double System::potentialEnergy(const Eigen::VectorXd& q, const ActuationValues& 
     }
   }
   for (const Cable& c : model_.cables)
-    e += cablePotentialEnergy(c, evaluateCable(model_, c, q, zero, u, false, nullptr));
+    e += cablePotentialEnergy(c, evaluateCable(model_, c, q, zero, u, false));
   return e;
 }
 

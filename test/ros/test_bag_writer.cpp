@@ -85,7 +85,7 @@ TEST(MessageBuilder, FramesAndStrutCylindersSitOnTheScenesNodes)
     const Eigen::VectorXd zero = Eigen::VectorXd::Zero(model.nq);
     for (const at::Node& n : model.nodes)
     {
-      const at::Vec3 p = at::pointKinematics(model, n.point, state.q, zero).p;
+      const at::Vec3 p = at::pointPosition(model, n.point, state.q);
       best_a = std::min(best_a, (p - (c + half)).norm());
       best_b = std::min(best_b, (p - (c - half)).norm());
     }

@@ -61,8 +61,7 @@ void expectCablesAsOurs(const at::Model& model, tools::MujocoPeer& peer)
   const at::State s = at::initialState(model);
   for (size_t i = 0; i < model.cables.size(); ++i)
   {
-    const at::CableState ours =
-        at::evaluateCable(model, model.cables[i], s.q, s.qd, s.u, model.damping_enabled, nullptr);
+    const at::CableState ours = at::evaluateCable(model, model.cables[i], s.q, s.qd, s.u, model.damping_enabled);
     EXPECT_NEAR(peer.cableLength(static_cast<int>(i)), ours.length, 1e-12) << model.cables[i].name;
     EXPECT_NEAR(peer.cableTension(static_cast<int>(i)), ours.tension, 1e-9 * (1.0 + ours.tension))
         << model.cables[i].name;

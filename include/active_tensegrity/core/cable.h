@@ -43,21 +43,14 @@ struct CableState
 /// unless `damping`. What evaluateCable applies once it has l and l_dot from the points.
 CableState cableLaw(const Cable& cable, double length, double rate, const ActuationValues& u, bool damping);
 
-/// Evaluates one cable (two points or sliding through several) at (q, qd) under actuation u (empty: no pull-in) and
-/// adds its generalized force into F (if not null). (Its exact tangents in these coordinates are the test oracle's.)
+/// Evaluates one cable (two points or sliding through several) at body poses and rates (q, qd) under actuation u
+/// (empty: no pull-in).
 CableState evaluateCable(const Model& model, const Cable& cable, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
-                         const ActuationValues& u, bool damping, Eigen::VectorXd* F = nullptr);
+                         const ActuationValues& u, bool damping);
 /// The cable's state alone at its point slots (`points`, as many as the cable has), the points' motion from frames
 /// formed at (q, qd).
 CableState evaluateCable(const Cable& cable, const PointSlot* points, const BodyFrames& frames,
                          const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const ActuationValues& u, bool damping);
-/// The same without tangents, the points' motion from frames formed at (q, qd) and the forces summed into
-/// `sum` and F (the caller flushes `sum` into F once all elements are added): a residual's force loop. The
-/// cable's points are given as slots (`points`, as many as the cable has; System keeps them in one table).
-CableState evaluateCable(const Cable& cable, const PointSlot* points, const BodyFrames& frames,
-                         const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const ActuationValues& u, bool damping,
-                         PointForceSum& sum, Eigen::VectorXd& F);
-
 /// V = 1/2 k (l - l0)^2 of a cable in state s (from evaluateCable), J; 0 when slack under tension_only
 /// (l <= l0).
 double cablePotentialEnergy(const Cable& cable, const CableState& s);

@@ -20,10 +20,8 @@
 ///   friction      F_T = mu c_d(|v_T|) F_N against the slip v_T = (I - n n^T)(v_PA - v_PB) of the
 ///                 contact points PA = P1 - r1 n, PB = P2 + r2 n (material points of each strut),
 ///                 c_d = 0 below v0, linear to 1 at v1, 1 above (Ambrosio's modified Coulomb law);
-///   generalized   Q_1 = F_N B_P1^T n - F_T B_PA^T t,  Q_2 = -F_N B_P2^T n + F_T B_PB^T t,  t = v_T/|v_T|.
-/// The tangents K = -dQ/dq and C = -dQ/dqd are exact: they include the motion of the closest points
-/// along the axes (ds/dq from the stationarity conditions), the turning of n, the change of K with
-/// the crossing angle and every term of the friction force that the paper drops (docs/physics.md).
+/// The law acts on the struts' axis segments, which are each strut's two end nodes: the forces on the nodes and
+/// their exact tangents are the natural coordinates' (natural.h: naturalContact), derived from this law.
 ///
 /// The ground (Model::ground) is a half-space z <= h touched by spheres (Model::ground_contacts: strut ends,
 /// point masses with a radius), each a contact "slot" after the strut pairs: for a sphere of centre c and
@@ -53,14 +51,6 @@ enum class ContactMode
 
 /// (effectiveModulus and makeStrutPair: model.h)
 
-/// Contact stiffness K (N/m^1.5) for a squared cosine c2 of the crossing angle, and dK/dc2.
-struct StiffnessValue
-{
-  double k = 0.0;
-  double dk_dc2 = 0.0;
-};
-StiffnessValue contactStiffness(double k90, double cos2, double min_crossing_angle);
-
 /// Everything known about one checked pair after evaluation (world frame, SI units).
 struct ContactPairState
 {
@@ -85,29 +75,14 @@ struct ContactPairState
   ClosestRegion region = ClosestRegion::kInterior;
 };
 
-/// Local contributions of one pair: Q (14: body a's 7 then body b's 7) and its tangents
-/// K = -dQ/dq, C = -dQ/dqd over [q_a; q_b]. A ground contact fills the first nq entries (its body's) only.
-struct ContactContribution
-{
-  /// false: only `force` is filled (stiffness and damping are left as they were): for residual-only
-  /// Newton iterations (modified Newton)
-  bool tangents = true;
-  Eigen::Matrix<double, 14, 1> force = Eigen::Matrix<double, 14, 1>::Zero();
-  Eigen::Matrix<double, 14, 14> stiffness = Eigen::Matrix<double, 14, 14>::Zero();
-  Eigen::Matrix<double, 14, 14> damping = Eigen::Matrix<double, 14, 14>::Zero();
-};
-
-/// Geometry of a contact slot at q alone (narrow phase, no forces): gap, closest points, normal.
+/// Geometry of a contact slot at body poses q alone (narrow phase, no forces): gap, closest points, normal.
 ContactPairState contactGeometry(const Model& model, int pair, const Eigen::VectorXd& q);
 
-/// Geometry of a contact slot at q and its penetration rate at qd, no forces: evaluateContact's state before its
-/// force law (gap, penetration, closest points, normal, bodies, penetration_rate).
-ContactPairState contactMotion(const Model& model, int pair, const Eigen::VectorXd& q, const Eigen::VectorXd& qd);
-
-/// Evaluates contact slot `pair` (a strut pair or a ground contact) at (q, qd) with impact speed v_0 (m/s,
-/// used in dynamics only). Fills `out` (when not null) with its force and exact tangents; returns its state.
+/// Evaluates contact slot `pair` (a strut pair or a ground contact) at body poses and rates (q, qd) with impact speed
+/// v_0 (m/s, used in dynamics only): the struts' end nodes and spin rates from the poses, then the natural
+/// coordinates' law (statics: at rest, so neither damping nor friction).
 ContactPairState evaluateContact(const Model& model, int pair, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
-                                 double impact_speed, ContactMode mode, ContactContribution* out);
+                                 double impact_speed, ContactMode mode);
 
 /// The elastic energy (J) stored in contact state `st` (from evaluateContact): Hertz's (2/5) K zeta^(5/2), plus the
 /// cores', or (1/2) k zeta^2 under the linear law; 0 when not active.
@@ -119,17 +94,15 @@ void appendGroundCandidates(const Model& model, const Eigen::VectorXd& q, double
 /// "ground" for body -1, else the body's name (contacts' second body in outputs).
 const std::string& contactBodyName(const Model& model, int body);
 
-/// True when the axes of strut pair `pair` passed through each other between q0 and q1: the signed distance
-/// (c1 - c2) . (a1 x a2) of the axis lines changed sign while the lines' closest points lie inside both
-/// segments at q1 and the struts touched or overlapped at q0 or q1. A common normal a1 x a2 that turned
-/// by more than 90 degrees (motion through a parallel configuration) is not judged.
-bool passedThrough(const Model& model, int pair, const Eigen::VectorXd& q0, const Eigen::VectorXd& q1);
 /// A strut axis at an instant: its centre and unit direction.
 struct AxisPose
 {
   Vec3 centre, axis;
 };
-/// passedThrough's test on two axes of half-lengths half_a and half_b, each moving linearly from (a0, b0) to (a1, b1).
+/// True when two axes of half-lengths half_a and half_b, each moving linearly from (a0, b0) to (a1, b1), passed
+/// through each other: the signed distance (c1 - c2) . (a1 x a2) of the axis lines changed sign while the lines'
+/// closest points lie inside both segments. A common normal a1 x a2 that turned by more than 90 degrees (motion
+/// through a parallel configuration) is not judged.
 bool axesPassedThrough(const AxisPose& a0, const AxisPose& b0, const AxisPose& a1, const AxisPose& b1, double half_a,
                        double half_b);
 

@@ -32,12 +32,11 @@ struct TypeLayout
 
 struct EigenLayout
 {
-  int max_static_align_bytes = 0;   // EIGEN_MAX_STATIC_ALIGN_BYTES
-  TypeLayout probe;                 // EigenLayoutProbe, member `vector`
-  TypeLayout constraint;            // Constraint (model.h), member `coefficients`
-  TypeLayout contact_contribution;  // ContactContribution (contact.h), member `damping`
-  TypeLayout model;                 // Model (model.h), member `gravity`
-  TypeLayout state;                 // State (state.h), member `lambda`
+  int max_static_align_bytes = 0;  // EIGEN_MAX_STATIC_ALIGN_BYTES
+  TypeLayout probe;                // EigenLayoutProbe, member `vector`
+  TypeLayout constraint;           // Constraint (model.h), member `coefficients`
+  TypeLayout model;                // Model (model.h), member `gravity`
+  TypeLayout state;                // State (state.h), member `lambda`
 };
 
 /// The layout as the library was compiled (src/core/eigen_layout.cpp).

@@ -7,6 +7,7 @@
 #include <iostream>
 #include <vector>
 
+#include "active_tensegrity/oracle/body_contact.h"
 #include "active_tensegrity/core/contact.h"
 #include "active_tensegrity/core/rotation.h"
 #include "bench.h"

@@ -13,6 +13,8 @@
 
 #include <Eigen/Core>
 
+#include "active_tensegrity/oracle/body_kinematics.h"
+#include "active_tensegrity/oracle/body_contact.h"
 #include "active_tensegrity/oracle/block_sparse.h"
 #include "active_tensegrity/core/broad_phase.h"
 #include "active_tensegrity/core/cable.h"
