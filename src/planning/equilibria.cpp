@@ -4,7 +4,7 @@
 #include <cmath>
 #include <sstream>
 
-#include "active_tensegrity/core/analysis.h"
+#include "active_tensegrity/core/outputs/observables.h"
 
 namespace active_tensegrity::planning
 {

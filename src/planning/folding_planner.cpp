@@ -43,13 +43,13 @@
 #include <ompl/geometric/planners/sbl/SBL.h>
 #include <ompl/util/Console.h>
 
-#include "active_tensegrity/core/actuation_control.h"
-#include "active_tensegrity/core/analysis.h"
-#include "active_tensegrity/core/contact.h"
-#include "active_tensegrity/core/dynamics.h"
-#include "active_tensegrity/core/modal.h"
-#include "active_tensegrity/core/statics.h"
-#include "active_tensegrity/core/text.h"
+#include "active_tensegrity/core/solvers/actuation_control.h"
+#include "active_tensegrity/core/outputs/observables.h"
+#include "active_tensegrity/core/contact/contact.h"
+#include "active_tensegrity/core/solvers/dynamics.h"
+#include "active_tensegrity/core/solvers/modal.h"
+#include "active_tensegrity/core/solvers/statics.h"
+#include "active_tensegrity/core/base/text.h"
 #include "active_tensegrity/planning/trajectory.h"
 #include "active_tensegrity/planning/validity.h"
 

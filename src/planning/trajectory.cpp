@@ -6,7 +6,7 @@
 
 #include <Eigen/Core>
 
-#include "active_tensegrity/core/actuation_control.h"
+#include "active_tensegrity/core/solvers/actuation_control.h"
 
 namespace active_tensegrity::planning
 {

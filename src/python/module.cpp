@@ -13,16 +13,19 @@
 #include <string>
 #include <vector>
 
-#include "active_tensegrity/core/actuation_control.h"
-#include "active_tensegrity/core/analysis.h"
-#include "active_tensegrity/core/dynamics.h"
-#include "active_tensegrity/core/energy.h"
-#include "active_tensegrity/core/form_finding.h"
-#include "active_tensegrity/core/kinematics.h"
-#include "active_tensegrity/core/modal.h"
-#include "active_tensegrity/core/scene.h"
-#include "active_tensegrity/core/structure_check.h"
-#include "active_tensegrity/core/text.h"
+#include "active_tensegrity/core/solvers/actuation_control.h"
+#include "active_tensegrity/core/outputs/observables.h"
+#include "active_tensegrity/core/outputs/csv.h"
+#include "active_tensegrity/core/outputs/peaks.h"
+#include "active_tensegrity/core/outputs/run.h"
+#include "active_tensegrity/core/solvers/dynamics.h"
+#include "active_tensegrity/core/solvers/energy.h"
+#include "active_tensegrity/core/scene/form_finding.h"
+#include "active_tensegrity/core/model/kinematics.h"
+#include "active_tensegrity/core/solvers/modal.h"
+#include "active_tensegrity/core/scene/scene.h"
+#include "active_tensegrity/core/solvers/structure_check.h"
+#include "active_tensegrity/core/base/text.h"
 #include "active_tensegrity/planning/folding_planner.h"
 
 namespace py = pybind11;

@@ -5,7 +5,7 @@
 #include <ros/names.h>
 #include <tf2_msgs/TFMessage.h>
 
-#include "active_tensegrity/core/text.h"
+#include "active_tensegrity/core/base/text.h"
 
 namespace active_tensegrity::ros_layer
 {

@@ -5,8 +5,8 @@
 #include <iterator>
 #include <utility>
 
-#include "active_tensegrity/core/analysis.h"
-#include "active_tensegrity/core/contact.h"
+#include "active_tensegrity/core/outputs/observables.h"
+#include "active_tensegrity/core/contact/contact.h"
 
 namespace active_tensegrity::ros_layer
 {

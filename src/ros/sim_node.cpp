@@ -9,9 +9,9 @@
 
 #include <rosgraph_msgs/Clock.h>
 
-#include "active_tensegrity/core/kinematics.h"
-#include "active_tensegrity/core/scene.h"
-#include "active_tensegrity/core/text.h"
+#include "active_tensegrity/core/model/kinematics.h"
+#include "active_tensegrity/core/scene/scene.h"
+#include "active_tensegrity/core/base/text.h"
 #include "active_tensegrity/planning/folding_planner.h"
 
 namespace active_tensegrity::ros_layer

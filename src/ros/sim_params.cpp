@@ -9,7 +9,7 @@
 #include <ros/this_node.h>
 #include <xmlrpcpp/XmlRpcValue.h>
 
-#include "active_tensegrity/core/text.h"
+#include "active_tensegrity/core/base/text.h"
 
 namespace active_tensegrity::ros_layer
 {

@@ -11,10 +11,11 @@
 #include <stdexcept>
 #include <utility>
 
-#include "active_tensegrity/core/analysis.h"
-#include "active_tensegrity/core/contact.h"
-#include "active_tensegrity/core/structure_check.h"
-#include "active_tensegrity/core/text.h"
+#include "active_tensegrity/core/model/actuation_schedule.h"
+#include "active_tensegrity/core/outputs/observables.h"
+#include "active_tensegrity/core/contact/contact.h"
+#include "active_tensegrity/core/solvers/structure_check.h"
+#include "active_tensegrity/core/base/text.h"
 
 namespace active_tensegrity::tools
 {

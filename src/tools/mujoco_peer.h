@@ -31,7 +31,7 @@
 #include <string>
 #include <vector>
 
-#include "active_tensegrity/core/model.h"
+#include "active_tensegrity/core/model/model.h"
 
 struct mjModel_;
 struct mjData_;

@@ -5,7 +5,7 @@
 #include <string>
 #include <vector>
 
-#include "active_tensegrity/core/scene.h"
+#include "active_tensegrity/core/scene/scene.h"
 #include "cli.h"
 #ifdef ACTIVE_TENSEGRITY_HAVE_MUJOCO
 #include "mujoco_peer.h"

@@ -1,4 +1,4 @@
-// tensegrity_formfind: finds the self-equilibrated form of a scene (core/form_finding.h) and writes it as a
+// tensegrity_formfind: finds the self-equilibrated form of a scene (core/scene/form_finding.h) and writes it as a
 // loadable scene whose rest lengths give the prestress exactly.
 #include <cmath>
 #include <cstdio>
@@ -6,9 +6,9 @@
 #include <iostream>
 #include <string>
 
-#include "active_tensegrity/core/form_finding.h"
-#include "active_tensegrity/core/scene.h"
-#include "active_tensegrity/core/text.h"
+#include "active_tensegrity/core/scene/form_finding.h"
+#include "active_tensegrity/core/scene/scene.h"
+#include "active_tensegrity/core/base/text.h"
 #include "cli.h"
 
 namespace at = active_tensegrity::core;

@@ -1,4 +1,4 @@
-// tensegrity_generate: writes the scene of a standard structure (core/generators.h, lattice.h), ready to run.
+// tensegrity_generate: writes the scene of a standard structure (core/scene/generators.h, lattice.h), ready to run.
 #include <algorithm>
 #include <cmath>
 #include <fstream>
@@ -6,9 +6,9 @@
 #include <string>
 #include <vector>
 
-#include "active_tensegrity/core/generators.h"
-#include "active_tensegrity/core/scene.h"
-#include "active_tensegrity/core/text.h"
+#include "active_tensegrity/core/scene/generators.h"
+#include "active_tensegrity/core/scene/scene.h"
+#include "active_tensegrity/core/base/text.h"
 #include "cli.h"
 #include "lattice.h"
 

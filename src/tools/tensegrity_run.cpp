@@ -11,12 +11,15 @@
 #include <string>
 #include <vector>
 
-#include "active_tensegrity/core/analysis.h"
-#include "active_tensegrity/core/kinematics.h"
-#include "active_tensegrity/core/modal.h"
-#include "active_tensegrity/core/scene.h"
-#include "active_tensegrity/core/structure_check.h"
-#include "active_tensegrity/core/vtk_writer.h"
+#include "active_tensegrity/core/outputs/observables.h"
+#include "active_tensegrity/core/outputs/csv.h"
+#include "active_tensegrity/core/outputs/peaks.h"
+#include "active_tensegrity/core/outputs/run.h"
+#include "active_tensegrity/core/model/kinematics.h"
+#include "active_tensegrity/core/solvers/modal.h"
+#include "active_tensegrity/core/scene/scene.h"
+#include "active_tensegrity/core/solvers/structure_check.h"
+#include "active_tensegrity/core/outputs/vtk_writer.h"
 #include "active_tensegrity/ros/bag_writer.h"
 
 namespace at = active_tensegrity::core;
@@ -132,7 +135,7 @@ std::string yamlNumber(double v)
   return std::isnan(v) ? "null" : csvNumber(v);
 }
 
-// The structural diagnostics (core/structure_check.h) as YAML lines, each indented by `indent`.
+// The structural diagnostics (core/solvers/structure_check.h) as YAML lines, each indented by `indent`.
 std::string structureYaml(const at::StructureReport& r, const std::string& indent)
 {
   std::ostringstream y;

@@ -5,8 +5,8 @@
 
 #include <gtest/gtest.h>
 
-#include "active_tensegrity/core/natural.h"
-#include "active_tensegrity/core/contact.h"
+#include "active_tensegrity/core/solvers/natural.h"
+#include "active_tensegrity/core/contact/contact.h"
 
 namespace active_tensegrity::test
 {

@@ -5,7 +5,7 @@
 
 #include <cmath>
 
-#include "active_tensegrity/core/actuation_control.h"
+#include "active_tensegrity/core/solvers/actuation_control.h"
 
 namespace at = active_tensegrity::core;
 

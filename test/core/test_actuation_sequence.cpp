@@ -8,8 +8,10 @@
 
 #include <gtest/gtest.h>
 
-#include "active_tensegrity/core/analysis.h"
-#include "active_tensegrity/core/scene.h"
+#include "active_tensegrity/core/model/actuation_schedule.h"
+#include "active_tensegrity/core/outputs/observables.h"
+#include "active_tensegrity/core/outputs/run.h"
+#include "active_tensegrity/core/scene/scene.h"
 #include "test_models.h"
 
 using namespace active_tensegrity::test;

@@ -6,10 +6,10 @@
 #include <gtest/gtest.h>
 
 #include "../../src/tools/heap_counter.h"  // (defines malloc, calloc and realloc for this executable)
-#include "active_tensegrity/core/adaptive.h"
-#include "active_tensegrity/core/analysis.h"
-#include "active_tensegrity/core/dynamics.h"
-#include "active_tensegrity/core/scene.h"
+#include "active_tensegrity/core/solvers/adaptive.h"
+#include "active_tensegrity/core/model/actuation_schedule.h"
+#include "active_tensegrity/core/solvers/dynamics.h"
+#include "active_tensegrity/core/scene/scene.h"
 
 using namespace active_tensegrity::core;
 using active_tensegrity::tools::heapAllocationCount;

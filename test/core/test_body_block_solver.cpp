@@ -10,10 +10,10 @@
 #include <Eigen/Eigenvalues>
 #include <gtest/gtest.h>
 
-#include "active_tensegrity/core/analysis.h"
+#include "active_tensegrity/core/outputs/observables.h"
 #include "active_tensegrity/oracle/body_block_solver.h"
 #include "active_tensegrity/oracle/body_dynamics.h"
-#include "active_tensegrity/core/scene.h"
+#include "active_tensegrity/core/scene/scene.h"
 #include "active_tensegrity/oracle/sparse_linear_solver.h"
 #include "tower_fold.h"
 

@@ -17,10 +17,10 @@
 
 #include <gtest/gtest.h>
 
-#include "active_tensegrity/core/analysis.h"
-#include "active_tensegrity/core/broad_phase.h"
-#include "active_tensegrity/core/contact.h"
-#include "active_tensegrity/core/contact_search.h"
+#include "active_tensegrity/core/outputs/observables.h"
+#include "active_tensegrity/core/contact/broad_phase.h"
+#include "active_tensegrity/core/contact/contact.h"
+#include "active_tensegrity/core/contact/contact_search.h"
 #include "test_models.h"
 
 using namespace active_tensegrity::test;

@@ -9,7 +9,7 @@
 #include <gtest/gtest.h>
 
 #include "active_tensegrity/oracle/body_kinematics.h"
-#include "active_tensegrity/core/cable.h"
+#include "active_tensegrity/core/elements/cable.h"
 #include "test_models.h"
 
 using namespace active_tensegrity::test;

@@ -1,4 +1,4 @@
-// Cables against struts (core/analysis.h, minimumCableStrutGap and cableStrutCrossings): the gap of a cable
+// Cables against struts (core/outputs/observables.h, minimumCableStrutGap and cableStrutCrossings): the gap of a cable
 // segment from a strut against its closed form (above, through and beside the strut), the struts a cable meets
 // at its nodes left out, sliding cables segment by segment, the CSV column, and the run's warning naming the
 // cable and the strut.
@@ -7,8 +7,10 @@
 
 #include <gtest/gtest.h>
 
-#include "active_tensegrity/core/analysis.h"
-#include "active_tensegrity/core/scene.h"
+#include "active_tensegrity/core/outputs/observables.h"
+#include "active_tensegrity/core/outputs/csv.h"
+#include "active_tensegrity/core/outputs/run.h"
+#include "active_tensegrity/core/scene/scene.h"
 
 using namespace active_tensegrity::core;
 

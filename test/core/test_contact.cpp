@@ -8,7 +8,7 @@
 #include <gtest/gtest.h>
 
 #include "active_tensegrity/oracle/body_contact.h"
-#include "active_tensegrity/core/contact.h"
+#include "active_tensegrity/core/contact/contact.h"
 #include "active_tensegrity/oracle/mechanics.h"
 #include "fd_check.h"
 #include "test_models.h"

@@ -10,9 +10,9 @@
 
 #include <gtest/gtest.h>
 
-#include "active_tensegrity/core/adaptive.h"
-#include "active_tensegrity/core/analysis.h"
-#include "active_tensegrity/core/dynamics.h"
+#include "active_tensegrity/core/solvers/adaptive.h"
+#include "active_tensegrity/core/outputs/observables.h"
+#include "active_tensegrity/core/solvers/dynamics.h"
 #include "active_tensegrity/oracle/body_dynamics.h"
 #include "fd_check.h"
 #include "test_models.h"

@@ -14,10 +14,10 @@
 #include <Eigen/SparseCholesky>
 
 #include "active_tensegrity/oracle/body_rotation.h"
-#include "active_tensegrity/core/adaptive.h"
-#include "active_tensegrity/core/analysis.h"
-#include "active_tensegrity/core/dynamics.h"
-#include "active_tensegrity/core/scene.h"
+#include "active_tensegrity/core/solvers/adaptive.h"
+#include "active_tensegrity/core/outputs/run.h"
+#include "active_tensegrity/core/solvers/dynamics.h"
+#include "active_tensegrity/core/scene/scene.h"
 #include "active_tensegrity/oracle/sparse_linear_solver.h"
 #include "active_tensegrity/oracle/body_dynamics.h"
 #include "fd_check.h"

@@ -1,4 +1,4 @@
-// The energy account (core/energy.h) and the step control built on it: each power against the rate of the
+// The energy account (core/solvers/energy.h) and the step control built on it: each power against the rate of the
 // energy it stands for, the account closing as the step shrinks, a structure at rest staying put under adaptive
 // steps, and an impact's rebound against the exact law.
 #include <algorithm>
@@ -8,10 +8,11 @@
 
 #include <gtest/gtest.h>
 
-#include "active_tensegrity/core/adaptive.h"
-#include "active_tensegrity/core/analysis.h"
-#include "active_tensegrity/core/energy.h"
-#include "active_tensegrity/core/scene.h"
+#include "active_tensegrity/core/solvers/adaptive.h"
+#include "active_tensegrity/core/model/actuation_schedule.h"
+#include "active_tensegrity/core/outputs/run.h"
+#include "active_tensegrity/core/solvers/energy.h"
+#include "active_tensegrity/core/scene/scene.h"
 #include "active_tensegrity/oracle/energy_meter.h"
 #include "test_models.h"
 

@@ -9,9 +9,9 @@
 
 #include <gtest/gtest.h>
 
-#include "active_tensegrity/core/adaptive.h"
-#include "active_tensegrity/core/dynamics.h"
-#include "active_tensegrity/core/state.h"
+#include "active_tensegrity/core/solvers/adaptive.h"
+#include "active_tensegrity/core/solvers/dynamics.h"
+#include "active_tensegrity/core/solvers/state.h"
 #include "fd_check.h"
 #include "test_models.h"
 

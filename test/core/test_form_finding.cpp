@@ -1,4 +1,4 @@
-// Form-finding (core/form_finding.h, docs/form_finding.md): the equations' Jacobian against finite
+// Form-finding (core/scene/form_finding.h, docs/form_finding.md): the equations' Jacobian against finite
 // differences, closed forms (the n-strut prism's twist and force densities, the expanded octahedron's
 // proportions, the quadruplex's prestress of paper Table 1), the written scene's own check, and refusals.
 #include <algorithm>
@@ -11,9 +11,9 @@
 
 #include <gtest/gtest.h>
 
-#include "active_tensegrity/core/form_finding.h"
-#include "active_tensegrity/core/generators.h"
-#include "active_tensegrity/core/scene.h"
+#include "active_tensegrity/core/scene/form_finding.h"
+#include "active_tensegrity/core/scene/generators.h"
+#include "active_tensegrity/core/scene/scene.h"
 
 namespace at = active_tensegrity::core;
 

@@ -7,7 +7,7 @@
 
 #include <gtest/gtest.h>
 
-#include "active_tensegrity/core/geometry.h"
+#include "active_tensegrity/core/base/geometry.h"
 
 using namespace active_tensegrity::core;
 

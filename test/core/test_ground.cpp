@@ -12,10 +12,11 @@
 #include <gtest/gtest.h>
 
 #include "active_tensegrity/oracle/body_contact.h"
-#include "active_tensegrity/core/analysis.h"
-#include "active_tensegrity/core/dynamics.h"
-#include "active_tensegrity/core/scene.h"
-#include "active_tensegrity/core/structure_check.h"
+#include "active_tensegrity/core/outputs/observables.h"
+#include "active_tensegrity/core/outputs/run.h"
+#include "active_tensegrity/core/solvers/dynamics.h"
+#include "active_tensegrity/core/scene/scene.h"
+#include "active_tensegrity/core/solvers/structure_check.h"
 #include "contact_checks.h"
 #include "fd_check.h"
 #include "test_models.h"

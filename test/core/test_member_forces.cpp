@@ -1,4 +1,4 @@
-// Member forces (analysis.h: strutAxialForces, memberColumns, memberRow): the quadruplex's strut force of
+// Member forces (observables.h, csv.h: strutAxialForces, memberColumns, memberRow): the quadruplex's strut force of
 // Table 1, the tower's struts through their ball joints in static equilibrium (both ends agree, and the natural
 // coordinates' forces are the body coordinates'), a
 // form-found prism at rest in a dynamic run; the struts' bending stress under contact loads (maxStrutBendingStress).
@@ -9,12 +9,15 @@
 
 #include <gtest/gtest.h>
 
-#include "active_tensegrity/core/analysis.h"
+#include "active_tensegrity/core/outputs/observables.h"
+#include "active_tensegrity/core/outputs/csv.h"
+#include "active_tensegrity/core/outputs/peaks.h"
+#include "active_tensegrity/core/outputs/run.h"
 #include "active_tensegrity/oracle/body_statics.h"
-#include "active_tensegrity/core/cable.h"
-#include "active_tensegrity/core/form_finding.h"
-#include "active_tensegrity/core/generators.h"
-#include "active_tensegrity/core/scene.h"
+#include "active_tensegrity/core/elements/cable.h"
+#include "active_tensegrity/core/scene/form_finding.h"
+#include "active_tensegrity/core/scene/generators.h"
+#include "active_tensegrity/core/scene/scene.h"
 
 namespace at = active_tensegrity::core;
 

@@ -7,11 +7,11 @@
 
 #include <gtest/gtest.h>
 
-#include "active_tensegrity/core/dynamics.h"
-#include "active_tensegrity/core/modal.h"
-#include "active_tensegrity/core/natural.h"
-#include "active_tensegrity/core/scene.h"
-#include "active_tensegrity/core/statics.h"
+#include "active_tensegrity/core/solvers/dynamics.h"
+#include "active_tensegrity/core/solvers/modal.h"
+#include "active_tensegrity/core/solvers/natural.h"
+#include "active_tensegrity/core/scene/scene.h"
+#include "active_tensegrity/core/solvers/statics.h"
 #include "test_models.h"
 
 using namespace active_tensegrity::test;

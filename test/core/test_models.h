@@ -6,7 +6,7 @@
 #include <random>
 
 #include "active_tensegrity/oracle/mechanics.h"
-#include "active_tensegrity/core/model.h"
+#include "active_tensegrity/core/model/model.h"
 
 namespace active_tensegrity::test
 {

@@ -6,14 +6,16 @@
 #include <random>
 #include <string>
 
-#include "active_tensegrity/core/analysis.h"
-#include "active_tensegrity/core/cable.h"
-#include "active_tensegrity/core/energy.h"
-#include "active_tensegrity/core/natural.h"
-#include "active_tensegrity/core/scene.h"
-#include "active_tensegrity/core/state.h"
+#include "active_tensegrity/core/model/actuation_schedule.h"
+#include "active_tensegrity/core/outputs/observables.h"
+#include "active_tensegrity/core/outputs/run.h"
+#include "active_tensegrity/core/elements/cable.h"
+#include "active_tensegrity/core/solvers/energy.h"
+#include "active_tensegrity/core/solvers/natural.h"
+#include "active_tensegrity/core/scene/scene.h"
+#include "active_tensegrity/core/solvers/state.h"
 #include "active_tensegrity/oracle/body_statics.h"
-#include "active_tensegrity/core/statics.h"
+#include "active_tensegrity/core/solvers/statics.h"
 #include "active_tensegrity/oracle/body_dynamics.h"
 #include "active_tensegrity/oracle/energy_meter.h"
 #include "test_models.h"

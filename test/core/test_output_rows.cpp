@@ -6,8 +6,8 @@
 
 #include <gtest/gtest.h>
 
-#include "active_tensegrity/core/analysis.h"
-#include "active_tensegrity/core/scene.h"
+#include "active_tensegrity/core/outputs/run.h"
+#include "active_tensegrity/core/scene/scene.h"
 
 using namespace active_tensegrity::core;
 

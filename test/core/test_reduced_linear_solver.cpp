@@ -7,10 +7,10 @@
 #include <Eigen/Dense>
 #include <gtest/gtest.h>
 
-#include "active_tensegrity/core/analysis.h"
+#include "active_tensegrity/core/outputs/observables.h"
 #include "active_tensegrity/oracle/body_dynamics.h"
 #include "active_tensegrity/oracle/reduced_linear_solver.h"
-#include "active_tensegrity/core/scene.h"
+#include "active_tensegrity/core/scene/scene.h"
 #include "active_tensegrity/oracle/body_statics.h"
 #include "test_models.h"
 #include "tower_fold.h"

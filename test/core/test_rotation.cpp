@@ -4,7 +4,7 @@
 #include <gtest/gtest.h>
 
 #include "active_tensegrity/oracle/body_rotation.h"
-#include "active_tensegrity/core/rotation.h"
+#include "active_tensegrity/core/base/rotation.h"
 #include "fd_check.h"
 
 namespace at = active_tensegrity::core;

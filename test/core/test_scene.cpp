@@ -18,9 +18,9 @@
 #include <gtest/gtest.h>
 
 #include "active_tensegrity/oracle/mechanics.h"
-#include "active_tensegrity/core/scene.h"
-#include "active_tensegrity/core/state.h"
-#include "active_tensegrity/core/text.h"
+#include "active_tensegrity/core/scene/scene.h"
+#include "active_tensegrity/core/solvers/state.h"
+#include "active_tensegrity/core/base/text.h"
 
 using namespace active_tensegrity::core;
 

@@ -7,7 +7,7 @@
 
 #include <gtest/gtest.h>
 
-#include "active_tensegrity/core/schedule.h"
+#include "active_tensegrity/core/base/schedule.h"
 
 using namespace active_tensegrity::core;
 

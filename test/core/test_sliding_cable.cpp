@@ -7,9 +7,9 @@
 
 #include <gtest/gtest.h>
 
-#include "active_tensegrity/core/analysis.h"
-#include "active_tensegrity/core/dynamics.h"
-#include "active_tensegrity/core/statics.h"
+#include "active_tensegrity/core/outputs/observables.h"
+#include "active_tensegrity/core/solvers/dynamics.h"
+#include "active_tensegrity/core/solvers/statics.h"
 #include "fd_check.h"
 #include "test_models.h"
 

@@ -4,10 +4,11 @@
 
 #include <gtest/gtest.h>
 
-#include "active_tensegrity/core/analysis.h"
-#include "active_tensegrity/core/scene.h"
+#include "active_tensegrity/core/outputs/observables.h"
+#include "active_tensegrity/core/outputs/run.h"
+#include "active_tensegrity/core/scene/scene.h"
 #include "active_tensegrity/oracle/body_statics.h"
-#include "active_tensegrity/core/statics.h"
+#include "active_tensegrity/core/solvers/statics.h"
 #include "test_models.h"
 
 using namespace active_tensegrity::test;

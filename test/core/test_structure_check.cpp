@@ -15,12 +15,12 @@
 
 #include <Eigen/Dense>
 
-#include "active_tensegrity/core/analysis.h"
-#include "active_tensegrity/core/natural.h"
-#include "active_tensegrity/core/scene.h"
-#include "active_tensegrity/core/statics.h"
-#include "active_tensegrity/core/structure_check.h"
-#include "active_tensegrity/core/svd.h"
+#include "active_tensegrity/core/outputs/run.h"
+#include "active_tensegrity/core/solvers/natural.h"
+#include "active_tensegrity/core/scene/scene.h"
+#include "active_tensegrity/core/solvers/statics.h"
+#include "active_tensegrity/core/solvers/structure_check.h"
+#include "active_tensegrity/core/linalg/svd.h"
 #include "test_models.h"
 
 using namespace active_tensegrity::test;

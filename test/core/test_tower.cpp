@@ -5,9 +5,11 @@
 
 #include <gtest/gtest.h>
 
-#include "active_tensegrity/core/adaptive.h"
-#include "active_tensegrity/core/analysis.h"
-#include "active_tensegrity/core/scene.h"
+#include "active_tensegrity/core/solvers/adaptive.h"
+#include "active_tensegrity/core/model/actuation_schedule.h"
+#include "active_tensegrity/core/outputs/observables.h"
+#include "active_tensegrity/core/outputs/run.h"
+#include "active_tensegrity/core/scene/scene.h"
 #include "contact_checks.h"
 
 using namespace active_tensegrity::core;

@@ -8,9 +8,9 @@
 
 #include <gtest/gtest.h>
 
-#include "active_tensegrity/core/analysis.h"
+#include "active_tensegrity/core/model/actuation_schedule.h"
 #include "active_tensegrity/oracle/body_dynamics.h"
-#include "active_tensegrity/core/scene.h"
+#include "active_tensegrity/core/scene/scene.h"
 
 namespace active_tensegrity::test
 {

@@ -7,12 +7,12 @@
 
 #include <gtest/gtest.h>
 
-#include "active_tensegrity/core/analysis.h"
-#include "active_tensegrity/core/contact.h"
-#include "active_tensegrity/core/eigen_layout.h"
-#include "active_tensegrity/core/model.h"
-#include "active_tensegrity/core/scene.h"
-#include "active_tensegrity/core/state.h"
+#include "active_tensegrity/core/outputs/run.h"
+#include "active_tensegrity/core/contact/contact.h"
+#include "active_tensegrity/core/outputs/eigen_layout.h"
+#include "active_tensegrity/core/model/model.h"
+#include "active_tensegrity/core/scene/scene.h"
+#include "active_tensegrity/core/solvers/state.h"
 
 namespace at = active_tensegrity::core;
 

@@ -13,9 +13,9 @@
 #include <typeinfo>
 #include <vector>
 
-#include "active_tensegrity/core/analysis.h"
-#include "active_tensegrity/core/scene.h"
-#include "active_tensegrity/core/state.h"
+#include "active_tensegrity/core/outputs/csv.h"
+#include "active_tensegrity/core/scene/scene.h"
+#include "active_tensegrity/core/solvers/state.h"
 
 namespace at = active_tensegrity::core;
 

@@ -5,7 +5,7 @@
 #include <sstream>
 #include <utility>
 
-#include "active_tensegrity/core/analysis.h"
+#include "active_tensegrity/core/outputs/observables.h"
 
 namespace active_tensegrity::core
 {

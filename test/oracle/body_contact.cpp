@@ -4,8 +4,8 @@
 
 #include <cmath>
 
-#include "active_tensegrity/core/kinematics.h"
-#include "active_tensegrity/core/rotation.h"
+#include "active_tensegrity/core/model/kinematics.h"
+#include "active_tensegrity/core/base/rotation.h"
 
 namespace active_tensegrity::core
 {

@@ -8,8 +8,8 @@
 #include <limits>
 #include <sstream>
 
-#include "active_tensegrity/core/adaptive.h"
-#include "active_tensegrity/core/text.h"
+#include "active_tensegrity/core/solvers/adaptive.h"
+#include "active_tensegrity/core/base/text.h"
 
 namespace active_tensegrity::core
 {

@@ -10,7 +10,7 @@
 #include <Eigen/Dense>
 
 #include "active_tensegrity/oracle/body_dynamics.h"
-#include "active_tensegrity/core/structure_check.h"
+#include "active_tensegrity/core/solvers/structure_check.h"
 
 namespace active_tensegrity::core
 {

@@ -6,7 +6,7 @@
 #include <cstdlib>
 #include <vector>
 
-#include "active_tensegrity/core/rotation.h"
+#include "active_tensegrity/core/base/rotation.h"
 
 namespace active_tensegrity::core
 {

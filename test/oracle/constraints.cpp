@@ -5,7 +5,7 @@
 #include <stdexcept>
 #include <string>
 
-#include "active_tensegrity/core/rotation.h"
+#include "active_tensegrity/core/base/rotation.h"
 
 namespace active_tensegrity::core
 {

@@ -1,6 +1,6 @@
 #include "active_tensegrity/oracle/energy_meter.h"
 
-#include "active_tensegrity/core/cable.h"
+#include "active_tensegrity/core/elements/cable.h"
 
 namespace active_tensegrity::core
 {

@@ -9,11 +9,11 @@
 #include <cmath>
 #include <random>
 
-#include "active_tensegrity/core/actuation_control.h"
-#include "active_tensegrity/core/analysis.h"
-#include "active_tensegrity/core/dynamics.h"
-#include "active_tensegrity/core/scene.h"
-#include "active_tensegrity/core/statics.h"
+#include "active_tensegrity/core/solvers/actuation_control.h"
+#include "active_tensegrity/core/outputs/observables.h"
+#include "active_tensegrity/core/solvers/dynamics.h"
+#include "active_tensegrity/core/scene/scene.h"
+#include "active_tensegrity/core/solvers/statics.h"
 #include "active_tensegrity/planning/folding_planner.h"
 #include "active_tensegrity/planning/validity.h"
 

@@ -16,9 +16,10 @@
 #include <rosbag/view.h>
 #include <tf2_msgs/TFMessage.h>
 
-#include "active_tensegrity/core/analysis.h"
-#include "active_tensegrity/core/dynamics.h"
-#include "active_tensegrity/core/scene.h"
+#include "active_tensegrity/core/outputs/observables.h"
+#include "active_tensegrity/core/outputs/run.h"
+#include "active_tensegrity/core/solvers/dynamics.h"
+#include "active_tensegrity/core/scene/scene.h"
 #include "active_tensegrity/ros/messages.h"
 
 namespace at = active_tensegrity::core;

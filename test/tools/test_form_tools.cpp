@@ -11,10 +11,10 @@
 
 #include <gtest/gtest.h>
 
-#include "active_tensegrity/core/generators.h"
-#include "active_tensegrity/core/kinematics.h"
-#include "active_tensegrity/core/scene.h"
-#include "active_tensegrity/core/state.h"
+#include "active_tensegrity/core/scene/generators.h"
+#include "active_tensegrity/core/model/kinematics.h"
+#include "active_tensegrity/core/scene/scene.h"
+#include "active_tensegrity/core/solvers/state.h"
 #include "command.h"
 
 namespace at = active_tensegrity::core;

@@ -16,10 +16,12 @@
 
 #include "command.h"
 
-#include "active_tensegrity/core/analysis.h"
-#include "active_tensegrity/core/natural.h"
-#include "active_tensegrity/core/scene.h"
-#include "active_tensegrity/core/statics.h"
+#include "active_tensegrity/core/model/actuation_schedule.h"
+#include "active_tensegrity/core/outputs/observables.h"
+#include "active_tensegrity/core/outputs/run.h"
+#include "active_tensegrity/core/solvers/natural.h"
+#include "active_tensegrity/core/scene/scene.h"
+#include "active_tensegrity/core/solvers/statics.h"
 #include "active_tensegrity/oracle/mechanics.h"
 #include "cli.h"
 #include "lattice.h"

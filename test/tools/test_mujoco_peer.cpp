@@ -17,10 +17,11 @@
 #include <gtest/gtest.h>
 #include <mujoco/mujoco.h>
 
-#include "active_tensegrity/core/analysis.h"
-#include "active_tensegrity/core/contact.h"
-#include "active_tensegrity/core/generators.h"
-#include "active_tensegrity/core/scene.h"
+#include "active_tensegrity/core/outputs/observables.h"
+#include "active_tensegrity/core/outputs/run.h"
+#include "active_tensegrity/core/contact/contact.h"
+#include "active_tensegrity/core/scene/generators.h"
+#include "active_tensegrity/core/scene/scene.h"
 #include "command.h"
 #include "mujoco_peer.h"
 

@@ -13,10 +13,10 @@
 #include <string>
 #include <vector>
 
-#include "active_tensegrity/core/model.h"
-#include "active_tensegrity/core/state.h"
-#include "active_tensegrity/core/statics.h"
-#include "active_tensegrity/core/summary.h"
+#include "active_tensegrity/core/model/model.h"
+#include "active_tensegrity/core/solvers/state.h"
+#include "active_tensegrity/core/solvers/statics.h"
+#include "active_tensegrity/core/base/summary.h"
 
 namespace active_tensegrity::planning
 {

@@ -11,8 +11,8 @@
 #include <string>
 #include <vector>
 
-#include "active_tensegrity/core/model.h"
-#include "active_tensegrity/core/state.h"
+#include "active_tensegrity/core/model/model.h"
+#include "active_tensegrity/core/solvers/state.h"
 #include "active_tensegrity/planning/equilibria.h"
 
 namespace active_tensegrity::core

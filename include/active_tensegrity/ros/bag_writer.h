@@ -8,8 +8,8 @@
 
 #include <rosbag/bag.h>
 
-#include "active_tensegrity/core/model.h"
-#include "active_tensegrity/core/state.h"
+#include "active_tensegrity/core/model/model.h"
+#include "active_tensegrity/core/solvers/state.h"
 #include "active_tensegrity/ros/messages.h"
 
 namespace active_tensegrity::ros_layer

@@ -14,9 +14,9 @@
 #include "active_tensegrity/CableArray.h"
 #include "active_tensegrity/StrutArray.h"
 #include "active_tensegrity/ContactArray.h"
-#include "active_tensegrity/core/cable.h"
-#include "active_tensegrity/core/model.h"
-#include "active_tensegrity/core/state.h"
+#include "active_tensegrity/core/elements/cable.h"
+#include "active_tensegrity/core/model/model.h"
+#include "active_tensegrity/core/solvers/state.h"
 
 namespace active_tensegrity::ros_layer
 {

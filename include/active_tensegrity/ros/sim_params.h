@@ -8,7 +8,7 @@
 
 #include <ros/node_handle.h>
 
-#include "active_tensegrity/core/scene.h"
+#include "active_tensegrity/core/scene/scene.h"
 #include "active_tensegrity/ros/messages.h"
 
 namespace active_tensegrity::ros_layer

@@ -10,8 +10,8 @@
 #include <string>
 #include <vector>
 
-#include "active_tensegrity/core/model.h"
-#include "active_tensegrity/core/scene.h"
+#include "active_tensegrity/core/model/model.h"
+#include "active_tensegrity/core/scene/scene.h"
 
 namespace active_tensegrity::tools::bench
 {
@@ -45,7 +45,7 @@ int plan(const std::string& scene, const std::vector<std::string>& args);
 /// `work-precision SCENE`: integrators and the MuJoCo peer against a fine reference (work_precision.cpp).
 int workPrecision(const std::string& scene, const std::vector<std::string>& args);
 
-/// `natural SCENE`: the body coordinates against the natural coordinates (core/natural.h) at equal error (natural.cpp).
+/// `natural SCENE`: the body coordinates against the natural coordinates (core/solvers/natural.h) at equal error (natural.cpp).
 int natural(const std::string& scene, const std::vector<std::string>& args);
 
 /// The processor's model name and which of avx2, fma, avx512f it has (/proc/cpuinfo; "unknown" without it).

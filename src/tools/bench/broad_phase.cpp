@@ -9,9 +9,9 @@
 #include <string>
 #include <vector>
 
-#include "active_tensegrity/core/broad_phase.h"
-#include "active_tensegrity/core/contact.h"
-#include "active_tensegrity/core/rotation.h"
+#include "active_tensegrity/core/contact/broad_phase.h"
+#include "active_tensegrity/core/contact/contact.h"
+#include "active_tensegrity/core/base/rotation.h"
 #include "bench.h"
 
 namespace at = active_tensegrity::core;

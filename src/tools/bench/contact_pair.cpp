@@ -8,8 +8,8 @@
 #include <vector>
 
 #include "active_tensegrity/oracle/body_contact.h"
-#include "active_tensegrity/core/contact.h"
-#include "active_tensegrity/core/rotation.h"
+#include "active_tensegrity/core/contact/contact.h"
+#include "active_tensegrity/core/base/rotation.h"
 #include "bench.h"
 
 namespace at = active_tensegrity::core;

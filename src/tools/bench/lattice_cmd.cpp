@@ -11,9 +11,9 @@
 #include <string>
 #include <vector>
 
-#include "active_tensegrity/core/analysis.h"
-#include "active_tensegrity/core/dynamics.h"
-#include "active_tensegrity/core/scene.h"
+#include "active_tensegrity/core/outputs/run.h"
+#include "active_tensegrity/core/solvers/dynamics.h"
+#include "active_tensegrity/core/scene/scene.h"
 #include "active_tensegrity/oracle/mechanics.h"
 #include "../cli.h"
 #include "../lattice.h"

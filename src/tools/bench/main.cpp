@@ -3,7 +3,7 @@
 #include <string>
 #include <vector>
 
-#include "active_tensegrity/core/scene.h"
+#include "active_tensegrity/core/scene/scene.h"
 #include "../cli.h"
 #include "bench.h"
 

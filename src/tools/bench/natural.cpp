@@ -1,7 +1,7 @@
 //   tensegrity_bench natural SCENE [--set key=value]... [--dts a,b,..] [--tols a,b,..] [--ref-dt R] [--repeat N]
 //                            [--csv FILE] [--no-spin] [--fixed-only]
 // The scene's dynamic analysis in body coordinates (the package's solver) and in natural coordinates
-// (core/natural.h), in one run: each over the fixed steps `dts` and, adaptive, over the error tolerances `tols`,
+// (core/solvers/natural.h), in one run: each over the fixed steps `dts` and, adaptive, over the error tolerances `tols`,
 // with the scene's integrator and Newton settings. Each run is compared with a fine reference of
 // the body coordinates (generalized-alpha at R, tolerance 1e-10) on the output grid: the largest error of a strut
 // centre or point mass; the natural coordinates' own fine reference (trapezoidal at R) gives the two models'
@@ -15,14 +15,15 @@
 #include <string>
 #include <vector>
 
-#include "active_tensegrity/core/adaptive.h"
+#include "active_tensegrity/core/solvers/adaptive.h"
 #include "active_tensegrity/oracle/body_adaptive.h"
-#include "active_tensegrity/core/analysis.h"
-#include "active_tensegrity/core/natural.h"
-#include "active_tensegrity/core/scene.h"
-#include "active_tensegrity/core/state.h"
+#include "active_tensegrity/core/model/actuation_schedule.h"
+#include "active_tensegrity/core/outputs/observables.h"
+#include "active_tensegrity/core/solvers/natural.h"
+#include "active_tensegrity/core/scene/scene.h"
+#include "active_tensegrity/core/solvers/state.h"
 #include "active_tensegrity/oracle/body_statics.h"
-#include "active_tensegrity/core/statics.h"
+#include "active_tensegrity/core/solvers/statics.h"
 #include "active_tensegrity/oracle/body_dynamics.h"
 #include "../cli.h"
 #include "bench.h"

@@ -12,8 +12,8 @@
 #include <string>
 #include <vector>
 
-#include "active_tensegrity/core/scene.h"
-#include "active_tensegrity/core/statics.h"
+#include "active_tensegrity/core/scene/scene.h"
+#include "active_tensegrity/core/solvers/statics.h"
 #include "active_tensegrity/planning/folding_planner.h"
 #include "../cli.h"
 #include "bench.h"

@@ -10,9 +10,10 @@
 #include <string>
 #include <vector>
 
-#include "active_tensegrity/core/analysis.h"
-#include "active_tensegrity/core/natural.h"
-#include "active_tensegrity/core/scene.h"
+#include "active_tensegrity/core/outputs/peaks.h"
+#include "active_tensegrity/core/outputs/run.h"
+#include "active_tensegrity/core/solvers/natural.h"
+#include "active_tensegrity/core/scene/scene.h"
 #include "bench.h"
 
 namespace at = active_tensegrity::core;

@@ -7,9 +7,10 @@
 #include <string>
 #include <vector>
 
-#include "active_tensegrity/core/analysis.h"
-#include "active_tensegrity/core/contact.h"
-#include "active_tensegrity/core/scene.h"
+#include "active_tensegrity/core/outputs/observables.h"
+#include "active_tensegrity/core/outputs/run.h"
+#include "active_tensegrity/core/contact/contact.h"
+#include "active_tensegrity/core/scene/scene.h"
 #include "../cli.h"
 #include "bench.h"
 

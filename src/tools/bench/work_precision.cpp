@@ -6,7 +6,7 @@
 // actuation-force error (relative to the reference's largest force), error of the peak contact force,
 // of its time and of the contact impulse (time integral of the summed normal forces); with the wall time
 // of the run (callbacks excluded). One CSV row per run. The schemes natural_generalized_alpha and
-// adaptive_natural_generalized_alpha (the same in natural coordinates, core/natural.h) run only when named.
+// adaptive_natural_generalized_alpha (the same in natural coordinates, core/solvers/natural.h) run only when named.
 // --mujoco-dts a,b,.. then runs the scene translated into MuJoCo (mujoco_peer.h) over that ladder with each of
 // --mujoco-integrators (default euler,implicit,rk4), rows named mujoco_<integrator>, measured the same way;
 // --mujoco-contact-force F sets its contact stiffness scale (default: the reference's peak contact force).
@@ -22,12 +22,15 @@
 #include <string>
 #include <vector>
 
-#include "active_tensegrity/core/analysis.h"
-#include "active_tensegrity/core/contact.h"
-#include "active_tensegrity/core/natural.h"
-#include "active_tensegrity/core/scene.h"
-#include "active_tensegrity/core/structure_check.h"
-#include "active_tensegrity/core/text.h"
+#include "active_tensegrity/core/model/actuation_schedule.h"
+#include "active_tensegrity/core/outputs/observables.h"
+#include "active_tensegrity/core/outputs/csv.h"
+#include "active_tensegrity/core/outputs/run.h"
+#include "active_tensegrity/core/contact/contact.h"
+#include "active_tensegrity/core/solvers/natural.h"
+#include "active_tensegrity/core/scene/scene.h"
+#include "active_tensegrity/core/solvers/structure_check.h"
+#include "active_tensegrity/core/base/text.h"
 #include "../cli.h"
 #ifdef ACTIVE_TENSEGRITY_HAVE_MUJOCO
 #include "../mujoco_peer.h"
@@ -94,7 +97,7 @@ Trace traceRun(const at::Model& model)
   return tr;
 }
 
-/// traceRun's trace of the same analysis in natural coordinates (core/natural.h): the body coordinates of its
+/// traceRun's trace of the same analysis in natural coordinates (core/solvers/natural.h): the body coordinates of its
 /// nodes at every output, the first actuator's force, the heights; the contacts' peak and impulse over every step.
 Trace traceNatural(const at::Model& model)
 {
@@ -166,7 +169,7 @@ Trace traceNatural(const at::Model& model)
 }
 
 /// One integrator of the work-precision benchmark; adaptive ones run over the tolerance ladder; `natural` ones in
-/// natural coordinates (core/natural.h, modified Newton).
+/// natural coordinates (core/solvers/natural.h, modified Newton).
 struct Scheme
 {
   const char* name;

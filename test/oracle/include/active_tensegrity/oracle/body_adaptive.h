@@ -1,13 +1,13 @@
 /// Variable time steps for the body coordinates' BodyDynamicsSolver (the comparison `tensegrity_bench natural` runs):
-/// the step-size rules of core/adaptive.h (StepSizeControl) with the error, onset and energy checks of the package's
-/// AdaptiveStepper.
+/// the step-size rules of core/solvers/adaptive.h (StepSizeControl) with the error, onset and energy checks of the
+/// package's AdaptiveStepper.
 #pragma once
 
 #include <functional>
 #include <memory>
 
-#include "active_tensegrity/core/adaptive.h"
-#include "active_tensegrity/core/energy.h"
+#include "active_tensegrity/core/solvers/adaptive.h"
+#include "active_tensegrity/core/solvers/energy.h"
 #include "active_tensegrity/oracle/body_dynamics.h"
 #include "active_tensegrity/oracle/energy_meter.h"
 

@@ -9,7 +9,7 @@
 #include <Eigen/LU>
 #include <Eigen/SparseCore>
 
-#include "active_tensegrity/core/static_lu.h"
+#include "active_tensegrity/core/linalg/static_lu.h"
 
 namespace active_tensegrity::core
 {

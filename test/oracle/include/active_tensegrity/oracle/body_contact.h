@@ -9,8 +9,8 @@
 
 #include <Eigen/Core>
 
-#include "active_tensegrity/core/contact.h"
-#include "active_tensegrity/core/model.h"
+#include "active_tensegrity/core/contact/contact.h"
+#include "active_tensegrity/core/model/model.h"
 
 namespace active_tensegrity::core
 {

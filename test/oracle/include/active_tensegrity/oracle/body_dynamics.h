@@ -11,12 +11,12 @@
 #include <type_traits>
 #include <utility>
 
-#include "active_tensegrity/core/actuation_law.h"
-#include "active_tensegrity/core/contact.h"
+#include "active_tensegrity/core/model/actuation_law.h"
+#include "active_tensegrity/core/contact/contact.h"
 #include "active_tensegrity/oracle/reduced_linear_solver.h"
 #include "active_tensegrity/oracle/sparse_linear_solver.h"
-#include "active_tensegrity/core/state.h"
-#include "active_tensegrity/core/summary.h"
+#include "active_tensegrity/core/solvers/state.h"
+#include "active_tensegrity/core/base/summary.h"
 #include "active_tensegrity/oracle/mechanics.h"
 
 namespace active_tensegrity::core

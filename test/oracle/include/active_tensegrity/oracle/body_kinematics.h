@@ -6,8 +6,8 @@
 
 #include <Eigen/Core>
 
-#include "active_tensegrity/core/cable.h"
-#include "active_tensegrity/core/kinematics.h"
+#include "active_tensegrity/core/elements/cable.h"
+#include "active_tensegrity/core/model/kinematics.h"
 
 namespace active_tensegrity::core
 {

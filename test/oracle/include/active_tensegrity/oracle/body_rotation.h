@@ -1,8 +1,8 @@
-/// Derivatives of the Euler-parameter rotation (core/rotation.h) with respect to Theta: what the body coordinates'
+/// Derivatives of the Euler-parameter rotation (core/base/rotation.h) with respect to Theta: what the body coordinates'
 /// tangents (the test oracle) build on.
 #pragma once
 
-#include "active_tensegrity/core/rotation.h"
+#include "active_tensegrity/core/base/rotation.h"
 
 namespace active_tensegrity::core
 {

@@ -13,10 +13,10 @@
 
 #include "active_tensegrity/oracle/mechanics.h"
 #include "active_tensegrity/oracle/reduced_linear_solver.h"
-#include "active_tensegrity/core/state.h"
-#include "active_tensegrity/core/statics.h"
-#include "active_tensegrity/core/structure_check.h"
-#include "active_tensegrity/core/summary.h"
+#include "active_tensegrity/core/solvers/state.h"
+#include "active_tensegrity/core/solvers/statics.h"
+#include "active_tensegrity/core/solvers/structure_check.h"
+#include "active_tensegrity/core/base/summary.h"
 
 namespace active_tensegrity::core
 {

@@ -3,7 +3,7 @@
 
 #include <Eigen/Core>
 
-#include "active_tensegrity/core/cable.h"
+#include "active_tensegrity/core/elements/cable.h"
 #include "active_tensegrity/oracle/block_sparse.h"
 
 namespace active_tensegrity::core

@@ -29,8 +29,8 @@
 #include <Eigen/Core>
 
 #include "active_tensegrity/oracle/block_sparse.h"
-#include "active_tensegrity/core/kinematics.h"
-#include "active_tensegrity/core/model.h"
+#include "active_tensegrity/core/model/kinematics.h"
+#include "active_tensegrity/core/model/model.h"
 
 namespace active_tensegrity::core
 {

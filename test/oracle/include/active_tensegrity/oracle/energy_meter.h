@@ -4,8 +4,8 @@
 
 #include <vector>
 
-#include "active_tensegrity/core/energy.h"
-#include "active_tensegrity/core/kinematics.h"
+#include "active_tensegrity/core/solvers/energy.h"
+#include "active_tensegrity/core/model/kinematics.h"
 #include "active_tensegrity/oracle/mechanics.h"
 
 namespace active_tensegrity::core

@@ -16,14 +16,14 @@
 #include "active_tensegrity/oracle/body_kinematics.h"
 #include "active_tensegrity/oracle/body_contact.h"
 #include "active_tensegrity/oracle/block_sparse.h"
-#include "active_tensegrity/core/broad_phase.h"
-#include "active_tensegrity/core/cable.h"
+#include "active_tensegrity/core/contact/broad_phase.h"
+#include "active_tensegrity/core/elements/cable.h"
 #include "active_tensegrity/oracle/constraints.h"
-#include "active_tensegrity/core/contact.h"
-#include "active_tensegrity/core/contact_search.h"
-#include "active_tensegrity/core/kinematics.h"
-#include "active_tensegrity/core/model.h"
-#include "active_tensegrity/core/slot_values.h"
+#include "active_tensegrity/core/contact/contact.h"
+#include "active_tensegrity/core/contact/contact_search.h"
+#include "active_tensegrity/core/model/kinematics.h"
+#include "active_tensegrity/core/model/model.h"
+#include "active_tensegrity/core/base/slot_values.h"
 
 namespace active_tensegrity::core
 {
@@ -96,7 +96,7 @@ public:
   /// Strut contact and ground contact (contact.h) at (q, qd), when enabled: adds the generalized
   /// contact forces into F (not cleared) and k_weight K + c_weight C into jac (when not null). Only the
   /// broad phase's candidates reach the narrow phase. impact_speeds: v_0 per contact slot (dynamics;
-  /// may be empty in statics). The pairs' states for output come from activeContacts() (analysis.h).
+  /// may be empty in statics). The pairs' states for output come from activeContacts() (observables.h).
   void contactForce(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const SlotValues& impact_speeds,
                     ContactMode mode, Eigen::VectorXd& F, BlockSparseMatrix* jac, double k_weight,
                     double c_weight) const;

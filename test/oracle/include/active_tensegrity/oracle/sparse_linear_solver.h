@@ -10,9 +10,9 @@
 #include <Eigen/SparseLU>
 
 #include "active_tensegrity/oracle/body_block_solver.h"
-#include "active_tensegrity/core/static_lu.h"
+#include "active_tensegrity/core/linalg/static_lu.h"
 
-#include "active_tensegrity/core/dense_lu.h"
+#include "active_tensegrity/core/linalg/dense_lu.h"
 
 namespace active_tensegrity::core
 {
