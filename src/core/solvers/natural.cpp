@@ -1014,23 +1014,7 @@ ContactPairState evaluateContact(const Model& model, int pair, const Eigen::Vect
 
 namespace
 {
-constexpr double kNearFloor = 1e-4;  // m: the least motion the near pairs allow for
-constexpr double kRateFloor = 0.05;  // the least contraction rate assumed of modified Newton
-constexpr int kFullNewtonFrom = 8;   // a step's iterations from this one on build their own matrix (full Newton)
-constexpr int kDenseMost = 160;      // Newton matrices up to this size are factorized dense, larger ones sparse
-// Static pivots (docs/physics.md, "Linear solves"): the constraint rows' shift, kStaticShift phi^2 / d. Measured on
-// the 504-strut lattice's Newton matrix, the factors' solve leaves a relative residual of about 5e-5: modified Newton
-// cannot tell them from exact ones.
-constexpr double kStaticShift = 1e-6;
-constexpr int kStaticPivotSkip = 4;
-// Dense factorizations of a dynamic step are inverted while they serve, on average, at least kInverseSolves times
-// their size in solves (the break-even, measured at 80 unknowns: about 42 solves); the average's weight of the last.
-constexpr double kInverseSolves = 0.75;
-constexpr double kSolvesAverage = 0.25;  // after a refused factorization, this many use the sparse LU
-// The check of a factorization: A 1 solved comes back within this of 1 (the largest contraction rate modified Newton
-// keeps a matrix for); refined, within kStaticRefinedCheck.
-constexpr double kStaticCheck = 0.5;
-constexpr double kStaticRefinedCheck = 1e-8;
+constexpr double kNearFloor = 1e-4;        // m: the least motion the near pairs allow for
 constexpr int kDirectPairsMost = 64;       // up to this many strut pairs are checked without the broad phase
 constexpr double kListMarginLeast = 2e-3;  // m: the least margin of the listed contacts
 constexpr double kListMarginSteps = 8.0;   // the margin in steps' motions
@@ -1520,8 +1504,8 @@ bool NaturalSolver::factorize(int size, Pivots pivots)
   scaled_ = false;
   static_mode_ = false;
   use_inverse_ = false;
-  solves_per_factor_ =
-      kSolvesAverage * static_cast<double>(solves_since_factor_) + (1.0 - kSolvesAverage) * solves_per_factor_;
+  solves_per_factor_ = policy_.solves_average * static_cast<double>(solves_since_factor_) +
+                       (1.0 - policy_.solves_average) * solves_per_factor_;
   solves_since_factor_ = 0;
   dense_mode_ = entries_.to_dense;
   if (dense_mode_)
@@ -1529,7 +1513,7 @@ bool NaturalSolver::factorize(int size, Pivots pivots)
     dense_lu_.compute(entries_.dense);
     // modified Newton's: inverted when the factorizations have been serving more solves than the inverse costs (about
     // size / 2); full Newton's keep the LU's more accurate solves. In place: the inverse's own expression allocates
-    if (pivots == Pivots::kStatic && solves_per_factor_ >= kInverseSolves * size)
+    if (pivots == Pivots::kStatic && solves_per_factor_ >= policy_.inverse_solves * size)
     {
       // P (P A = L U), then L and U solved in place (the row of P I holding column i's one is P's index of i)
       dense_inverse_.setZero(size, size);
@@ -1573,9 +1557,9 @@ bool NaturalSolver::factorize(int size, Pivots pivots)
     }
     else
     {
-      // refused: the sparse LU for this and the next kStaticPivotSkip factorizations
+      // refused: the sparse LU for this and the next policy_.static_pivot_skip factorizations
       ++stats_.static_pivot_refusals;
-      static_skip_ = kStaticPivotSkip;
+      static_skip_ = policy_.static_pivot_skip;
     }
   }
   if (!lu_analysed_)
@@ -1604,7 +1588,7 @@ bool NaturalSolver::factorizeStaticPivot(bool refined)
   shifted_rows_.clear();
   for (int r = n; r < size; ++r)
     shifted_rows_.push_back(r);
-  // delta = kStaticShift phi^2 / d, phi the constraint rows' largest entry and d the largest diagonal entry: the
+  // delta = static_shift phi^2 / d, phi the constraint rows' largest entry and d the largest diagonal entry: the
   // constraint block's Schur complement is about phi^2 / d at its smallest
   const double diag = a.diagonal().head(n).cwiseAbs().maxCoeff();
   double phi = 0.0;
@@ -1613,7 +1597,7 @@ bool NaturalSolver::factorizeStaticPivot(bool refined)
       phi = std::max(phi, std::abs(it.value()));
   if (!(diag > 0.0) || !(phi > 0.0) || !std::isfinite(diag) || !std::isfinite(phi))
     return false;
-  if (!static_lu_.factorize(a, shifted_rows_, -kStaticShift * phi * phi / diag))
+  if (!static_lu_.factorize(a, shifted_rows_, -policy_.static_shift * phi * phi / diag))
     return false;
   static_mode_ = true;
   static_refined_ = refined;
@@ -1621,11 +1605,11 @@ bool NaturalSolver::factorizeStaticPivot(bool refined)
   check_b_ = a * Eigen::VectorXd::Ones(size);
   bool ok = false;
   if (refined)
-    ok = solveRefined(check_b_, check_x_) && (check_x_.array() - 1.0).abs().maxCoeff() <= kStaticRefinedCheck;
+    ok = solveRefined(check_b_, check_x_) && (check_x_.array() - 1.0).abs().maxCoeff() <= policy_.static_refined_check;
   else
   {
     static_lu_.solve(check_b_, check_x_);
-    ok = check_x_.allFinite() && (check_x_.array() - 1.0).abs().maxCoeff() <= kStaticCheck;
+    ok = check_x_.allFinite() && (check_x_.array() - 1.0).abs().maxCoeff() <= policy_.static_check;
   }
   static_mode_ = ok;
   return ok;
@@ -1786,7 +1770,7 @@ double NaturalSolver::errorLeft(double scaled, bool kept, bool fresh, double& pr
     theta_known_ = true;
   }
   previous = scaled;
-  const double rate = std::max(theta_, kRateFloor);
+  const double rate = std::max(theta_, policy_.rate_floor);
   return fresh ? scaled : (theta_known_ ? rate / (1.0 - rate) : 1.0) * scaled;
 }
 
@@ -1839,7 +1823,7 @@ void NaturalSolver::assembleStatic(const Eigen::VectorXd& x, const Eigen::Vector
   residual_.resize(n + m);
   if (tangent)
   {
-    entries_.clear(n + m, n + m <= kDenseMost);
+    entries_.clear(n + m, n + m <= policy_.dense_most);
     entries_.k_weight = 1.0;
     entries_.c_weight = 0.0;
   }
@@ -2022,7 +2006,7 @@ Summary NaturalSolver::initialize(NaturalState& s, const ActuationLaw& law)
   contactForces(s.x, s.v, false);
   contactsAt(s, s.contacts);
   // [M G^T; G 0] [a; lambda] = [F; -2 |u_dot|^2 - 2 u . (driven accelerations)]
-  entries_.clear(n + m, n + m <= kDenseMost);
+  entries_.clear(n + m, n + m <= policy_.dense_most);
   entries_.addMatrix(nm_.mass);
   Eigen::VectorXd rhs = Eigen::VectorXd::Zero(n + m);
   rhs.head(n) = f_;
@@ -2079,7 +2063,7 @@ Summary NaturalSolver::project(NaturalState& s, const ActuationValues& u)
     for (size_t i = 0; i < nm_.nodes.size(); ++i)
       pos_[i] = naturalNodePosition(nm_, static_cast<int>(i), s.x, u_);
     residual_.setZero(n + m);
-    entries_.clear(n + m, n + m <= kDenseMost);
+    entries_.clear(n + m, n + m <= policy_.dense_most);
     entries_.addMatrix(nm_.mass);
     constraintRows(s.x, no_lambda, 1.0, 0.0, true);
     return factorize(n + m);
@@ -2212,12 +2196,8 @@ Summary NaturalSolver::setExternalLoads(const std::vector<PointLoad>& loads, Nat
   return initialize(s, law);
 }
 
-Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& law)
+void NaturalSolver::startStep(const NaturalState& s, double h)
 {
-  Summary out;
-  const int n = nm_.coordinates, m = static_cast<int>(nm_.struts.size() + nm_.rows.size());
-  const double t1 = s.t + h;
-  law(t1, u_);
   // the pairs a node can reach in this step (from its speed and acceleration at the start), checked after
   double reach = 0.0;
   for (int c = 0; c < nm_.positions; c += 3)
@@ -2229,15 +2209,8 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
     const ScopeTimer timer(stats_.contact_time);
     findNear(s, std::max(2.0 * reach, kNearFloor));
   }
-  // The unknowns are the accelerations qdd at the step's end; the algorithmic accelerations are
-  // a = c1 qdd + c0 (generalized-alpha: (1 - alpha_m) a + alpha_m a_n = (1 - alpha_f) qdd + alpha_f qdd_n; Newmark:
-  // a = qdd), and x = x_n + h v_n + h^2 ((1/2 - beta) a_n + beta a), v = v_n + h ((1 - gamma) a_n + gamma a).
-  const double c1 = (1.0 - alpha_f_) / (1.0 - alpha_m_);
   // (members, kept between steps: no allocation in the step loop once they have their size)
   c0_ = (alpha_f_ * s.qdd - alpha_m_ * s.a) / (1.0 - alpha_m_);
-  const double bh2 = beta_ * h * h * c1, gh = gamma_ * h * c1;
-  // Newton's first guess: through the last three step ends quadratic, through two linear (from the state the last
-  // step ended in), else the start's
   acc_ = s.qdd;
   lambda_ = s.lambda;
   const int known = s.t == last_end_t_ ? history_count_ : 0;
@@ -2256,27 +2229,39 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
     acc_ = w2 * s.qdd + w1 * history_[0].a + w0 * history_[1].a;
     lambda_ = w2 * s.lambda + w1 * history_[0].lambda + w0 * history_[1].lambda;
   }
-  residual_.resize(n + m);
   x_pred_ = s.x + h * s.v + h * h * ((0.5 - beta_) * s.a + beta_ * c0_);
   v_pred_ = s.v + h * ((1.0 - gamma_) * s.a + gamma_ * c0_);
-  // modified Newton keeps the factorization while it serves: a new one for a new step size (beyond 25 %), an old one
-  // (max_jacobian_age steps), or a change of the pairs touching at the start (a kept matrix with a contact stiffness
-  // that is gone makes small increments of a wrong iterate)
   touching_.clear();
   for (const NaturalTouch& c : s.touching)
     touching_.push_back(c.slot);
-  bool rebuild = !have_lu_ || std::abs(h - lu_h_) > 0.25 * lu_h_ || factor_age_ >= options_.max_jacobian_age ||
-                 touching_ != factor_contacts_;
+}
+
+Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& law)
+{
+  // The unknowns are the accelerations qdd at the step's end; the algorithmic accelerations are
+  // a = c1 qdd + c0 (generalized-alpha: (1 - alpha_m) a + alpha_m a_n = (1 - alpha_f) qdd + alpha_f qdd_n; Newmark:
+  // a = qdd), and x = x_n + h v_n + h^2 ((1/2 - beta) a_n + beta a), v = v_n + h ((1 - gamma) a_n + gamma a).
+  Summary out;
+  const int n = nm_.coordinates, m = static_cast<int>(nm_.struts.size() + nm_.rows.size());
+  law(s.t + h, u_);
+  startStep(s, h);
+  const double c1 = (1.0 - alpha_f_) / (1.0 - alpha_m_);
+  const double bh2 = beta_ * h * h * c1, gh = gamma_ * h * c1;
+  residual_.resize(n + m);
+  // modified Newton keeps the factorization while it serves (NewtonPolicy)
+  bool rebuild =
+      policy_.rebuildAtStart(have_lu_, h, lu_h_, factor_age_, options_.max_jacobian_age, touching_ != factor_contacts_);
   bool built_this_step = false;
   double previous = 0.0;  // the last increment over the tolerance
   for (int it = 0; it < options_.max_iterations; ++it)
   {
     x_ = x_pred_ + bh2 * acc_;
     v_ = v_pred_ + gh * acc_;
-    const bool build = rebuild || it >= kFullNewtonFrom || !options_.reuse_jacobian;
+    const bool full = policy_.fullNewton(it, options_.reuse_jacobian);
+    const bool build = rebuild || full;
     if (build)
     {
-      entries_.clear(n + m, n + m <= kDenseMost);
+      entries_.clear(n + m, n + m <= policy_.dense_most);
       entries_.addMatrix(nm_.mass);
       entries_.k_weight = bh2;
       entries_.c_weight = gh;
@@ -2294,8 +2279,7 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
     if (build)
     {
       // (modified Newton's matrix may be an approximation; full Newton's is refined to round-off at every solve)
-      const bool factorized = factorize(
-          n + m, it >= kFullNewtonFrom || !options_.reuse_jacobian ? Pivots::kStaticRefined : Pivots::kStatic);
+      const bool factorized = factorize(n + m, full ? Pivots::kStaticRefined : Pivots::kStatic);
       laps.lap(stats_.factorization_time);
       if (!factorized)
       {
@@ -2345,76 +2329,86 @@ Summary NaturalSolver::tryStep(NaturalState& s, double h, const ActuationLaw& la
         findNear(s, 2.0 * largestMotion(s.x, x_));
         continue;
       }
-      // a step that jumps a strut through another is refused (and cut), never accepted silently
-      const ScopeTimer timer(stats_.contact_time);  // (the pass-through check and the end's contacts)
-      const int crossed = firstPassedThrough();
-      if (crossed >= 0)
-      {
-        const auto [body_a, body_b] = model_.pairBodies(crossed);
-        out.status = SolveStatus::kPassedThrough;
-        out.message = "struts '" + model_.bodies[body_a].name + "' and '" + model_.bodies[body_b].name +
-                      "' passed through each other";
-        return out;
-      }
-      // the local error and a new contact's depth
-      error_ = 0.0;
-      const double factor = h * h * (std::abs(beta_ - 1.0 / 6.0) + std::abs(gamma_ - 0.5));
-      a_end_ = c1 * acc_ + c0_;
-      for (int c = 0; c < nm_.positions; c += 3)
-        error_ = std::max(error_, factor * (a_end_.segment<3>(c) - s.a.segment<3>(c)).norm());
-      v_ = v_pred_ + gh * acc_;
-      onset_depth_ = 0.0;
-      // the listed contacts at the end (the next step's start reads them), a new contact's depth, and the contact
-      // memory: the contacts touching at the end keep (or take) this step's impact speed, the others forget it; a near
-      // pair's forces at its impact speed, in the same pass (near_ ascends, as listed_ does by slot)
-      s.touching.clear();
-      s.contacts.clear();
-      auto next_near = near_.begin();
-      for (size_t k = 0; k < listed_.size(); ++k)
-      {
-        Listed& l = listed_[k];
-        const bool near = next_near != near_.end() && *next_near == static_cast<int>(k);
-        if (near)
-          ++next_near;
-        Vec14 f;
-        const ContactPairState st = naturalContact(nm_, l.c, naturalContactInput(nm_, l.c, x_, v_, u_),
-                                                   near ? l.step_speed : 0.0, near ? &f : nullptr, nullptr, nullptr);
-        l.end_gap = st.gap;
-        l.end_rate = st.penetration_rate;
-        if (!near || !st.active)
-          continue;
-        s.touching.push_back({ l.c.slot, l.step_speed });
-        s.contacts.push_back(st);
-        if (-l.end_gap > onset_depth_ && !std::binary_search(touching_.begin(), touching_.end(), l.c.slot))
-          onset_depth_ = -l.end_gap;
-      }
-      end_t_ = t1;
-      end_list_version_ = list_version_;
-      // the history of Newton's first guess
-      if (s.t == last_end_t_ && history_count_ > 0)
-        std::swap(history_[0], history_[1]);
-      history_count_ = s.t == last_end_t_ ? std::min(history_count_ + 1, 2) : 1;
-      history_[0].t = s.t;
-      history_[0].a = s.qdd;
-      history_[0].lambda = s.lambda;
-      last_end_t_ = t1;
-      s.x = x_;
-      s.v = v_;
-      s.a = a_end_;
-      s.qdd = acc_;
-      s.lambda = lambda_;
-      s.t = t1;
-      ++stats_.steps;
-      ++factor_age_;
+      const Summary end = endStep(s, h, c1);
+      out.status = end.status;
+      out.message = end.message;
       return out;
     }
     // an old matrix that does not contract: a new one
-    if (theta_ > 0.5)
+    if (!contracting())
       rebuild = true;
   }
   out.status = SolveStatus::kMaxIterations;
   out.message = "natural coordinates: Newton did not converge";
   have_lu_ = false;
+  return out;
+}
+
+Summary NaturalSolver::endStep(NaturalState& s, double h, double c1)
+{
+  Summary out;
+  const double t1 = s.t + h;
+  // a step that jumps a strut through another is refused (and cut), never accepted silently
+  const ScopeTimer timer(stats_.contact_time);  // (the pass-through check and the end's contacts)
+  const int crossed = firstPassedThrough();
+  if (crossed >= 0)
+  {
+    const auto [body_a, body_b] = model_.pairBodies(crossed);
+    out.status = SolveStatus::kPassedThrough;
+    out.message = "struts '" + model_.bodies[body_a].name + "' and '" + model_.bodies[body_b].name +
+                  "' passed through each other";
+    return out;
+  }
+  // the local error and a new contact's depth
+  error_ = 0.0;
+  const double factor = h * h * (std::abs(beta_ - 1.0 / 6.0) + std::abs(gamma_ - 0.5));
+  a_end_ = c1 * acc_ + c0_;
+  for (int c = 0; c < nm_.positions; c += 3)
+    error_ = std::max(error_, factor * (a_end_.segment<3>(c) - s.a.segment<3>(c)).norm());
+  v_ = v_pred_ + gamma_ * h * c1 * acc_;
+  onset_depth_ = 0.0;
+  // the listed contacts at the end (the next step's start reads them), a new contact's depth, and the contact
+  // memory: the contacts touching at the end keep (or take) this step's impact speed, the others forget it; a near
+  // pair's forces at its impact speed, in the same pass (near_ ascends, as listed_ does by slot)
+  s.touching.clear();
+  s.contacts.clear();
+  auto next_near = near_.begin();
+  for (size_t k = 0; k < listed_.size(); ++k)
+  {
+    Listed& l = listed_[k];
+    const bool near = next_near != near_.end() && *next_near == static_cast<int>(k);
+    if (near)
+      ++next_near;
+    Vec14 f;
+    const ContactPairState st = naturalContact(nm_, l.c, naturalContactInput(nm_, l.c, x_, v_, u_),
+                                               near ? l.step_speed : 0.0, near ? &f : nullptr, nullptr, nullptr);
+    l.end_gap = st.gap;
+    l.end_rate = st.penetration_rate;
+    if (!near || !st.active)
+      continue;
+    s.touching.push_back({ l.c.slot, l.step_speed });
+    s.contacts.push_back(st);
+    if (-l.end_gap > onset_depth_ && !std::binary_search(touching_.begin(), touching_.end(), l.c.slot))
+      onset_depth_ = -l.end_gap;
+  }
+  end_t_ = t1;
+  end_list_version_ = list_version_;
+  // the history of Newton's first guess
+  if (s.t == last_end_t_ && history_count_ > 0)
+    std::swap(history_[0], history_[1]);
+  history_count_ = s.t == last_end_t_ ? std::min(history_count_ + 1, 2) : 1;
+  history_[0].t = s.t;
+  history_[0].a = s.qdd;
+  history_[0].lambda = s.lambda;
+  last_end_t_ = t1;
+  s.x = x_;
+  s.v = v_;
+  s.a = a_end_;
+  s.qdd = acc_;
+  s.lambda = lambda_;
+  s.t = t1;
+  ++stats_.steps;
+  ++factor_age_;
   return out;
 }
 

@@ -23,6 +23,7 @@
 #pragma once
 
 #include <array>
+#include <cmath>
 #include <functional>
 #include <limits>
 #include <vector>
@@ -215,6 +216,47 @@ struct NaturalStats
   double forces_time = 0.0, contact_time = 0.0, constraints_time = 0.0, factorization_time = 0.0, solve_time = 0.0;
 };
 
+/// Modified Newton's policy in a dynamic step: when the Newton matrix is kept, built anew or distrusted, and how it is
+/// factorized. NaturalSolver::tryStep follows it; SolverOptions holds what a scene sets (reuse_jacobian,
+/// max_jacobian_age, newton_tolerance, max_iterations).
+struct NewtonPolicy
+{
+  /// A step's iterations from this one on build their own matrix (full Newton).
+  int full_newton_from = 8;
+  /// A kept matrix is built anew for a step size that differs from its own by more than this share.
+  double step_change = 0.25;
+  /// ... and once the iteration's contraction rate with it exceeds this (it no longer contracts).
+  double contraction = 0.5;
+  /// The least contraction rate assumed of a kept matrix when judging the error an increment leaves.
+  double rate_floor = 0.05;
+  /// Newton matrices up to this size are factorized dense, larger ones sparse.
+  int dense_most = 160;
+  /// Sparse: static pivots with the constraint rows' diagonal shifted by -static_shift phi^2 / d (phi the rows'
+  /// largest entry, d the largest diagonal entry); after a refused factorization, this many use the sparse LU.
+  double static_shift = 1e-6;
+  int static_pivot_skip = 4;
+  /// A static-pivot factorization's check: A 1 solved comes back within static_check of 1 (the contraction rate
+  /// modified Newton tolerates), refined within static_refined_check.
+  double static_check = 0.5;
+  double static_refined_check = 1e-8;
+  /// Dense: a kept factorization is inverted (a solve is then one product) while the recent factorizations served on
+  /// average at least inverse_solves times their size in solves; the average's weight of the last.
+  double inverse_solves = 0.75;
+  double solves_average = 0.25;
+
+  /// Whether a step starts with a matrix built anew: none kept, a step size changed, the matrix too old, or the pairs
+  /// touching at the start not those it was built with.
+  bool rebuildAtStart(bool have, double h, double h_built, int age, int max_age, bool contacts_changed) const
+  {
+    return !have || std::abs(h - h_built) > step_change * h_built || age >= max_age || contacts_changed;
+  }
+  /// Whether iteration `it` builds its own matrix (full Newton).
+  bool fullNewton(int it, bool reuse_jacobian) const
+  {
+    return !reuse_jacobian || it >= full_newton_from;
+  }
+};
+
 /// Index-3 Newmark or generalized-alpha in natural coordinates with modified Newton, by the body solver's rules
 /// (dynamics.h): the Newton matrix [M + beta h^2 K + gamma h C, G^T; G, 0] (dense LU up to 160 unknowns, sparse LU
 /// above) is kept across steps and built anew for a new step size, after solver.max_jacobian_age steps, when the pairs
@@ -352,8 +394,20 @@ public:
   {
     return error_;
   }
+  /// Modified Newton's policy the steps follow.
+  const NewtonPolicy& policy() const
+  {
+    return policy_;
+  }
 
 private:
+  NewtonPolicy policy_;
+  /// tryStep's start: the near pairs for the step, Newton's first guess (acc_, lambda_: through the last three step
+  /// ends quadratic, through two linear, else the start's) and the predictors c0_, x_pred_, v_pred_.
+  void startStep(const NaturalState& s, double h);
+  /// tryStep's end once Newton has converged at x_: the step is refused (kPassedThrough) when a strut passed through
+  /// another; else its error, the end's contacts and contact memory, and the state written into s.
+  Summary endStep(NaturalState& s, double h, double c1);
   Summary advance(NaturalState& s, double t_end, const ActuationLaw& law,
                   const std::function<void(const NaturalState&)>& on_step, bool adaptive);
   void forces(const Eigen::VectorXd& x, const Eigen::VectorXd& v, bool tangents);
@@ -466,9 +520,8 @@ private:
   Entries entries_;
   Eigen::SparseMatrix<double> sparse_;
   Eigen::PartialPivLU<Eigen::MatrixXd> dense_lu_;
-  // a dense factorization that serves many solves is inverted: a solve is then one product (for 80 unknowns 0.2 us
-  // against the triangular solves' 1.1; the inverse costs about 37 us, 2.3 factorizations). Whether the factorizations
-  // serve that many: the solves each served, averaged (exponentially) over the last ones
+  // a dense factorization that serves many solves is inverted (NewtonPolicy::inverse_solves): the solves each
+  // factorization served, averaged (exponentially) over the last ones
   Eigen::MatrixXd dense_inverse_;
   bool use_inverse_ = false;
   long solves_since_factor_ = 0;
@@ -532,10 +585,10 @@ private:
   /// the largest contraction rate seen with it) or with one built for this step (`fresh`); the error it leaves, in
   /// tolerances. `previous`: the last increment with the same matrix.
   double errorLeft(double scaled, bool kept, bool fresh, double& previous);
-  /// Whether the iteration contracts (the largest rate seen with the matrix at most 0.5).
+  /// Whether the iteration contracts (the largest rate seen with the matrix at most policy_.contraction).
   bool contracting() const
   {
-    return !(theta_ > 0.5);
+    return !(theta_ > policy_.contraction);
   }
   /// A new factorization: its contraction rate unknown.
   void freshMatrix(double& previous);
