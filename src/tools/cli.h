@@ -3,6 +3,7 @@
 
 #include <cmath>
 #include <filesystem>
+#include <functional>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -88,6 +89,97 @@ public:
 private:
   std::vector<std::string> args_;
   size_t next_ = 0;
+};
+
+/// A tool's command line, walked in order: options that take a value (`--name VALUE`), flags (`--name`) and
+/// positional arguments. Asking for help (-h, --help), an unknown option, a missing or empty value and a positional
+/// argument too many are handled here, with one wording for every tool (BadArgument).
+class CommandLine
+{
+public:
+  using Take = std::function<void(const std::string& value)>;
+  /// `what` names the positional arguments in messages ("scene"); `context` prefixes the unknown-option message and
+  /// `hint` follows it.
+  explicit CommandLine(std::string what = "scene", std::string context = "", std::string hint = "")
+    : what_(std::move(what)), context_(std::move(context)), hint_(std::move(hint))
+  {
+  }
+  /// `--name VALUE`: take(VALUE).
+  CommandLine& value(const std::string& name, Take take)
+  {
+    values_.emplace_back(name, std::move(take));
+    return *this;
+  }
+  /// `--name`: set().
+  CommandLine& flag(const std::string& name, std::function<void()> set)
+  {
+    flags_.emplace_back(name, std::move(set));
+    return *this;
+  }
+  /// Up to `most` positional arguments, each given to take; `dash` also takes "-" (stdin) as one.
+  CommandLine& positional(Take take, int most = 1, bool dash = false)
+  {
+    positional_ = std::move(take);
+    most_ = most;
+    dash_ = dash;
+    return *this;
+  }
+  /// Walks the rest of `args`; false when help was asked (what follows it is not read).
+  bool parse(Args& args)
+  {
+    while (args.more())
+    {
+      const std::string arg = args.option();
+      if (arg == "-h" || arg == "--help")
+        return false;
+      if (take(arg, args))
+        continue;
+      if (!arg.empty() && arg[0] == '-' && !(dash_ && arg == "-"))
+        throw BadArgument(context_ + "unknown option '" + arg + "'" + hint_);
+      if (!positional_ || given_.size() >= static_cast<size_t>(most_))
+        throw BadArgument(given_.empty() ?
+                              context_ + "unexpected argument '" + arg + "'" + hint_ :
+                              "more than one " + what_ + " given ('" + given_.back() + "' and '" + arg + "')");
+      given_.push_back(arg);
+      positional_(arg);
+    }
+    return true;
+  }
+  bool parse(int argc, char** argv)
+  {
+    Args args(std::vector<std::string>(argv + 1, argv + argc));
+    return parse(args);
+  }
+
+private:
+  bool take(const std::string& arg, Args& args)
+  {
+    for (const auto& [name, take] : values_)
+      if (arg == name)
+      {
+        const std::string v = args.value(arg);
+        // (an empty name opens nothing and writes nothing, and the run would say nothing of it)
+        if (v.empty())
+          throw BadArgument(arg + " needs a value, got an empty one ('')");
+        take(v);
+        return true;
+      }
+    for (const auto& [name, set] : flags_)
+      if (arg == name)
+      {
+        set();
+        return true;
+      }
+    return false;
+  }
+
+  std::string what_, context_, hint_;
+  std::vector<std::pair<std::string, Take>> values_;
+  std::vector<std::pair<std::string, std::function<void()>>> flags_;
+  Take positional_;
+  int most_ = 1;
+  bool dash_ = false;
+  std::vector<std::string> given_;
 };
 
 /// The directory of the shipped scenes: <prefix>/share/active_tensegrity/config/scenes when the running tool

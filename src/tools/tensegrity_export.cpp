@@ -37,44 +37,34 @@ int main(int argc, char** argv)
 #endif
   try
   {
-    tools::Args args(std::vector<std::string>(argv + 1, argv + argc));
-    while (args.more())
-    {
-      const std::string arg = args.option();
-      if (arg == "-h" || arg == "--help")
-      {
-        std::cout << kUsage;
-        return 0;
-      }
-      if (arg == "--set")
-        overrides.push_back(at::parseOverride(args.value(arg)));
-      else if (arg == "--mjcf")
-        mjcf_path = args.value(arg);
+    const auto into = [](std::string& field) { return [&field](const std::string& v) { field = v; }; };
+    tools::CommandLine cl;
+    cl.value("--set", [&](const std::string& v) { overrides.push_back(at::parseOverride(v)); })
+        .value("--mjcf", into(mjcf_path))
 #ifdef ACTIVE_TENSEGRITY_HAVE_MUJOCO
-      else if (arg == "--timestep")
-        options.timestep = tools::parsePositive<double>(arg, args.value(arg));
-      else if (arg == "--integrator")
-      {
-        const std::string v = args.value(arg);
-        try
-        {
-          options.integrator = tools::parseMujocoIntegrator(v);
-        }
-        catch (const std::invalid_argument&)
-        {
-          throw tools::BadArgument("--integrator: expected euler, implicit or rk4, got '" + v + "'");
-        }
-      }
+        .value("--timestep",
+               [&](const std::string& v) { options.timestep = tools::parsePositive<double>("--timestep", v); })
+        .value("--integrator",
+               [&](const std::string& v)
+               {
+                 try
+                 {
+                   options.integrator = tools::parseMujocoIntegrator(v);
+                 }
+                 catch (const std::invalid_argument&)
+                 {
+                   throw tools::BadArgument("--integrator: expected euler, implicit or rk4, got '" + v + "'");
+                 }
+               })
 #else
-      else if (arg == "--timestep" || arg == "--integrator")
-        args.value(arg);
+        .value("--timestep", [](const std::string&) {})
+        .value("--integrator", [](const std::string&) {})
 #endif
-      else if (!arg.empty() && arg[0] == '-')
-        throw tools::BadArgument("unknown option '" + arg + "'");
-      else if (scene.empty())
-        scene = arg;
-      else
-        throw tools::BadArgument("more than one scene given ('" + scene + "' and '" + arg + "')");
+        .positional(into(scene));
+    if (!cl.parse(argc, argv))
+    {
+      std::cout << kUsage;
+      return 0;
     }
     if (scene.empty())
       throw tools::BadArgument("no scene given");

@@ -106,52 +106,50 @@ int main(int argc, char** argv)
   at::FormFindingOptions o;
   try
   {
-    tools::Args args(std::vector<std::string>(argv + 1, argv + argc));
-    while (args.more())
-    {
-      const std::string arg = args.option();
-      if (arg == "-h" || arg == "--help")
-      {
-        std::cout << kUsage;
-        return 0;
-      }
-      if (arg == "--out")
-        out_path = args.value(arg);
-      else if (arg == "--mode")
-        o.mode = choice(arg, args.value(arg), "free", "prestress") == "free" ? at::FormFindingMode::kFree :
+    tools::CommandLine cl;
+    cl.value("--out", [&](const std::string& v) { out_path = v; })
+        .value("--mode",
+               [&](const std::string& v)
+               {
+                 o.mode = choice("--mode", v, "free", "prestress") == "free" ? at::FormFindingMode::kFree :
                                                                                at::FormFindingMode::kPrestress;
-      else if (arg == "--prestress" || arg == "--force-density")
-      {
-        const auto [family, value] = familyValue(arg, args.value(arg));
-        auto& map = arg == "--prestress" ? o.tension : o.force_density;
-        if (!map.emplace(family, value).second)
-          throw tools::BadArgument(arg + ": family '" + family + "' given twice");
-      }
-      else if (arg == "--supports")
-        o.supports_react = choice(arg, args.value(arg), "fixed", "react") == "react";
-      else if (arg == "--struts")
-        o.uniform_struts = choice(arg, args.value(arg), "uniform", "free") == "uniform";
-      else if (arg == "--strut-lengths")
-        o.keep_strut_lengths = choice(arg, args.value(arg), "free", "keep") == "keep";
-      else if (arg == "--tolerance")
-      {
-        o.tolerance = tools::parsePositive<double>(arg, args.value(arg));
-        if (o.tolerance >= 1e-3)
-          throw tools::BadArgument(arg + ": expected a relative tolerance below 1e-3, got '" +
-                                   at::shortestNumber(o.tolerance) + "'");
-      }
-      else if (arg == "--max-iterations")
-      {
-        o.max_iterations = tools::parsePositive<int>(arg, args.value(arg));
-        if (o.max_iterations > 10000)
-          throw tools::BadArgument(arg + ": at most 10000, got '" + std::to_string(o.max_iterations) + "'");
-      }
-      else if (!arg.empty() && arg[0] == '-' && arg != "-")
-        throw tools::BadArgument("unknown option '" + arg + "'");
-      else if (in_path.empty())
-        in_path = arg;
-      else
-        throw tools::BadArgument("more than one scene given ('" + in_path + "' and '" + arg + "')");
+               })
+        .value("--supports",
+               [&](const std::string& v) { o.supports_react = choice("--supports", v, "fixed", "react") == "react"; })
+        .value("--struts",
+               [&](const std::string& v) { o.uniform_struts = choice("--struts", v, "uniform", "free") == "uniform"; })
+        .value("--strut-lengths", [&](const std::string& v)
+               { o.keep_strut_lengths = choice("--strut-lengths", v, "free", "keep") == "keep"; })
+        .value("--tolerance",
+               [&](const std::string& v)
+               {
+                 o.tolerance = tools::parsePositive<double>("--tolerance", v);
+                 if (o.tolerance >= 1e-3)
+                   throw tools::BadArgument("--tolerance: expected a relative tolerance below 1e-3, got '" +
+                                            at::shortestNumber(o.tolerance) + "'");
+               })
+        .value("--max-iterations",
+               [&](const std::string& v)
+               {
+                 o.max_iterations = tools::parsePositive<int>("--max-iterations", v);
+                 if (o.max_iterations > 10000)
+                   throw tools::BadArgument("--max-iterations: at most 10000, got '" +
+                                            std::to_string(o.max_iterations) + "'");
+               })
+        .positional([&](const std::string& v) { in_path = v; }, 1, true);
+    for (const std::string option : { "--prestress", "--force-density" })
+      cl.value(option,
+               [&o, option](const std::string& v)
+               {
+                 const auto [family, value] = familyValue(option, v);
+                 auto& map = option == "--prestress" ? o.tension : o.force_density;
+                 if (!map.emplace(family, value).second)
+                   throw tools::BadArgument(option + ": family '" + family + "' given twice");
+               });
+    if (!cl.parse(argc, argv))
+    {
+      std::cout << kUsage;
+      return 0;
     }
     if (in_path.empty())
       throw tools::BadArgument("no scene given");

@@ -46,9 +46,8 @@ struct HelpRequested
 };
 
 /// A number in [lo, hi] (unit) for `option`, else BadArgument naming the option, the range and the value.
-double bounded(tools::Args& args, const std::string& option, double lo, double hi, const std::string& unit)
+double bounded(const std::string& option, const std::string& text, double lo, double hi, const std::string& unit)
 {
-  const std::string text = args.value(option);
   const double v = tools::parsePositive<double>(option, text);
   if (v < lo || v > hi)
     throw tools::BadArgument(option + ": must lie in [" + at::shortestNumber(lo) + ", " + at::shortestNumber(hi) +
@@ -56,73 +55,69 @@ double bounded(tools::Args& args, const std::string& option, double lo, double h
   return v;
 }
 
-double length(tools::Args& args, const std::string& option)
+/// Takes a length (m) or a prestress (N) within the generators' bounds into `field`.
+tools::CommandLine::Take length(const std::string& option, double& field)
 {
-  return bounded(args, option, at::kMinGeneratedLength, at::kMaxGeneratedLength, "m");
+  return [&field, option](const std::string& v)
+  { field = bounded(option, v, at::kMinGeneratedLength, at::kMaxGeneratedLength, "m"); };
 }
-
-double prestress(tools::Args& args, const std::string& option)
+tools::CommandLine::Take prestress(const std::string& option, double& field)
 {
-  return bounded(args, option, at::kMinGeneratedPrestress, at::kMaxGeneratedPrestress, "N");
+  return [&field, option](const std::string& v)
+  { field = bounded(option, v, at::kMinGeneratedPrestress, at::kMaxGeneratedPrestress, "N"); };
 }
 
 // at most this many lattice cells (4 struts each): the most struts whose pairs the loader numbers (auto pairs,
 // Model::kMostAutoPairStruts)
 constexpr int kMaxLatticeCells = at::Model::kMostAutoPairStruts / 4;
 
+/// The options of one structure: its own, then --out; no positional argument. Help among them: HelpRequested.
+void parseStructure(tools::CommandLine& cl, tools::Args& args, std::string& out_path)
+{
+  cl.value("--out", [&](const std::string& v) { out_path = v; });
+  if (!cl.parse(args))
+    throw HelpRequested{};
+}
+
 std::string generate(const std::string& structure, tools::Args& args, std::string& out_path)
 {
-  const auto unknown = [&](const std::string& arg)
-  { return tools::BadArgument(structure + ": unknown option '" + arg + "' (tensegrity_generate --help)"); };
+  tools::CommandLine cl("argument", structure + ": ", " (tensegrity_generate --help)");
   if (structure == "prism")
   {
     at::PrismSpec s;
     bool struts = false;
-    while (args.more())
-    {
-      const std::string arg = args.option();
-      if (arg == "-h" || arg == "--help")
-        throw HelpRequested{};
-      if (arg == "--struts")
-      {
-        s.struts = tools::parsePositive<int>(arg, args.value(arg));
-        struts = true;
-      }
-      else if (arg == "--radius")
-        s.radius = length(args, arg);
-      else if (arg == "--height")
-        s.height = length(args, arg);
-      else if (arg == "--twist")
-      {
-        const std::string v = args.value(arg);
-        size_t used = 0;
-        try
-        {
-          s.twist = std::stod(v, &used) * M_PI / 180.0;
-        }
-        catch (const std::exception&)
-        {
-          used = 0;
-        }
-        if (used != v.size() || v.empty() || !std::isfinite(s.twist))
-          throw tools::BadArgument("--twist: expected an angle in degrees, got '" + v + "'");
-        if (std::abs(std::stod(v)) > at::kMaxGeneratedTwist)
-          throw tools::BadArgument("--twist: must lie in [" + at::shortestNumber(-at::kMaxGeneratedTwist) + ", " +
-                                   at::shortestNumber(at::kMaxGeneratedTwist) + "] degrees, got '" + v + "'");
-      }
-      else if (arg == "--prestress")
-        s.ring_prestress = prestress(args, arg);
-      else if (arg == "--pinned")
-        s.pinned = true;
-      else if (arg == "--driven")
-        s.driven = true;
-      else if (arg == "--strut-radius")
-        s.strut_radius = length(args, arg);
-      else if (arg == "--out")
-        out_path = args.value(arg);
-      else
-        throw unknown(arg);
-    }
+    cl.value("--struts",
+             [&](const std::string& v)
+             {
+               s.struts = tools::parsePositive<int>("--struts", v);
+               struts = true;
+             })
+        .value("--radius", length("--radius", s.radius))
+        .value("--height", length("--height", s.height))
+        .value("--twist",
+               [&](const std::string& v)
+               {
+                 size_t used = 0;
+                 try
+                 {
+                   s.twist = std::stod(v, &used) * M_PI / 180.0;
+                 }
+                 catch (const std::exception&)
+                 {
+                   used = 0;
+                 }
+                 if (used != v.size() || v.empty() || !std::isfinite(s.twist))
+                   throw tools::BadArgument("--twist: expected an angle in degrees, got '" + v + "'");
+                 if (std::abs(std::stod(v)) > at::kMaxGeneratedTwist)
+                   throw tools::BadArgument("--twist: must lie in [" + at::shortestNumber(-at::kMaxGeneratedTwist) +
+                                            ", " + at::shortestNumber(at::kMaxGeneratedTwist) + "] degrees, got '" + v +
+                                            "'");
+               })
+        .value("--prestress", prestress("--prestress", s.ring_prestress))
+        .flag("--pinned", [&] { s.pinned = true; })
+        .flag("--driven", [&] { s.driven = true; })
+        .value("--strut-radius", length("--strut-radius", s.strut_radius));
+    parseStructure(cl, args, out_path);
     if (s.driven && !s.pinned)
       throw tools::BadArgument("prism: --driven needs --pinned (the top nodes are pressed against the base)");
     if (!struts)
@@ -134,62 +129,39 @@ std::string generate(const std::string& structure, tools::Args& args, std::strin
   if (structure == "octahedron")
   {
     at::OctahedronSpec s;
-    while (args.more())
-    {
-      const std::string arg = args.option();
-      if (arg == "-h" || arg == "--help")
-        throw HelpRequested{};
-      if (arg == "--strut-length")
-        s.strut_length = length(args, arg);
-      else if (arg == "--prestress")
-        s.prestress = prestress(args, arg);
-      else if (arg == "--pinned")
-        s.pinned = true;
-      else if (arg == "--out")
-        out_path = args.value(arg);
-      else
-        throw unknown(arg);
-    }
+    cl.value("--strut-length", length("--strut-length", s.strut_length))
+        .value("--prestress", prestress("--prestress", s.prestress))
+        .flag("--pinned", [&] { s.pinned = true; });
+    parseStructure(cl, args, out_path);
     return at::octahedronScene(s);
   }
   if (structure == "quadruplex-lattice")
   {
     tools::LatticeOptions o;
     bool cells = false, top_radius_given = false;
-    while (args.more())
-    {
-      const std::string arg = args.option();
-      if (arg == "-h" || arg == "--help")
-        throw HelpRequested{};
-      if (arg == "--cells")
-      {
-        const std::string v = args.value(arg);
-        const size_t x = v.find('x');
-        if (x == std::string::npos)
-          throw tools::BadArgument("--cells: expected AxB (e.g. 2x3), got '" + v + "'");
-        o.nx = tools::parsePositive<int>(arg, v.substr(0, x));
-        o.ny = tools::parsePositive<int>(arg, v.substr(x + 1));
-        if (static_cast<long>(o.nx) * o.ny > kMaxLatticeCells)
-          throw tools::BadArgument("--cells: at most " + std::to_string(kMaxLatticeCells) +
-                                   " cells (e.g. 80x100), got '" + v + "'");
-        cells = true;
-      }
-      else if (arg == "--pitch")
-        o.pitch = length(args, arg);
-      else if (arg == "--height")
-        o.height = length(args, arg);
-      else if (arg == "--top-radius")
-      {
-        o.top_radius = length(args, arg);
-        top_radius_given = true;
-      }
-      else if (arg == "--strut-radius")
-        o.strut_radius = length(args, arg);
-      else if (arg == "--out")
-        out_path = args.value(arg);
-      else
-        throw unknown(arg);
-    }
+    cl.value("--cells",
+             [&](const std::string& v)
+             {
+               const size_t x = v.find('x');
+               if (x == std::string::npos)
+                 throw tools::BadArgument("--cells: expected AxB (e.g. 2x3), got '" + v + "'");
+               o.nx = tools::parsePositive<int>("--cells", v.substr(0, x));
+               o.ny = tools::parsePositive<int>("--cells", v.substr(x + 1));
+               if (static_cast<long>(o.nx) * o.ny > kMaxLatticeCells)
+                 throw tools::BadArgument("--cells: at most " + std::to_string(kMaxLatticeCells) +
+                                          " cells (e.g. 80x100), got '" + v + "'");
+               cells = true;
+             })
+        .value("--pitch", length("--pitch", o.pitch))
+        .value("--height", length("--height", o.height))
+        .value("--top-radius",
+               [&, take = length("--top-radius", o.top_radius)](const std::string& v)
+               {
+                 take(v);
+                 top_radius_given = true;
+               })
+        .value("--strut-radius", length("--strut-radius", o.strut_radius));
+    parseStructure(cl, args, out_path);
     if (!cells)
       throw tools::BadArgument("quadruplex-lattice: --cells AxB is required");
     if (!(o.top_radius < o.pitch / 2.0))
@@ -207,23 +179,14 @@ std::string generate(const std::string& structure, tools::Args& args, std::strin
   {
     at::TowerSpec s;
     bool stages = false;
-    while (args.more())
-    {
-      const std::string arg = args.option();
-      if (arg == "-h" || arg == "--help")
-        throw HelpRequested{};
-      if (arg == "--stages")
-      {
-        s.stages = tools::parsePositive<int>(arg, args.value(arg));
-        stages = true;
-      }
-      else if (arg == "--width")
-        s.width = length(args, arg);
-      else if (arg == "--out")
-        out_path = args.value(arg);
-      else
-        throw unknown(arg);
-    }
+    cl.value("--stages",
+             [&](const std::string& v)
+             {
+               s.stages = tools::parsePositive<int>("--stages", v);
+               stages = true;
+             })
+        .value("--width", length("--width", s.width));
+    parseStructure(cl, args, out_path);
     if (!stages)
       throw tools::BadArgument("tower: --stages K is required");
     if (s.stages > at::kMaxTowerStages)

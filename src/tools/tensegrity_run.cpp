@@ -7,7 +7,11 @@
 #include <iomanip>
 #include <iostream>
 #include <limits>
+#include <functional>
 #include <memory>
+#include <sstream>
+#include <type_traits>
+#include <utility>
 #include <string>
 #include <vector>
 
@@ -21,8 +25,10 @@
 #include "active_tensegrity/core/solvers/structure_check.h"
 #include "active_tensegrity/core/outputs/vtk_writer.h"
 #include "active_tensegrity/ros/bag_writer.h"
+#include "cli.h"
 
 namespace at = active_tensegrity::core;
+namespace tools = active_tensegrity::tools;
 
 namespace
 {
@@ -242,107 +248,162 @@ int runModalScene(const std::string& scene, const at::Model& model, std::ostream
     summary << "  " << cols[i] << ": " << csvNumber(row[i]) << "\n";
   return finish(summary.str(), summary_file, summary_path, run.summary);
 }
-}  // namespace
-
-int main(int argc, char** argv)
+/// What the command line asks for.
+struct Options
 {
   std::string scene, out_path, summary_path, contacts_path, nodes_path, members_path, vtk_dir, bag_path, modes_path,
       bag_ns = kDefaultBagNs;
   bool check = false;
   std::vector<at::Override> overrides;
-  try
+};
+
+/// The command line into o; false when help was asked. Throws (BadArgument, std::invalid_argument, a malformed
+/// --set) when it is wrong.
+bool parseCommandLine(int argc, char** argv, Options& o)
+{
+  const auto into = [](std::string& field) { return [&field](const std::string& v) { field = v; }; };
+  tools::CommandLine cl;
+  cl.value("--set", [&](const std::string& v) { o.overrides.push_back(at::parseOverride(v)); })
+      .value("--out", into(o.out_path))
+      .value("--summary", into(o.summary_path))
+      .value("--contacts", into(o.contacts_path))
+      .value("--nodes", into(o.nodes_path))
+      .value("--members", into(o.members_path))
+      .value("--vtk", into(o.vtk_dir))
+      .value("--bag", into(o.bag_path))
+      .value("--bag-ns", into(o.bag_ns))
+      .value("--modes", into(o.modes_path))
+      .flag("--check", [&] { o.check = true; })
+      .positional(into(o.scene));
+  if (!cl.parse(argc, argv))
+    return false;
+  if (o.scene.empty())
+    throw tools::BadArgument("no scene given");
+  if (!o.bag_path.empty())
+    active_tensegrity::ros_layer::BagWriter::checkNamespace(o.bag_ns);
+  else if (o.bag_ns != kDefaultBagNs)
+    throw tools::BadArgument("--bag-ns needs --bag");
+  if (o.check && !(o.out_path.empty() && o.summary_path.empty() && o.contacts_path.empty() && o.nodes_path.empty() &&
+                   o.members_path.empty() && o.vtk_dir.empty() && o.bag_path.empty() && o.modes_path.empty()))
+    throw tools::BadArgument("--check prints its report on stdout and runs no analysis: it takes no --out, "
+                             "--summary, --contacts, --nodes, --members, --vtk, --bag or --modes");
+  return true;
+}
+
+/// The files of a run that is not modal: opened (with their headers) before the run, so that a bad path costs no
+/// simulation, and a row for each output state.
+class RunFiles
+{
+public:
+  /// Opens every file asked for; false (said on stderr) when one cannot be written.
+  bool open(const Options& o, const at::Model& model)
   {
-    for (int i = 1; i < argc; ++i)
+    if (!openFile(o.out_path, file_) || !openFile(o.contacts_path, contacts_) || !openFile(o.nodes_path, nodes_) ||
+        !openFile(o.members_path, members_) || !openFile(o.summary_path, summary_))
+      return false;
+    try
     {
-      const std::string arg = argv[i];
-      auto value = [&](const char* name) -> std::string
-      {
-        if (i + 1 >= argc)
-          throw std::invalid_argument(std::string(name) + " needs a value");
-        // (an empty name opened nothing and wrote nothing, and the run said nothing of it)
-        if (argv[i + 1][0] == '\0')
-          throw std::invalid_argument(std::string(name) + " needs a value, got an empty one ('')");
-        return argv[++i];
-      };
-      if (arg == "-h" || arg == "--help")
-      {
-        std::cout << kUsage;
-        return 0;
-      }
-      if (arg == "--set")
-        overrides.push_back(at::parseOverride(value("--set")));
-      else if (arg == "--out")
-        out_path = value("--out");
-      else if (arg == "--summary")
-        summary_path = value("--summary");
-      else if (arg == "--contacts")
-        contacts_path = value("--contacts");
-      else if (arg == "--nodes")
-        nodes_path = value("--nodes");
-      else if (arg == "--members")
-        members_path = value("--members");
-      else if (arg == "--vtk")
-        vtk_dir = value("--vtk");
-      else if (arg == "--bag")
-        bag_path = value("--bag");
-      else if (arg == "--bag-ns")
-        bag_ns = value("--bag-ns");
-      else if (arg == "--modes")
-        modes_path = value("--modes");
-      else if (arg == "--check")
-        check = true;
-      else if (!arg.empty() && arg[0] == '-')
-        throw std::invalid_argument("unknown option '" + arg + "'");
-      else if (scene.empty())
-        scene = arg;
-      else
-        throw std::invalid_argument("more than one scene given ('" + scene + "' and '" + arg + "')");
+      if (!o.vtk_dir.empty())
+        vtk_ = std::make_unique<at::VtkWriter>(model, o.vtk_dir);
     }
-    if (scene.empty())
-      throw std::invalid_argument("no scene given");
-    if (!bag_path.empty())
-      active_tensegrity::ros_layer::BagWriter::checkNamespace(bag_ns);
-    else if (bag_ns != kDefaultBagNs)
-      throw std::invalid_argument("--bag-ns needs --bag");
-    if (check && !(out_path.empty() && summary_path.empty() && contacts_path.empty() && nodes_path.empty() &&
-                   members_path.empty() && vtk_dir.empty() && bag_path.empty() && modes_path.empty()))
-      throw std::invalid_argument("--check prints its report on stdout and runs no analysis: it takes no --out, "
-                                  "--summary, --contacts, --nodes, --members, --vtk, --bag or --modes");
-  }
-  catch (const std::exception& e)
-  {
-    std::cerr << "tensegrity_run: " << e.what() << "\n" << kUsage;
-    return 2;
-  }
-
-  at::Model model;
-  try
-  {
-    model = at::loadScene(scene, overrides);
-  }
-  catch (const at::SceneError& e)
-  {
-    std::cerr << "tensegrity_run: scene refused: " << e.what() << "\n";
-    return 1;
-  }
-
-  if (check)
-    return runCheck(scene, model);
-  const bool modal = model.analysis.type == at::AnalysisType::kModal;
-  const char* misfit = nullptr;
-  if (modal &&
-      !(contacts_path.empty() && nodes_path.empty() && members_path.empty() && vtk_dir.empty() && bag_path.empty()))
-    misfit = "a modal analysis writes no --contacts, --nodes, --members, --vtk or --bag (its mode shapes: --modes)";
-  else if (!modal && !modes_path.empty())
-    misfit = "--modes writes the mode shapes of a modal analysis (analysis.type: modal)";
-  if (misfit)
-  {
-    std::cerr << "tensegrity_run: " << misfit << "\n" << kUsage;
-    return 2;
+    catch (const std::exception& e)
+    {
+      std::cerr << "tensegrity_run: --vtk: " << e.what() << "\n";
+      return false;
+    }
+    try
+    {
+      if (!o.bag_path.empty())
+        bag_ = std::make_unique<active_tensegrity::ros_layer::BagWriter>(o.bag_path, model, o.bag_ns);
+    }
+    catch (const std::exception& e)
+    {
+      std::cerr << "tensegrity_run: cannot write the bag '" << o.bag_path << "': " << e.what() << "\n";
+      return false;
+    }
+    csv_ = o.out_path.empty() ? &std::cout : &file_;
+    if (contacts_.is_open())
+      contacts_ << kContactColumns;
+    if (nodes_.is_open())
+    {
+      nodes_ << "t";
+      for (const at::Node& n : model.nodes)
+        nodes_ << "," << n.name << "_x," << n.name << "_y," << n.name << "_z";
+      nodes_ << "\n";
+    }
+    if (members_.is_open())
+      writeRow(members_, at::memberColumns(model));
+    writeRow(*csv_, at::csvColumns(model));
+    return true;
   }
 
-  // output files are opened before the run, so that a bad path costs no simulation
-  const auto open = [](const std::string& path, std::ofstream& f)
+  /// The rows of an output state in every file.
+  void write(const at::Model& model, const at::State& s)
+  {
+    writeRow(*csv_, at::csvRow(model, s));
+    if (bag_)
+      bag_->write(s);
+    if (vtk_)
+    {
+      try
+      {
+        vtk_->write(s);
+      }
+      catch (const std::exception& e)  // a full disk: said once, the run goes on without VTK files
+      {
+        std::cerr << "tensegrity_run: --vtk: " << e.what() << " (no more VTK files are written)\n";
+        vtk_.reset();
+        vtk_failed_ = true;
+      }
+    }
+    if (nodes_.is_open())
+    {
+      nodes_ << csvNumber(s.t);
+      for (const at::Node& n : model.nodes)
+      {
+        const at::Vec3 p = at::pointPosition(model, n.point, s.q);
+        nodes_ << "," << csvNumber(p.x()) << "," << csvNumber(p.y()) << "," << csvNumber(p.z());
+      }
+      nodes_ << "\n";
+    }
+    if (members_.is_open())
+      writeRow(members_, at::memberRow(model, s));
+    if (!contacts_.is_open())
+      return;
+    for (const at::ContactPairState& c : at::activeContacts(model, s))
+    {
+      contacts_ << csvNumber(s.t) << "," << at::contactBodyName(model, c.body_a) << ","
+                << at::contactBodyName(model, c.body_b);
+      for (const at::Vec3* v : { &c.point_a, &c.point_b, &c.normal })
+        contacts_ << "," << csvNumber(v->x()) << "," << csvNumber(v->y()) << "," << csvNumber(v->z());
+      contacts_ << "," << csvNumber(c.penetration) << "," << csvNumber(c.penetration_rate) << ","
+                << csvNumber(c.normal_force);
+      for (int k = 0; k < 3; ++k)
+        contacts_ << "," << csvNumber(c.friction_on_a(k));
+      contacts_ << "\n";
+    }
+  }
+
+  /// After the run: the CSV flushed, the bag closed and said.
+  void close(const std::string& bag_path)
+  {
+    csv_->flush();
+    if (!bag_)
+      return;
+    bag_->close();
+    std::cerr << "tensegrity_run: wrote " << bag_->written() << " states to " << bag_path << "\n";
+  }
+  std::ofstream& summary()
+  {
+    return summary_;
+  }
+  bool vtkFailed() const
+  {
+    return vtk_failed_;
+  }
+
+private:
+  static bool openFile(const std::string& path, std::ofstream& f)
   {
     if (path.empty())
       return true;
@@ -350,153 +411,36 @@ int main(int argc, char** argv)
     if (!f)
       std::cerr << "tensegrity_run: cannot write '" << path << "'\n";
     return static_cast<bool>(f);
-  };
-  std::ofstream file, contacts, nodes, members, summary_file, shapes;
-  if (!open(out_path, file) || !open(contacts_path, contacts) || !open(nodes_path, nodes) ||
-      !open(members_path, members) || !open(summary_path, summary_file) || !open(modes_path, shapes))
-    return 1;
-  if (modal)
-    return runModalScene(scene, model, out_path.empty() ? std::cout : file, shapes, summary_file, summary_path);
-  std::unique_ptr<at::VtkWriter> vtk;
-  bool vtk_failed = false;
-  if (!vtk_dir.empty())
-  {
-    try
-    {
-      vtk = std::make_unique<at::VtkWriter>(model, vtk_dir);
-    }
-    catch (const std::exception& e)
-    {
-      std::cerr << "tensegrity_run: --vtk: " << e.what() << "\n";
-      return 1;
-    }
   }
-  std::unique_ptr<active_tensegrity::ros_layer::BagWriter> bag;
-  if (!bag_path.empty())
+  template <class Row>
+  static void writeRow(std::ostream& out, const Row& row)
   {
-    try
+    for (size_t i = 0; i < row.size(); ++i)
     {
-      bag = std::make_unique<active_tensegrity::ros_layer::BagWriter>(bag_path, model, bag_ns);
+      out << (i ? "," : "");
+      if constexpr (std::is_same_v<typename Row::value_type, double>)
+        out << csvNumber(row[i]);
+      else
+        out << row[i];
     }
-    catch (const std::exception& e)
-    {
-      std::cerr << "tensegrity_run: cannot write the bag '" << bag_path << "': " << e.what() << "\n";
-      return 1;
-    }
-  }
-  std::ostream& csv = out_path.empty() ? std::cout : file;
-  if (contacts.is_open())
-    contacts << kContactColumns;
-  if (nodes.is_open())
-  {
-    nodes << "t";
-    for (const at::Node& n : model.nodes)
-      nodes << "," << n.name << "_x," << n.name << "_y," << n.name << "_z";
-    nodes << "\n";
-  }
-  if (members.is_open())
-  {
-    const std::vector<std::string> member_cols = at::memberColumns(model);
-    for (size_t i = 0; i < member_cols.size(); ++i)
-      members << (i ? "," : "") << member_cols[i];
-    members << "\n";
-  }
-  const std::vector<std::string> cols = at::csvColumns(model);
-  for (size_t i = 0; i < cols.size(); ++i)
-    csv << (i ? "," : "") << cols[i];
-  csv << "\n";
-
-  // peaks over every time step (or load step), not only the output steps
-  at::PeakTracker peaks(model);
-  const auto track_peaks = [&](const at::State& s, const std::vector<at::ContactPairState>* contacts)
-  { peaks.add(s, contacts); };
-
-  bool started = false;  // the first output row is the start: its values count for the peaks too
-  const auto wall_start = std::chrono::steady_clock::now();
-  auto last_report = wall_start;
-  bool reported = false;
-  const at::RunResult result = at::runAnalysis(
-      model,
-      [&](const at::State& s)
-      {
-        if (!started)
-        {
-          peaks.add(s);
-          started = true;
-        }
-        const std::vector<double> row = at::csvRow(model, s);
-        for (size_t i = 0; i < row.size(); ++i)
-          csv << (i ? "," : "") << csvNumber(row[i]);
-        csv << "\n";
-        if (bag)
-          bag->write(s);
-        if (vtk)
-        {
-          try
-          {
-            vtk->write(s);
-          }
-          catch (const std::exception& e)  // a full disk: said once, the run goes on without VTK files
-          {
-            std::cerr << "tensegrity_run: --vtk: " << e.what() << " (no more VTK files are written)\n";
-            vtk.reset();
-            vtk_failed = true;
-          }
-        }
-        if (nodes.is_open())
-        {
-          nodes << csvNumber(s.t);
-          for (const at::Node& n : model.nodes)
-          {
-            const at::Vec3 p = at::pointPosition(model, n.point, s.q);
-            nodes << "," << csvNumber(p.x()) << "," << csvNumber(p.y()) << "," << csvNumber(p.z());
-          }
-          nodes << "\n";
-        }
-        if (members.is_open())
-        {
-          const std::vector<double> member_row = at::memberRow(model, s);
-          for (size_t i = 0; i < member_row.size(); ++i)
-            members << (i ? "," : "") << csvNumber(member_row[i]);
-          members << "\n";
-        }
-        if (!contacts.is_open())
-          return;
-        for (const at::ContactPairState& c : at::activeContacts(model, s))
-        {
-          contacts << csvNumber(s.t) << "," << at::contactBodyName(model, c.body_a) << ","
-                   << at::contactBodyName(model, c.body_b);
-          for (const at::Vec3* v : { &c.point_a, &c.point_b, &c.normal })
-            contacts << "," << csvNumber(v->x()) << "," << csvNumber(v->y()) << "," << csvNumber(v->z());
-          contacts << "," << csvNumber(c.penetration) << "," << csvNumber(c.penetration_rate) << ","
-                   << csvNumber(c.normal_force);
-          for (int k = 0; k < 3; ++k)
-            contacts << "," << csvNumber(c.friction_on_a(k));
-          contacts << "\n";
-        }
-      },
-      [&](double fraction)
-      {
-        const auto now = std::chrono::steady_clock::now();
-        if (std::chrono::duration<double>(now - last_report).count() < 2.0)
-          return;
-        last_report = now;
-        reported = true;
-        std::fprintf(stderr, "\rtensegrity_run: %5.1f %%  (%.0f s wall)", 100.0 * fraction,
-                     std::chrono::duration<double>(now - wall_start).count());
-      },
-      track_peaks);
-  if (reported)
-    std::fprintf(stderr, "\n");
-  csv.flush();
-  if (bag)
-  {
-    bag->close();
-    std::cerr << "tensegrity_run: wrote " << bag->written() << " states to " << bag_path << "\n";
+    out << "\n";
   }
 
+  std::ofstream file_, contacts_, nodes_, members_, summary_;
+  std::ostream* csv_ = &std::cout;
+  std::unique_ptr<at::VtkWriter> vtk_;
+  bool vtk_failed_ = false;
+  std::unique_ptr<active_tensegrity::ros_layer::BagWriter> bag_;
+};
+
+/// The YAML summary of a run that is not modal.
+std::string runSummary(const std::string& scene, const at::Model& model, const at::RunResult& result,
+                       const std::vector<at::Peak>& peaks)
+{
   const at::State& fin = result.final_state;
+  const std::vector<std::string> cols = at::csvColumns(model);
   const std::vector<double> final_row = at::csvRow(model, fin);
+  const bool dynamic = model.analysis.type == at::AnalysisType::kDynamic;
   std::ostringstream summary;
   summary << std::setprecision(10);
   summary << "scene: " << scene << "\n"
@@ -509,15 +453,15 @@ int main(int argc, char** argv)
           << "newton_iterations: " << result.summary.iterations << "\n"
           << "step_cuts: " << result.summary.step_cuts << "\n"
           << "wall_time: " << result.wall_time << "\n";
-  if (model.analysis.type == at::AnalysisType::kDynamic)
+  if (dynamic)
   {
     summary << "duration: " << csvNumber(model.analysis.duration) << "\n";
     if (!model.analysis.duration_note.empty())
       summary << "duration_note: " << yamlString(model.analysis.duration_note) << "\n";
   }
-  if (model.analysis.type == at::AnalysisType::kDynamic && result.wall_time > 0.0)
+  if (dynamic && result.wall_time > 0.0)
     summary << "real_time_factor: " << fin.t / result.wall_time << "\n";
-  if (model.analysis.type == at::AnalysisType::kDynamic && model.solver.adaptive)
+  if (dynamic && model.solver.adaptive)
   {
     const at::AdaptiveStats& a = result.adaptive;
     summary << "adaptive_steps:  # solver.adaptive: accepted steps, refused ones by cause, step sizes (s)\n"
@@ -530,7 +474,7 @@ int main(int argc, char** argv)
             << "  smallest: " << csvNumber(a.h_min) << "\n"
             << "  largest: " << csvNumber(a.h_max) << "\n";
   }
-  if (model.analysis.type == at::AnalysisType::kDynamic)
+  if (dynamic)
   {
     // E = kinetic + elastic + gravity; start + actuator_work - damping - contact - numerical = end, each term summed
     // over every accepted step
@@ -561,8 +505,113 @@ int main(int argc, char** argv)
   for (size_t i = 0; i < cols.size(); ++i)
     summary << "  " << cols[i] << ": " << csvNumber(final_row[i]) << "\n";
   summary << "peaks:  # largest magnitude over every step, and when (t: time, or path parameter in statics)\n";
-  for (const at::Peak& p : peaks.peaks())
+  for (const at::Peak& p : peaks)
     summary << "  " << p.name << ": {value: " << csvNumber(p.value) << ", t: " << csvNumber(p.t) << "}\n";
-  const int code = finish(summary.str(), summary_file, summary_path, result.summary);
-  return code == 0 && vtk_failed ? 1 : code;
+  return summary.str();
+}
+
+/// Progress on stderr, at most every two seconds of wall time; end() ends its line once any was written.
+class Progress
+{
+public:
+  void operator()(double fraction)
+  {
+    const auto now = std::chrono::steady_clock::now();
+    if (std::chrono::duration<double>(now - last_).count() < 2.0)
+      return;
+    last_ = now;
+    reported_ = true;
+    std::fprintf(stderr, "\rtensegrity_run: %5.1f %%  (%.0f s wall)", 100.0 * fraction,
+                 std::chrono::duration<double>(now - start_).count());
+  }
+  void end() const
+  {
+    if (reported_)
+      std::fprintf(stderr, "\n");
+  }
+
+private:
+  std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now(), last_ = start_;
+  bool reported_ = false;
+};
+}  // namespace
+
+int main(int argc, char** argv)
+{
+  Options o;
+  try
+  {
+    if (!parseCommandLine(argc, argv, o))
+    {
+      std::cout << kUsage;
+      return 0;
+    }
+  }
+  catch (const std::exception& e)  // BadArgument, a missing value, a malformed --set
+  {
+    std::cerr << "tensegrity_run: " << e.what() << "\n" << kUsage;
+    return 2;
+  }
+  at::Model model;
+  try
+  {
+    model = at::loadScene(o.scene, o.overrides);
+  }
+  catch (const at::SceneError& e)
+  {
+    std::cerr << "tensegrity_run: scene refused: " << e.what() << "\n";
+    return 1;
+  }
+  if (o.check)
+    return runCheck(o.scene, model);
+  if (model.analysis.type == at::AnalysisType::kModal)
+  {
+    if (!(o.contacts_path.empty() && o.nodes_path.empty() && o.members_path.empty() && o.vtk_dir.empty() &&
+          o.bag_path.empty()))
+    {
+      std::cerr << "tensegrity_run: a modal analysis writes no --contacts, --nodes, --members, --vtk or --bag (its "
+                   "mode shapes: --modes)\n"
+                << kUsage;
+      return 2;
+    }
+    std::ofstream file, summary_file, shapes;
+    for (const auto& [path, f] : { std::pair{ &o.out_path, &file }, std::pair{ &o.summary_path, &summary_file },
+                                   std::pair{ &o.modes_path, &shapes } })
+      if (!path->empty() && !(f->open(*path), *f))
+      {
+        std::cerr << "tensegrity_run: cannot write '" << *path << "'\n";
+        return 1;
+      }
+    return runModalScene(o.scene, model, o.out_path.empty() ? std::cout : file, shapes, summary_file, o.summary_path);
+  }
+  if (!o.modes_path.empty())
+  {
+    std::cerr << "tensegrity_run: --modes writes the mode shapes of a modal analysis (analysis.type: modal)\n"
+              << kUsage;
+    return 2;
+  }
+  RunFiles files;
+  if (!files.open(o, model))
+    return 1;
+  // peaks over every time step (or load step), not only the output steps; the first output row is the start, whose
+  // values count for the peaks too
+  at::PeakTracker peaks(model);
+  bool started = false;
+  Progress progress;
+  const at::RunResult result = at::runAnalysis(
+      model,
+      [&](const at::State& s)
+      {
+        if (!started)
+          peaks.add(s);
+        started = true;
+        files.write(model, s);
+      },
+      std::ref(progress),
+      [&](const at::State& s, const std::vector<at::ContactPairState>* contacts) { peaks.add(s, contacts); });
+  progress.end();
+  files.close(o.bag_path);
+  const int code =
+      finish(runSummary(o.scene, model, result, peaks.peaks()), files.summary(), o.summary_path, result.summary);
+  return code == 0 && files.vtkFailed() ? 1 : code;
 }
