@@ -122,7 +122,7 @@ INSTANTIATE_TEST_SUITE_P(Integrators, NewtonJacobian,
 TEST(Dynamics, TorqueFreeSpinningStrutKeepsEnergyMomentumAndNorm)
 {
   // generalized-alpha with a little high-frequency damping: the undamped schemes (gamma = 1/2,
-  // rho_inf = 1) are only marginally stable on index-3 DAEs and drift on this fast spin (docs/numerics.md)
+  // rho_inf = 1) are only marginally stable on index-3 DAEs and drift on this fast spin (docs/physics.md, "Dynamics")
   const Model model = freeStrut();
   DynamicsSolver solver(model, options(Integrator::kGeneralizedAlpha, 1e-3, 0.5, 0.25, 0.9));
   State s = initialState(model);

@@ -1,5 +1,5 @@
 /// A run as VTK files for ParaView: one XML PolyData file (.vtp) per output state and a .pvd collection
-/// that lists them with their times (docs/outputs.md, "VTK").
+/// that lists them with their times (docs/tools.md, `--vtk`).
 ///
 /// Each .vtp holds
 /// - points: the nodes (in the scene's order), then every other point a member runs through, then the two

@@ -1,4 +1,4 @@
-/// Scenes of standard tensegrity structures, generated as YAML text a person can read (docs/generators.md).
+/// Scenes of standard tensegrity structures, generated as YAML text a person can read (docs/form_finding.md, "tensegrity_generate").
 #pragma once
 
 #include <limits>
