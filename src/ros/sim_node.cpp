@@ -1020,8 +1020,8 @@ void SimNode::publish(Outgoing& out)
   }
   if (out.kind == Outgoing::Kind::kClock)
     return;
-  // markers are for rviz, which draws at screen rates: at most marker_rate per wall second (with every
-  // publication they were about 40 % of the node's publishing time on the tower)
+  // markers are for rviz, which draws at screen rates: at most marker_rate per wall second (building them with every
+  // publication would take a large share of the publishing thread)
   const WallClock::time_point now = WallClock::now();
   const bool markers = out.marker_rate <= 0.0 || now >= next_markers_;
   const std::vector<core::ContactPairState>* contacts = out.have_contacts ? &out.contacts : nullptr;

@@ -21,8 +21,7 @@ int padded(int rows)
   return (rows + kPack - 1) / kPack * kPack;
 }
 /// A pack is one vector register where the processor has 256-bit ones (AVX), else two of 128 bits (SSE2 in the
-/// generic x86-64 build; a 256-bit vector type there was split through memory: the tower's solves took 13 us per
-/// step instead of 5).
+/// generic x86-64 build, where a 256-bit vector type is split through memory).
 #if defined(__AVX__)
 using Lane = double __attribute__((vector_size(32)));
 #else

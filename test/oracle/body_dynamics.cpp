@@ -21,22 +21,20 @@ constexpr double kReuseStepChange = 0.2;
 constexpr double kRateFloor = 0.05;
 constexpr int kFreshStartsLeast = 2;
 constexpr int kFreshStartsMost = 64;
-// Small systems, where a factorization costs about a residual: Newton matrices of at most this many unknowns
-// (the six-bar robot, 48: 9 us against 8 us; the tower, 200: 250 us against 15 us). Fresh starts there (dense
-// ones); body blocks only above (the six-bar robot on them: 4.2 Newton iterations per step instead of 2.1)
+// Small systems, where a factorization costs about a residual: Newton matrices of at most this many unknowns (the
+// six-bar robot's 48, not the tower's 200). Fresh starts there (dense ones); body blocks only above (on a small
+// system they double the Newton iterations)
 constexpr int kSmallSystem = 64;
 /// Exact factorizations with the one-body rows eliminated (ReducedLinearSolver) above kSmallSystem and up to
-/// this many unknowns (the dense LU's range; above it the static pivots and the sparse LU of the whole matrix).
-/// The tower's adaptive fold (200 unknowns, 120 factorized): 119-172 -> 98-132 us per step; the six-bar robot (48
-/// unknowns, only its 6 quaternion norms to eliminate) went from 33.2-34.0 to 36.2-36.7 us per step with it.
+/// this many unknowns (the dense LU's range; above it the static pivots and the sparse LU of the whole matrix):
+/// it pays where many one-body rows are eliminated (the tower's 200 unknowns leave 120), not on a small system.
 constexpr int kReducedMost = 400;
 /// With fixed steps, a body-block matrix that contracted at first and slowed later is rebuilt at the iterate
 /// (not distrusted) when the iterate moved this many Newton tolerances since the matrix was built (the sum of
 /// the position increments): far enough for the matrix, not the body blocks, to be what is off.
 constexpr double kRebuildMoved = 100.0;
 
-/// Whether two vectors hold the same bits (memcmp: Eigen's == compares coefficient by coefficient, 1.3 % of the
-/// tower's step where atEnd used it, 0.7 % in continuesHistory).
+/// Whether two vectors hold the same bits (memcmp: Eigen's == compares coefficient by coefficient).
 bool sameBits(const Eigen::VectorXd& a, const Eigen::VectorXd& b)
 {
   return a.size() == b.size() &&
@@ -441,8 +439,7 @@ Summary BodyDynamicsSolver::attempt(State& s, double h, const ActuationLaw& law,
   // A change of the touching pairs asks for a new matrix, except where the kept one is the static pivots and the
   // new one would be too (the body blocks paused): there the contraction check decides. In a lattice's rattling
   // contact the touching pairs change at nearly every step, and a static-pivot factorization costs far more than
-  // the iterations it saves (504 struts, 0.8 s: 0.68 -> 0.39 static-pivot factorizations per step, 6.7 -> 7.4
-  // Newton iterations, 16 -> 12 ms per step); while the body blocks serve, a new matrix is theirs and cheap.
+  // the iterations it saves; while the body blocks serve, a new matrix is theirs and cheap.
   bool rebuild = !reuse || !factor_valid_ || std::abs(h - factor_h_) > kReuseStepChange * h ||
                  factor_age_ >= options_.max_jacobian_age;
   if (!rebuild && touching_ != factor_contacts_)
@@ -547,14 +544,10 @@ Summary BodyDynamicsSolver::attempt(State& s, double h, const ActuationLaw& law,
       {
         rebuild = true;
         diverged = diverged || !built_this_step;
-        // body blocks too far off in the step that made them: the exact matrix now, and for a while (distrusting
-        // them at 0.25 or 0.1 gave more exact factorizations and no fewer iterations, on the tower's fixed and
-        // adaptive steps and on the lattices). With fixed steps, body blocks that contracted at first and slowed
-        // after the iterate moved far from where they were built (kRebuildMoved; a contact stiffening through
-        // the step) are rebuilt there instead: on the 504-strut lattice the exact factorizations after distrusts
-        // fell from 29 % to 13 % of all. (With variable steps that cost the 3x3 quadruplex lattice 11 % more
-        // iterations: there the step size, not the iterate, makes body blocks fail; without the distance, the
-        // tower's fold at fixed steps of 2 ms took 11 % more.)
+        // body blocks too far off in the step that made them: the exact matrix now, and for a while. With fixed
+        // steps, body blocks that contracted at first and slowed after the iterate moved far from where they were
+        // built (kRebuildMoved; a contact stiffening through the step) are rebuilt there instead, which saves exact
+        // factorizations. (With variable steps the step size, not the iterate, makes body blocks fail.)
         if (built_this_step && linear_.bodyBlocks())
         {
           if (!moved_on || variable_steps_)

@@ -70,8 +70,8 @@ CableState evaluateCableTangents(const Model& model, const Cable& cable, const E
   // d2l/dq2 = sum_k (B_{k+1} - B_k)^T (I - n_k n_k^T)/l_k (B_{k+1} - B_k) + sum_j G(u_j, w_j)
   // Each pair of points (x, y) on bodies gets one block, added once: the rank-one axial part, the damping
   // part, the strut's point Hessian (x = y) and the segments' geometric stiffness (the segments x and y
-  // both end on: x - 1 and x when x = y, min(x, y) when they are neighbours). (Adding each part
-  // separately scattered every entry up to five times; measured on the planner's tower solves.)
+  // both end on: x - 1 and x when x = y, min(x, y) when they are neighbours), so that no entry is scattered more
+  // than once.
   using Row7 = Eigen::Matrix<double, 1, 7>;
   using Col7 = Eigen::Matrix<double, 7, 1>;
   std::array<Mat3, Cable::kMaxPoints> D;

@@ -35,10 +35,8 @@ constexpr int kBodyBlockSkip = 4;
 constexpr int kBodyBlockPauseMost = 256;
 /// ... but on the static pivots' matrices (the large ones) the pause after a distrust starts at one
 /// factorization: there an exact factorization costs far more than the iterations a failing body-block matrix
-/// wastes (on a lattice of 2000 struts one static-pivot factorization took about 96 ms, a residual about
-/// 1.3 ms), and each is kept for many steps with its costly solves. On the tower's exact (reduced) matrices
-/// a pause of 1 or 2 cost iterations: its fold at fixed steps of 2 ms took 4.15 and 3.99 Newton iterations per
-/// step instead of 3.75.
+/// wastes (on a large lattice one static-pivot factorization costs tens of residuals), and each is kept for many
+/// steps with its costly solves. (On the tower's exact, reduced, matrices so short a pause costs iterations.)
 constexpr int kBodyBlockSkipLarge = 1;
 constexpr int kBodyBlockDoublingsMost = 8;
 /// The refined static pivots (StaticPivotLU::solveRefined): their factorization check, A 1 refined must come back

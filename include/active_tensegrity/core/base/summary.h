@@ -40,9 +40,8 @@ struct Summary
 };
 
 /// Wall time (s) a solver spent in each part of its steps (DynamicsSolver: time steps; StaticSolver: load
-/// increments), summed since construction (or DynamicsSolver::resetTimings()). Measured with steady_clock around each
-/// part: about ten clock reads per Newton iteration, about 4 % of the tower's step at dt = 2e-4 s (the whole fold 0.80
-/// s with the clock reads, 0.77 s without them, on the AMD EPYC VM of docs/benchmarks.md).
+/// increments), summed since construction (or DynamicsSolver::resetTimings()). Measured with the part timers around
+/// each part (partTicks below): about ten readings per Newton iteration.
 struct StepTimings
 {
   double forces = 0.0;         // inertial and applied (cable, spring, actuator) forces with their tangents

@@ -43,9 +43,8 @@ PointSlot pointSlot(const Model& model, const PointRef& point);
 /// The world position of a point slot at q (as pointPosition).
 Vec3 slotPosition(const PointSlot& point, const Eigen::VectorXd& q);
 /// The rotation matrix A(Theta) of every strut at one configuration and its rate dA/dt, formed once so that
-/// each material point on a strut then costs two 3x3 products instead of pointMotion's quaternion forms: the
-/// cable loop of a residual visits every strut's points several times (on the tower the applied forces take
-/// 31 % fewer instructions so). Non-unit Theta (Newton iterates) keep the same quadratic form.
+/// each material point on a strut then costs two 3x3 products instead of pointMotion's quaternion forms (a scan
+/// over the cables visits every strut's points several times). Non-unit Theta keep the same quadratic form.
 class BodyFrames
 {
 public:

@@ -89,9 +89,8 @@ public:
   /// A body's coordinates and the rows it owns (a strut: 7, its quaternion norm and up to 8 more).
   static constexpr int kMaxBodyRows = 16;
   /// Two bodies whose coupling in H reaches this share of the smaller of their diagonals (largest entries
-  /// compared) are solved together, their coupling kept (steel struts touching on the lattices: 504 struts
-  /// 2.34 -> 2.17 ms per step, 2000 struts 24.0 -> 19.3 ms; at 0.05, 2.34 ms at 504: more regrouping, each
-  /// a new analysis; the tower's contacts stay below it) ...
+  /// compared) are solved together, their coupling kept (steel struts touching on the lattices; a lower share
+  /// regroups more often, each regrouping a new analysis; the tower's contacts stay below it) ...
   static constexpr double kGroupCoupling = 0.2;
   /// ... while the group has at most this many coordinates (four struts), its system at most kMaxGroupRows.
   static constexpr int kMaxGroupColumns = 28;
