@@ -21,6 +21,7 @@
 #include "active_tensegrity/core/contact/broad_phase.h"
 #include "active_tensegrity/core/contact/contact.h"
 #include "active_tensegrity/core/contact/contact_search.h"
+#include "active_tensegrity/oracle/near_slot_cache.h"
 #include "test_models.h"
 
 using namespace active_tensegrity::test;

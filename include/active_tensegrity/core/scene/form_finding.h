@@ -184,11 +184,6 @@ public:
   {
     return parameter_names_;
   }
-  /// The rows of the residual that belong to node i (-1 when it need not be in equilibrium).
-  int rowOf(int node) const
-  {
-    return row_[node];
-  }
 
 private:
   FormTopology topology_;

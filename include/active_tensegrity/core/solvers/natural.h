@@ -389,11 +389,6 @@ public:
   {
     return stats_;
   }
-  /// The last tryStep's local error estimate (m): h^2 (|beta - 1/6| + |gamma - 1/2|) |a1 - a0|, largest per node.
-  double lastError() const
-  {
-    return error_;
-  }
   /// Modified Newton's policy the steps follow.
   const NewtonPolicy& policy() const
   {

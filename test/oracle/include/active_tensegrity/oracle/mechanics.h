@@ -21,6 +21,7 @@
 #include "active_tensegrity/oracle/constraints.h"
 #include "active_tensegrity/core/contact/contact.h"
 #include "active_tensegrity/core/contact/contact_search.h"
+#include "active_tensegrity/oracle/near_slot_cache.h"
 #include "active_tensegrity/core/model/kinematics.h"
 #include "active_tensegrity/core/model/model.h"
 #include "active_tensegrity/core/base/slot_values.h"
