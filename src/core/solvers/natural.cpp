@@ -326,7 +326,7 @@ void groundKernel(const Model& model, const GroundConstants& gc, const V3<T> r[4
   F(12) = e.dot(m);
 }
 
-PairConstants pairConstants(const NaturalModel& nm, const NaturalContactSlot& cs)
+PairConstants pairConstants(const NaturalContactSlot& cs, double floor_sin)
 {
   PairConstants pc;
   for (int k = 0; k < 2; ++k)
@@ -339,7 +339,7 @@ PairConstants pairConstants(const NaturalModel& nm, const NaturalContactSlot& cs
   pc.stiffness90 = cs.stiffness90;
   pc.core_stiffness90 = cs.core_stiffness90;
   pc.core_gap = cs.core_gap;
-  pc.floor_sin = nm.floor_sin;
+  pc.floor_sin = floor_sin;
   return pc;
 }
 
@@ -860,7 +860,7 @@ ContactPairState naturalContact(const NaturalModel& nm, const NaturalContactSlot
     const auto [body_a, body_b] = model.pairBodies(cs.slot);
     st.body_a = body_a;
     st.body_b = body_b;
-    pc = pairConstants(nm, cs);
+    pc = pairConstants(cs, nm.floor_sin);
   }
   const auto kernel = [&](auto r, auto v, auto spin, bool with_force, auto& f)
   {
@@ -953,49 +953,46 @@ ContactPairState contactAtPoses(const Model& model, int slot, const Eigen::Vecto
   ContactPairState st;
   st.pair = slot;
   Vec14 f;
+  // the slot's constants as a NaturalContactSlot holds them (naturalContactSlot), from the model's bodies
+  NaturalContactSlot cs;
   if (model.isGroundSlot(slot))
   {
     const GroundContact& g = model.groundContactOf(slot);
     const Body& b = model.bodies[g.body];
     st.body_a = g.body;
     st.body_b = -1;
-    GroundConstants gc;
-    gc.radius = g.radius;
-    gc.stiffness = g.stiffness;
+    cs.radius[0] = g.radius;
+    cs.stiffness90 = g.stiffness;
     if (b.kind == BodyKind::kStrut)
     {
-      gc.strut = true;
-      gc.sphere_end = g.local.z() > 0.0 ? 1 : 0;
-      gc.inv_length = 1.0 / b.length;
-      gc.inv_length2 = gc.inv_length * gc.inv_length;
+      cs.struts[0] = 0;  // (a strut: its spin turns the sphere's lowest point)
+      cs.sphere_end = g.local.z() > 0.0 ? 1 : 0;
+      cs.inv_length[0] = 1.0 / b.length;
       strutEnds(b, q, qd, r, v, spin[0]);
     }
     else if (qd)
       pointMotion(model, PointRef{ g.body, g.local }, q, *qd, r[0], v[0]);
     else
       r[0] = pointPosition(model, PointRef{ g.body, g.local }, q);
-    groundKernel(model, gc, r, v, spin, impact_speed, force, f, st);
+    groundKernel(model, groundConstants(cs), r, v, spin, impact_speed, force, f, st);
     return st;
   }
   const auto [body_a, body_b] = model.pairBodies(slot);
   st.body_a = body_a;
   st.body_b = body_b;
-  const StrutPair p = model.strutPair(slot);
-  PairConstants pc;
   const int bodies[2] = { body_a, body_b };
   for (int k = 0; k < 2; ++k)
   {
     const Body& b = model.bodies[bodies[k]];
-    pc.radius[k] = b.radius();
-    pc.inv_length[k] = 1.0 / b.length;
-    pc.inv_length2[k] = pc.inv_length[k] * pc.inv_length[k];
-    pc.scale += 0.5 * b.length;
+    cs.radius[k] = b.radius();
+    cs.inv_length[k] = 1.0 / b.length;
     strutEnds(b, q, qd, r + 2 * k, v + 2 * k, spin[k]);
   }
-  pc.stiffness90 = p.stiffness90;
-  pc.core_stiffness90 = p.core_stiffness90;
-  pc.core_gap = p.core_gap;
-  pc.floor_sin = std::sin(model.contact.min_crossing_angle);
+  const StrutPair p = model.strutPair(slot);
+  cs.stiffness90 = p.stiffness90;
+  cs.core_stiffness90 = p.core_stiffness90;
+  cs.core_gap = p.core_gap;
+  const PairConstants pc = pairConstants(cs, std::sin(model.contact.min_crossing_angle));
   pairKernel(model, pc, r, v, spin, impact_speed, force, f, st);
   return st;
 }
