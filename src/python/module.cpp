@@ -20,7 +20,7 @@
 #include "active_tensegrity/core/outputs/run.h"
 #include "active_tensegrity/core/solvers/dynamics.h"
 #include "active_tensegrity/core/solvers/energy.h"
-#include "active_tensegrity/core/scene/form_finding.h"
+#include "active_tensegrity/design/form_finding.h"
 #include "active_tensegrity/core/model/kinematics.h"
 #include "active_tensegrity/core/solvers/modal.h"
 #include "active_tensegrity/core/scene/scene.h"
@@ -30,6 +30,7 @@
 
 namespace py = pybind11;
 namespace at = active_tensegrity::core;
+namespace design = active_tensegrity::design;
 
 namespace
 {
@@ -543,10 +544,10 @@ py::dict findForm(const std::string& yaml, const std::string& name, const std::s
                   int max_iterations)
 {
   // the options tensegrity_formfind refuses, refused alike
-  at::FormFindingOptions o;
+  design::FormFindingOptions o;
   if (mode != "free" && mode != "prestress")
     throw py::value_error("find_form: mode must be 'free' or 'prestress', got '" + mode.substr(0, 200) + "'");
-  o.mode = mode == "free" ? at::FormFindingMode::kFree : at::FormFindingMode::kPrestress;
+  o.mode = mode == "free" ? design::FormFindingMode::kFree : design::FormFindingMode::kPrestress;
   if (!(tolerance > 0.0 && tolerance < 1e-3))
     throw py::value_error("find_form: tolerance must be a relative tolerance in (0, 1e-3), got " +
                           at::shortestNumber(tolerance));
@@ -563,10 +564,10 @@ py::dict findForm(const std::string& yaml, const std::string& name, const std::s
   o.keep_strut_lengths = keep_strut_lengths;
   o.tolerance = tolerance;
   o.max_iterations = max_iterations;
-  at::FormFindingResult r;
+  design::FormFindingResult r;
   {
     const py::gil_scoped_release release;
-    r = at::findForm(yaml, name, o);
+    r = design::findForm(yaml, name, o);
   }
   py::array_t<double> positions({ r.positions.size(), size_t{ 3 } });
   double* out = positions.mutable_data();
@@ -577,7 +578,7 @@ py::dict findForm(const std::string& yaml, const std::string& name, const std::s
     *out++ = p.z();
   }
   py::list members;
-  for (const at::FormMember& m : r.members)
+  for (const design::FormMember& m : r.members)
   {
     py::dict d;
     d["name"] = m.name;
@@ -919,7 +920,7 @@ PYBIND11_MODULE(_core, m)
       });
 
   // a form that cannot be found: RuntimeError with form-finding's message
-  py::register_exception<at::FormFindingError>(m, "FormFindingError", PyExc_RuntimeError);
+  py::register_exception<design::FormFindingError>(m, "FormFindingError", PyExc_RuntimeError);
 
   py::class_<at::Model>(m, "Model", "A loaded, validated scene")
       .def_property_readonly("name", [](const at::Model& s) { return s.name; })

@@ -6,12 +6,13 @@
 #include <iostream>
 #include <string>
 
-#include "active_tensegrity/core/scene/form_finding.h"
+#include "active_tensegrity/design/form_finding.h"
 #include "active_tensegrity/core/scene/scene.h"
 #include "active_tensegrity/core/base/text.h"
 #include "cli.h"
 
 namespace at = active_tensegrity::core;
+namespace design = active_tensegrity::design;
 namespace tools = active_tensegrity::tools;
 
 namespace
@@ -54,10 +55,10 @@ std::string choice(const std::string& option, const std::string& value, const ch
   return value;
 }
 
-void report(std::ostream& out, const at::FormFindingResult& r, const at::FormFindingOptions& o)
+void report(std::ostream& out, const design::FormFindingResult& r, const design::FormFindingOptions& o)
 {
-  out << "mode: " << (o.mode == at::FormFindingMode::kFree ? "free" : "prestress") << "\n";
-  if (o.mode == at::FormFindingMode::kFree)
+  out << "mode: " << (o.mode == design::FormFindingMode::kFree ? "free" : "prestress") << "\n";
+  if (o.mode == design::FormFindingMode::kFree)
     out << "iterations: " << r.iterations << "\n";
   else
     out << "self_stress_states: " << r.self_stress_states << "  # of the given geometry\n";
@@ -66,7 +67,7 @@ void report(std::ostream& out, const at::FormFindingResult& r, const at::FormFin
   if (r.scale != 1.0)
     out << "scale: " << at::roundedNumber(r.scale, 9) << "\n";
   out << "members:  # name: [family, tension N (negative: compression), length m]\n";
-  for (const at::FormMember& m : r.members)
+  for (const design::FormMember& m : r.members)
     out << "  " << m.name << ": [" << m.family << ", " << at::roundedNumber(m.tension, 9) << ", "
         << at::roundedNumber(m.length, 9) << "]\n";
   if (!r.changes.empty())
@@ -81,7 +82,7 @@ void report(std::ostream& out, const at::FormFindingResult& r, const at::FormFin
     for (const std::string& n : r.notes)
       out << "  - \"" << n << "\"\n";
   }
-  const at::FormCheck& c = r.check;
+  const design::FormCheck& c = r.check;
   out << "check:  # the written scene, loaded (tensegrity_run OUT.yaml --check)\n";
   out << "  checked: " << (c.checked ? "true" : "false") << "\n";
   if (c.checked)
@@ -103,7 +104,7 @@ void report(std::ostream& out, const at::FormFindingResult& r, const at::FormFin
 int main(int argc, char** argv)
 {
   std::string in_path, out_path;
-  at::FormFindingOptions o;
+  design::FormFindingOptions o;
   try
   {
     tools::CommandLine cl;
@@ -111,8 +112,8 @@ int main(int argc, char** argv)
         .value("--mode",
                [&](const std::string& v)
                {
-                 o.mode = choice("--mode", v, "free", "prestress") == "free" ? at::FormFindingMode::kFree :
-                                                                               at::FormFindingMode::kPrestress;
+                 o.mode = choice("--mode", v, "free", "prestress") == "free" ? design::FormFindingMode::kFree :
+                                                                               design::FormFindingMode::kPrestress;
                })
         .value("--supports",
                [&](const std::string& v) { o.supports_react = choice("--supports", v, "fixed", "react") == "react"; })
@@ -194,16 +195,16 @@ int main(int argc, char** argv)
     std::cerr << "tensegrity_formfind: " << message << "\n";
     return 1;
   };
-  at::FormFindingResult r;
+  design::FormFindingResult r;
   try
   {
-    r = at::findForm(text, in_path, o);
+    r = design::findForm(text, in_path, o);
   }
   catch (const at::SceneError& e)
   {
     return fail(std::string("scene refused: ") + e.what());
   }
-  catch (const at::FormFindingError& e)
+  catch (const design::FormFindingError& e)
   {
     return fail(std::string("no form: ") + e.what());
   }

@@ -6,13 +6,14 @@
 #include <string>
 #include <vector>
 
-#include "active_tensegrity/core/scene/generators.h"
+#include "active_tensegrity/design/generators.h"
 #include "active_tensegrity/core/scene/scene.h"
 #include "active_tensegrity/core/base/text.h"
 #include "cli.h"
 #include "lattice.h"
 
 namespace at = active_tensegrity::core;
+namespace design = active_tensegrity::design;
 namespace tools = active_tensegrity::tools;
 
 namespace
@@ -59,12 +60,12 @@ double bounded(const std::string& option, const std::string& text, double lo, do
 tools::CommandLine::Take length(const std::string& option, double& field)
 {
   return [&field, option](const std::string& v)
-  { field = bounded(option, v, at::kMinGeneratedLength, at::kMaxGeneratedLength, "m"); };
+  { field = bounded(option, v, design::kMinGeneratedLength, design::kMaxGeneratedLength, "m"); };
 }
 tools::CommandLine::Take prestress(const std::string& option, double& field)
 {
   return [&field, option](const std::string& v)
-  { field = bounded(option, v, at::kMinGeneratedPrestress, at::kMaxGeneratedPrestress, "N"); };
+  { field = bounded(option, v, design::kMinGeneratedPrestress, design::kMaxGeneratedPrestress, "N"); };
 }
 
 // at most this many lattice cells (4 struts each): the most struts whose pairs the loader numbers (auto pairs,
@@ -84,7 +85,7 @@ std::string generate(const std::string& structure, tools::Args& args, std::strin
   tools::CommandLine cl("argument", structure + ": ", " (tensegrity_generate --help)");
   if (structure == "prism")
   {
-    at::PrismSpec s;
+    design::PrismSpec s;
     bool struts = false;
     cl.value("--struts",
              [&](const std::string& v)
@@ -108,10 +109,10 @@ std::string generate(const std::string& structure, tools::Args& args, std::strin
                  }
                  if (used != v.size() || v.empty() || !std::isfinite(s.twist))
                    throw tools::BadArgument("--twist: expected an angle in degrees, got '" + v + "'");
-                 if (std::abs(std::stod(v)) > at::kMaxGeneratedTwist)
-                   throw tools::BadArgument("--twist: must lie in [" + at::shortestNumber(-at::kMaxGeneratedTwist) +
-                                            ", " + at::shortestNumber(at::kMaxGeneratedTwist) + "] degrees, got '" + v +
-                                            "'");
+                 if (std::abs(std::stod(v)) > design::kMaxGeneratedTwist)
+                   throw tools::BadArgument("--twist: must lie in [" + at::shortestNumber(-design::kMaxGeneratedTwist) +
+                                            ", " + at::shortestNumber(design::kMaxGeneratedTwist) + "] degrees, got '" +
+                                            v + "'");
                })
         .value("--prestress", prestress("--prestress", s.ring_prestress))
         .flag("--pinned", [&] { s.pinned = true; })
@@ -124,16 +125,16 @@ std::string generate(const std::string& structure, tools::Args& args, std::strin
       throw tools::BadArgument("prism: --struts N is required");
     if (s.struts < 3 || s.struts > 64)
       throw tools::BadArgument("--struts: a prism has 3 to 64 struts, got '" + std::to_string(s.struts) + "'");
-    return at::prismScene(s);
+    return design::prismScene(s);
   }
   if (structure == "octahedron")
   {
-    at::OctahedronSpec s;
+    design::OctahedronSpec s;
     cl.value("--strut-length", length("--strut-length", s.strut_length))
         .value("--prestress", prestress("--prestress", s.prestress))
         .flag("--pinned", [&] { s.pinned = true; });
     parseStructure(cl, args, out_path);
-    return at::octahedronScene(s);
+    return design::octahedronScene(s);
   }
   if (structure == "quadruplex-lattice")
   {
@@ -177,7 +178,7 @@ std::string generate(const std::string& structure, tools::Args& args, std::strin
   }
   if (structure == "tower")
   {
-    at::TowerSpec s;
+    design::TowerSpec s;
     bool stages = false;
     cl.value("--stages",
              [&](const std::string& v)
@@ -189,11 +190,11 @@ std::string generate(const std::string& structure, tools::Args& args, std::strin
     parseStructure(cl, args, out_path);
     if (!stages)
       throw tools::BadArgument("tower: --stages K is required");
-    if (s.stages > at::kMaxTowerStages)
-      throw tools::BadArgument("--stages: a tower has 1 to " + std::to_string(at::kMaxTowerStages) +
+    if (s.stages > design::kMaxTowerStages)
+      throw tools::BadArgument("--stages: a tower has 1 to " + std::to_string(design::kMaxTowerStages) +
                                " stages (its sliding cables run through every level and end at a driven body: " +
                                "at most 32 nodes), got '" + std::to_string(s.stages) + "'");
-    return at::towerScene(s);
+    return design::towerScene(s);
   }
   throw tools::BadArgument("unknown structure '" + structure + "' (prism, octahedron, quadruplex-lattice, tower)");
 }

@@ -15,11 +15,12 @@
 #include "active_tensegrity/core/outputs/run.h"
 #include "active_tensegrity/oracle/body_statics.h"
 #include "active_tensegrity/core/elements/cable.h"
-#include "active_tensegrity/core/scene/form_finding.h"
-#include "active_tensegrity/core/scene/generators.h"
+#include "active_tensegrity/design/form_finding.h"
+#include "active_tensegrity/design/generators.h"
 #include "active_tensegrity/core/scene/scene.h"
 
 namespace at = active_tensegrity::core;
+namespace design = active_tensegrity::design;
 
 namespace
 {
@@ -127,9 +128,9 @@ TEST(MemberForces, TowerStrutsBalanceThroughTheirJoints)
 // ends
 TEST(MemberForces, FormFoundPrismAtRest)
 {
-  at::FormFindingOptions o;
+  design::FormFindingOptions o;
   o.tension["rings"] = 60.0;
-  const at::FormFindingResult form = at::findForm(at::prismScene({ 5 }), "prism", o);
+  const design::FormFindingResult form = design::findForm(design::prismScene({ 5 }), "prism", o);
   const at::Model model = at::loadSceneFromString(form.scene, "prism", overrides({ "analysis.duration=0.05" }));
   const std::vector<at::State> states = run(model);
   ASSERT_GE(states.size(), 2u);

@@ -11,13 +11,14 @@
 
 #include <gtest/gtest.h>
 
-#include "active_tensegrity/core/scene/generators.h"
+#include "active_tensegrity/design/generators.h"
 #include "active_tensegrity/core/model/kinematics.h"
 #include "active_tensegrity/core/scene/scene.h"
 #include "active_tensegrity/core/solvers/state.h"
 #include "command.h"
 
 namespace at = active_tensegrity::core;
+namespace design = active_tensegrity::design;
 using Result = active_tensegrity::test::CommandResult;
 
 namespace
@@ -101,14 +102,14 @@ TEST(TensegrityGenerate, EveryStructureLoads)
 // The generated four-stage tower is the package's tower scene: the same struts (the node names differ)
 TEST(TensegrityGenerate, FourStageTowerIsTheShippedTower)
 {
-  const at::Model generated = at::loadSceneFromString(at::towerScene({}), "tower4");
+  const at::Model generated = at::loadSceneFromString(design::towerScene({}), "tower4");
   const at::Model shipped = at::loadScene(std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) + "/config/scenes/tower.yaml");
   EXPECT_EQ(strutEnds(generated), strutEnds(shipped));
   EXPECT_EQ(generated.cables.size(), shipped.cables.size());
   EXPECT_EQ(generated.checkedPairList().size(), shipped.checkedPairList().size());
   EXPECT_EQ(generated.actuators.size(), shipped.actuators.size());
   // six stages: 24 struts, 4 sliding cables through 7 levels and a driven body
-  const at::Model six = at::loadSceneFromString(at::towerScene({ 6, 1.0 }), "tower6");
+  const at::Model six = at::loadSceneFromString(design::towerScene({ 6, 1.0 }), "tower6");
   EXPECT_EQ(strutEnds(six).size(), 24u);
 }
 

@@ -20,12 +20,13 @@
 #include "active_tensegrity/core/outputs/observables.h"
 #include "active_tensegrity/core/outputs/run.h"
 #include "active_tensegrity/core/contact/contact.h"
-#include "active_tensegrity/core/scene/generators.h"
+#include "active_tensegrity/design/generators.h"
 #include "active_tensegrity/core/scene/scene.h"
 #include "command.h"
 #include "mujoco_peer.h"
 
 namespace at = active_tensegrity::core;
+namespace design = active_tensegrity::design;
 namespace tools = active_tensegrity::tools;
 
 namespace
@@ -456,12 +457,12 @@ TEST(MujocoPeer, OnTheLinearContactLawMuJoCoFollowsOurImpacts)
 // stays together.
 TEST(MujocoPeer, ARunThatBlowsUpSaysDiverged)
 {
-  at::PrismSpec spec;
+  design::PrismSpec spec;
   spec.struts = 5;
   spec.pinned = true;
   spec.driven = true;
   const at::Model model = at::loadSceneFromString(
-      at::prismScene(spec), "prism5",
+      design::prismScene(spec), "prism5",
       { at::parseOverride("analysis.type=dynamic"), at::parseOverride("analysis.max_actuation=0.6"),
         at::parseOverride("actuation.speed=2"), at::parseOverride("analysis.duration=1.5") });
   tools::MujocoOptions o;
@@ -480,7 +481,7 @@ TEST(MujocoPeer, ARunThatBlowsUpSaysDiverged)
   EXPECT_TRUE(sound.ok()) << sound.message;
   EXPECT_LT(sound.joint_drift, 0.01 * sound.size);
   // the free prism at 1 ms with Euler: MuJoCo's own warning of an unstable simulation ("mujoco_failed" before)
-  const at::Model free = at::loadSceneFromString(at::prismScene({ 5 }), "prism5_free");
+  const at::Model free = at::loadSceneFromString(design::prismScene({ 5 }), "prism5_free");
   const tools::MujocoTrace unstable = tools::runMujoco(free, tools::MujocoOptions{});
   EXPECT_EQ(unstable.status, "diverged") << unstable.message;
   EXPECT_NE(unstable.message.find("bad qacc"), std::string::npos) << unstable.message;
@@ -570,11 +571,11 @@ TEST(MujocoPeer, WorkPrecisionLabelsADivergedPeerRun)
 {
   const std::string scene = active_tensegrity::test::scratchPath("prism5_driven.yaml"),
                     csv = active_tensegrity::test::scratchPath("prism5_wp.csv");
-  at::PrismSpec spec;
+  design::PrismSpec spec;
   spec.struts = 5;
   spec.pinned = true;
   spec.driven = true;
-  std::ofstream(scene) << at::prismScene(spec);
+  std::ofstream(scene) << design::prismScene(spec);
   const active_tensegrity::test::CommandResult r = active_tensegrity::test::runCommand(
       std::string(TENSEGRITY_BENCH_PATH) + " work-precision " + scene +
       " --set analysis.type=dynamic --set analysis.max_actuation=0.6 --set actuation.speed=2"

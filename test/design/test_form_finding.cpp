@@ -11,11 +11,12 @@
 
 #include <gtest/gtest.h>
 
-#include "active_tensegrity/core/scene/form_finding.h"
-#include "active_tensegrity/core/scene/generators.h"
+#include "active_tensegrity/design/form_finding.h"
+#include "active_tensegrity/design/generators.h"
 #include "active_tensegrity/core/scene/scene.h"
 
 namespace at = active_tensegrity::core;
+namespace design = active_tensegrity::design;
 
 namespace
 {
@@ -33,16 +34,16 @@ std::string sceneFile(const std::string& name)
 }
 
 /// The twist of strut i of a prism form: the angle of Ti about z minus that of Bi, in (-pi, pi].
-double strutTwist(const at::FormFindingResult& r, int n, int i)
+double strutTwist(const design::FormFindingResult& r, int n, int i)
 {
   const at::Vec3& b = r.positions[i];
   const at::Vec3& t = r.positions[n + i];
   return std::remainder(std::atan2(t.y(), t.x()) - std::atan2(b.y(), b.x()), 2.0 * M_PI);
 }
 
-const at::FormMember& member(const at::FormFindingResult& r, const std::string& name)
+const design::FormMember& member(const design::FormFindingResult& r, const std::string& name)
 {
-  for (const at::FormMember& m : r.members)
+  for (const design::FormMember& m : r.members)
     if (m.name == name)
       return m;
   throw std::runtime_error("no member " + name);
@@ -78,11 +79,11 @@ std::string jitterNodes(const std::string& yaml, const std::string& prefix, doub
 /// A prism a few degrees off its form, its top nodes moved by up to `jitter` m at random.
 std::string perturbedPrism(int n, double twist_error, double jitter, unsigned seed, bool pinned = false)
 {
-  at::PrismSpec spec;
+  design::PrismSpec spec;
   spec.struts = n;
-  spec.twist = at::prismTwist(n) + twist_error;
+  spec.twist = design::prismTwist(n) + twist_error;
   spec.pinned = pinned;
-  const std::string yaml = at::prismScene(spec);
+  const std::string yaml = design::prismScene(spec);
   return jitter == 0.0 ? yaml : jitterNodes(yaml, "  T", jitter, seed);
 }
 }  // namespace
@@ -91,19 +92,19 @@ std::string perturbedPrism(int n, double twist_error, double jitter, unsigned se
 // members, a sliding cable through an inner node, fixed nodes (with and without reactions).
 TEST(FormEquations, JacobianMatchesFiniteDifferences)
 {
-  const at::FormTopology t = at::readFormTopology(sceneFile("prism_pinned_sliding.yaml"), "sliding");
+  const design::FormTopology t = design::readFormTopology(sceneFile("prism_pinned_sliding.yaml"), "sliding");
   bool sliding = false;
-  for (const at::FormTopology::Member& m : t.members)
+  for (const design::FormTopology::Member& m : t.members)
     sliding = sliding || m.nodes.size() > 2;
   ASSERT_TRUE(sliding) << "the scene should have a sliding cable";
   ASSERT_GE(t.families.size(), 2u);
   std::mt19937 rng(3);
   std::uniform_real_distribution<double> d(-0.05, 0.05);
   for (const bool react : { false, true })
-    for (const auto kind : { at::FormEquations::Kind::kTension, at::FormEquations::Kind::kDensity })
+    for (const auto kind : { design::FormEquations::Kind::kTension, design::FormEquations::Kind::kDensity })
     {
       // with reactions: one force density per strut and every strut's length kept (one row each)
-      const at::FormEquations eq(t, { { 0, { kind, 150.0 } } }, react, !react, react ? 300.0 : 0.0);
+      const design::FormEquations eq(t, { { 0, { kind, 150.0 } } }, react, !react, react ? 300.0 : 0.0);
       EXPECT_EQ(eq.equations() - eq.forceRows(), react ? 3 : 0);
       std::vector<at::Vec3> x = t.positions;
       for (at::Vec3& p : x)
@@ -138,16 +139,16 @@ TEST(FormFinding, PrismTwistAndForceDensitiesMatchTheClosedForm)
   for (int n = 3; n <= 8; ++n)
   {
     SCOPED_TRACE("n = " + std::to_string(n));
-    at::FormFindingOptions o;
+    design::FormFindingOptions o;
     o.tension["rings"] = 100.0;
     const std::string yaml = perturbedPrism(n, 12.0 * M_PI / 180.0, 0.0, 1);
-    const at::FormFindingResult r = at::findForm(yaml, "prism", o);
+    const design::FormFindingResult r = design::findForm(yaml, "prism", o);
     EXPECT_GT(r.max_move, 0.01);
     for (int i = 0; i < n; ++i)
-      EXPECT_NEAR(strutTwist(r, n, i), at::prismTwist(n), 1e-6);
-    const at::FormMember& ring = member(r, "R1");
-    const at::FormMember& vertical = member(r, "V1");
-    const at::FormMember& strut = member(r, "S1");
+      EXPECT_NEAR(strutTwist(r, n, i), design::prismTwist(n), 1e-6);
+    const design::FormMember& ring = member(r, "R1");
+    const design::FormMember& vertical = member(r, "V1");
+    const design::FormMember& strut = member(r, "S1");
     const double q_ring = ring.tension / ring.length;
     EXPECT_NEAR(ring.tension, 100.0, 1e-9);
     EXPECT_NEAR(vertical.tension / vertical.length / q_ring, 2.0 * std::sin(M_PI / n), 1e-8);
@@ -169,12 +170,12 @@ TEST(FormFinding, AsymmetricStartGivesAValidForm)
   for (unsigned seed = 1; seed <= 3; ++seed)
   {
     SCOPED_TRACE("seed " + std::to_string(seed));
-    at::FormFindingOptions o;
+    design::FormFindingOptions o;
     o.tension["rings"] = 100.0;
-    const at::FormFindingResult r = at::findForm(perturbedPrism(4, 0.1, 0.02, seed), "prism", o);
+    const design::FormFindingResult r = design::findForm(perturbedPrism(4, 0.1, 0.02, seed), "prism", o);
     EXPECT_LT(r.residual, 1e-9);
     double q_strut = 0.0;
-    for (const at::FormMember& m : r.members)
+    for (const design::FormMember& m : r.members)
     {
       if (m.family == "rings")
       {
@@ -202,23 +203,23 @@ TEST(FormFinding, AsymmetricStartGivesAValidForm)
 // long, and the force densities are cables : struts = 1 : -1.5.
 TEST(FormFinding, ExpandedOctahedronProportions)
 {
-  at::OctahedronSpec spec;
-  const std::string yaml = jitterNodes(at::octahedronScene(spec), "  N", 0.05, 5);
-  at::FormFindingOptions o;
+  design::OctahedronSpec spec;
+  const std::string yaml = jitterNodes(design::octahedronScene(spec), "  N", 0.05, 5);
+  design::FormFindingOptions o;
   o.tension["cables"] = 100.0;
-  const at::FormFindingResult r = at::findForm(yaml, "octahedron", o);
+  const design::FormFindingResult r = design::findForm(yaml, "octahedron", o);
   EXPECT_GT(r.max_move, 0.02);
   double strut_length = 0.0;
-  for (const at::FormMember& m : r.members)
+  for (const design::FormMember& m : r.members)
     if (m.strut)
       strut_length += m.length / 6.0;
-  const at::FormTopology given = at::readFormTopology(yaml, "octahedron");
+  const design::FormTopology given = design::readFormTopology(yaml, "octahedron");
   double given_length = 0.0;
   for (int k = 0; k < 6; ++k)
     given_length += (given.positions[2 * k + 1] - given.positions[2 * k]).norm() / 6.0;
   EXPECT_NEAR(strut_length, given_length, 1e-12) << "the mean strut length is kept";
   double q_cable = 0.0;
-  for (const at::FormMember& m : r.members)
+  for (const design::FormMember& m : r.members)
   {
     if (m.strut)
     {
@@ -231,7 +232,7 @@ TEST(FormFinding, ExpandedOctahedronProportions)
     EXPECT_NEAR(m.length / strut_length, std::sqrt(6.0) / 4.0, 2e-5) << m.name;
     q_cable = m.tension / m.length;
   }
-  for (const at::FormMember& m : r.members)
+  for (const design::FormMember& m : r.members)
   {
     if (m.strut)
     {
@@ -254,13 +255,13 @@ TEST(FormFinding, ExpandedOctahedronProportions)
 // struts 200 sqrt(6) = 489.90 N of compression; the written scene is that of config/scenes/quadruplex.yaml.
 TEST(FormFinding, QuadruplexPrestressMatchesTable1)
 {
-  at::FormFindingOptions o;
-  o.mode = at::FormFindingMode::kPrestress;
+  design::FormFindingOptions o;
+  o.mode = design::FormFindingMode::kPrestress;
   o.tension["lower"] = 200.0;
-  const at::FormFindingResult r = at::findForm(sceneFile("quadruplex.yaml"), "quadruplex", o);
+  const design::FormFindingResult r = design::findForm(sceneFile("quadruplex.yaml"), "quadruplex", o);
   EXPECT_EQ(r.self_stress_states, 1);
   EXPECT_EQ(r.max_move, 0.0);
-  for (const at::FormMember& m : r.members)
+  for (const design::FormMember& m : r.members)
   {
     if (m.family == "lower")
       EXPECT_NEAR(m.tension, 200.0, 1e-9);
@@ -274,9 +275,9 @@ TEST(FormFinding, QuadruplexPrestressMatchesTable1)
   // with reactions allowed the lower ring (between pinned nodes) is a self-stress of its own: it cannot set
   // the others, and the upper ring must be given too
   o.supports_react = true;
-  EXPECT_THROW(at::findForm(sceneFile("quadruplex.yaml"), "quadruplex", o), at::FormFindingError);
+  EXPECT_THROW(design::findForm(sceneFile("quadruplex.yaml"), "quadruplex", o), design::FormFindingError);
   o.tension["upper"] = 100.0;
-  const at::FormFindingResult react = at::findForm(sceneFile("quadruplex.yaml"), "quadruplex", o);
+  const design::FormFindingResult react = design::findForm(sceneFile("quadruplex.yaml"), "quadruplex", o);
   EXPECT_GT(react.self_stress_states, 1);
   EXPECT_NEAR(member(react, "C9").tension, 100.0, 1e-9);
   EXPECT_NEAR(member(react, "C1").tension, 200.0, 1e-9);
@@ -288,26 +289,26 @@ TEST(FormFinding, QuadruplexPrestressMatchesTable1)
 // is self-equilibrated (the pins carry nothing).
 TEST(FormFinding, PinnedPrismKeepsItsSupportsAndStrutLengths)
 {
-  at::FormFindingOptions o;
+  design::FormFindingOptions o;
   o.tension["rings"] = 50.0;
   const std::string yaml = perturbedPrism(5, -0.2, 0.0, 1, true);
   try
   {
-    at::findForm(yaml, "pinned", o);
+    design::findForm(yaml, "pinned", o);
     ADD_FAILURE() << "a flat form was accepted";
   }
-  catch (const at::FormFindingError& e)
+  catch (const design::FormFindingError& e)
   {
     EXPECT_NE(std::string(e.what()).find("flat"), std::string::npos) << e.what();
     EXPECT_NE(std::string(e.what()).find("--strut-lengths keep"), std::string::npos) << e.what();
   }
   o.keep_strut_lengths = true;
-  const at::FormFindingResult r = at::findForm(yaml, "pinned", o);
-  const at::FormTopology given = at::readFormTopology(yaml, "pinned");
+  const design::FormFindingResult r = design::findForm(yaml, "pinned", o);
+  const design::FormTopology given = design::readFormTopology(yaml, "pinned");
   for (int i = 0; i < 5; ++i)
   {
     EXPECT_EQ(r.positions[i], given.positions[i]) << "a pinned node moved";
-    EXPECT_NEAR(strutTwist(r, 5, i), at::prismTwist(5), 1e-6);
+    EXPECT_NEAR(strutTwist(r, 5, i), design::prismTwist(5), 1e-6);
     EXPECT_NEAR(r.members[i].length, (given.positions[5 + i] - given.positions[i]).norm(), 1e-9);
   }
   EXPECT_DOUBLE_EQ(r.scale, 1.0);
@@ -319,10 +320,10 @@ TEST(FormFinding, PinnedPrismKeepsItsSupportsAndStrutLengths)
 // The written scene is a form already: finding its form again moves nothing and keeps every force.
 TEST(FormFinding, WrittenSceneIsAFixedPoint)
 {
-  at::FormFindingOptions o;
+  design::FormFindingOptions o;
   o.tension["rings"] = 100.0;
-  const at::FormFindingResult first = at::findForm(perturbedPrism(6, 0.05, 0.0, 1), "prism", o);
-  const at::FormFindingResult again = at::findForm(first.scene, "again", o);
+  const design::FormFindingResult first = design::findForm(perturbedPrism(6, 0.05, 0.0, 1), "prism", o);
+  const design::FormFindingResult again = design::findForm(first.scene, "again", o);
   EXPECT_LT(again.max_move, 1e-9);
   EXPECT_LE(again.iterations, 1);
   for (size_t e = 0; e < first.members.size(); ++e)
@@ -333,14 +334,14 @@ TEST(FormFinding, WrittenSceneIsAFixedPoint)
 // family has the same force density and a family whose members differ in tension is split.
 TEST(FormFinding, ForceDensitiesAndSplitFamilies)
 {
-  at::FormFindingOptions o;
-  const at::FormFindingResult held = at::findForm(perturbedPrism(3, 0.1, 0.0, 1), "prism", o);
+  design::FormFindingOptions o;
+  const design::FormFindingResult held = design::findForm(perturbedPrism(3, 0.1, 0.0, 1), "prism", o);
   EXPECT_NEAR(member(held, "R1").tension, 100.0, 1e-9);
   ASSERT_FALSE(held.notes.empty());
   o.force_density["rings"] = 200.0;
   o.force_density["verticals"] = 200.0 * std::sqrt(3.0);
-  const at::FormFindingResult fdm = at::findForm(perturbedPrism(3, 0.1, 0.03, 2), "prism", o);
-  for (const at::FormMember& m : fdm.members)
+  const design::FormFindingResult fdm = design::findForm(perturbedPrism(3, 0.1, 0.03, 2), "prism", o);
+  for (const design::FormMember& m : fdm.members)
   {
     if (m.family == "rings")
     {
@@ -354,19 +355,19 @@ TEST(FormFinding, ForceDensitiesAndSplitFamilies)
 TEST(FormFinding, RefusesWhatItCannotDo)
 {
   const std::string prism = perturbedPrism(3, 0.0, 0.0, 1);
-  const auto message = [&](const std::string& yaml, const at::FormFindingOptions& o)
+  const auto message = [&](const std::string& yaml, const design::FormFindingOptions& o)
   {
     try
     {
-      at::findForm(yaml, "x.yaml", o);
+      design::findForm(yaml, "x.yaml", o);
     }
-    catch (const at::FormFindingError& e)
+    catch (const design::FormFindingError& e)
     {
       return std::string(e.what());
     }
     return std::string("no error");
   };
-  at::FormFindingOptions o;
+  design::FormFindingOptions o;
   o.tension["ringz"] = 1.0;
   EXPECT_NE(message(prism, o).find("no cable or spring family 'ringz'"), std::string::npos) << message(prism, o);
   EXPECT_NE(message(prism, o).find("'rings'"), std::string::npos);
@@ -378,13 +379,13 @@ TEST(FormFinding, RefusesWhatItCannotDo)
   o.force_density["rings"] = 1.0;
   EXPECT_NE(message(prism, o).find("held already"), std::string::npos);
   o = {};
-  o.mode = at::FormFindingMode::kPrestress;
+  o.mode = design::FormFindingMode::kPrestress;
   EXPECT_NE(message(prism, o).find("needs a target"), std::string::npos);
   o.force_density["rings"] = 1.0;
   EXPECT_NE(message(prism, o).find("not force densities"), std::string::npos);
   // a geometry that is no form: the prism 30 degrees off its twist has no self-stress
   o = {};
-  o.mode = at::FormFindingMode::kPrestress;
+  o.mode = design::FormFindingMode::kPrestress;
   o.tension["rings"] = 100.0;
   EXPECT_NE(message(perturbedPrism(3, 0.5, 0.0, 1), o).find("no state of self-stress"), std::string::npos);
   // iterations run out
@@ -393,21 +394,21 @@ TEST(FormFinding, RefusesWhatItCannotDo)
   o.max_iterations = 1;
   EXPECT_NE(message(perturbedPrism(3, 0.3, 0.0, 1), o).find("did not converge in 1 iterations"), std::string::npos);
   // the scene itself is refused by the loader, with its message
-  EXPECT_THROW(at::findForm("name: x\nnodes: {}\n", "x.yaml", {}), at::SceneError);
+  EXPECT_THROW(design::findForm("name: x\nnodes: {}\n", "x.yaml", {}), at::SceneError);
 }
 
 // Form-finding knows no strut thickness: a form whose struts overlap (here struts thicker than their spacing)
 // is written, with the overlapping pairs in the check and a note
 TEST(FormFinding, OverlappingStrutsAreNamed)
 {
-  at::PrismSpec spec;
+  design::PrismSpec spec;
   spec.struts = 3;
   spec.pinned = true;
   spec.driven = true;  // contact between every pair of struts
   spec.strut_radius = 0.3;
-  at::FormFindingOptions o;
+  design::FormFindingOptions o;
   o.tension["rings"] = 50.0;
-  const at::FormFindingResult r = at::findForm(at::prismScene(spec), "thick", o);
+  const design::FormFindingResult r = design::findForm(design::prismScene(spec), "thick", o);
   ASSERT_EQ(r.check.overlapping.size(), 3u);
   EXPECT_EQ(r.check.overlapping[0].rfind("S1-S2 (gap -", 0), 0u) << r.check.overlapping[0];
   bool noted = false;
@@ -415,7 +416,7 @@ TEST(FormFinding, OverlappingStrutsAreNamed)
     noted = noted || n.find("struts overlap in the form") != std::string::npos;
   EXPECT_TRUE(noted);
   spec.strut_radius = 0.012;  // the same form with thin struts: nothing overlaps
-  EXPECT_TRUE(at::findForm(at::prismScene(spec), "thin", o).check.overlapping.empty());
+  EXPECT_TRUE(design::findForm(design::prismScene(spec), "thin", o).check.overlapping.empty());
 }
 
 // The pinned prism whose verticals are one sliding cable running inside two hollow struts: its given
@@ -424,18 +425,18 @@ TEST(FormFinding, OverlappingStrutsAreNamed)
 // density per strut nothing moves and the cable keeps the scene's tension
 TEST(FormFinding, SlidingCableInsideStrutsNeedsTheirOwnForceDensities)
 {
-  at::FormFindingOptions o;
+  design::FormFindingOptions o;
   try
   {
-    at::findForm(sceneFile("prism_pinned_sliding.yaml"), "sliding", o);
+    design::findForm(sceneFile("prism_pinned_sliding.yaml"), "sliding", o);
     ADD_FAILURE() << "a form with uniform struts";
   }
-  catch (const at::FormFindingError& e)
+  catch (const design::FormFindingError& e)
   {
     EXPECT_NE(std::string(e.what()).find("--struts free"), std::string::npos) << e.what();
   }
   o.uniform_struts = false;
-  const at::FormFindingResult r = at::findForm(sceneFile("prism_pinned_sliding.yaml"), "sliding", o);
+  const design::FormFindingResult r = design::findForm(sceneFile("prism_pinned_sliding.yaml"), "sliding", o);
   EXPECT_LT(r.max_move, 1e-9);
   EXPECT_NEAR(member(r, "V").tension, 291.2704512527, 1e-6);
   // the struts the cable runs inside carry its tension on top of S1's compression
@@ -484,13 +485,13 @@ cables:
     members: {s1: [T1, M1], s2: [T2, M2], s3: [T3, M3], s4: [T1, M2], s5: [T2, M3], s6: [T3, M1]}
 analysis: {type: static, steps: 10}
 )";
-  const at::FormTopology t = at::readFormTopology(yaml, "tower2");
-  EXPECT_TRUE(at::formChanges(t, t.positions).empty());
+  const design::FormTopology t = design::readFormTopology(yaml, "tower2");
+  EXPECT_TRUE(design::formChanges(t, t.positions).empty());
   std::vector<at::Vec3> x = t.positions;
   for (size_t i = 0; i < x.size(); ++i)
     if (t.node_names[i][0] == 'M')
       x[i].z() += 0.3;
-  const std::vector<std::string> changes = at::formChanges(t, x);
+  const std::vector<std::string> changes = design::formChanges(t, x);
   const auto has = [&](const std::string& text)
   { return std::find(changes.begin(), changes.end(), text) != changes.end(); };
   std::string all;
@@ -513,7 +514,7 @@ analysis: {type: static, steps: 10}
     if (t.node_names[i][0] == 'T')
       x[i] = at::Vec3(1.2 * x[i].x(), 1.2 * x[i].y(), x[i].z());
   all.clear();
-  for (const std::string& c : at::formChanges(t, x))
+  for (const std::string& c : design::formChanges(t, x))
     all += c + "\n";
   EXPECT_NE(all.find("flatness of the level of nodes 'U1', 'U2', 'U3' (z = 1.7 m): its nodes at one height in the "
                      "scene, spread over z 1.7 to 1.75 m in the form"),

@@ -31,8 +31,10 @@
 
 #include "active_tensegrity/core/base/rotation.h"
 
-namespace active_tensegrity::core
+namespace active_tensegrity::design
 {
+using core::Vec3;
+
 /// A form that cannot be found (no convergence, a collapsed member, a cable in compression, no state of
 /// self-stress ...) or options that do not fit the scene: the message says which and why.
 class FormFindingError : public std::runtime_error
@@ -200,4 +202,4 @@ private:
   std::vector<double> kept_lengths_;  // their lengths in the topology
 };
 
-}  // namespace active_tensegrity::core
+}  // namespace active_tensegrity::design

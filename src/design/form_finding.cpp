@@ -1,4 +1,4 @@
-#include "active_tensegrity/core/scene/form_finding.h"
+#include "active_tensegrity/design/form_finding.h"
 
 #include <algorithm>
 #include <cmath>
@@ -18,8 +18,10 @@
 #include "active_tensegrity/core/linalg/svd.h"
 #include "active_tensegrity/core/base/text.h"
 
-namespace active_tensegrity::core
+namespace active_tensegrity::design
 {
+using namespace core;
+
 namespace
 {
 constexpr double kCollapsedLength = 1e-9;  // times the mean member length: a member that short has collapsed
@@ -960,4 +962,4 @@ FormFindingResult findForm(const std::string& yaml, const std::string& name, con
   return result;
 }
 
-}  // namespace active_tensegrity::core
+}  // namespace active_tensegrity::design

@@ -1,4 +1,4 @@
-#include "active_tensegrity/core/scene/generators.h"
+#include "active_tensegrity/design/generators.h"
 
 #include <cmath>
 #include <sstream>
@@ -9,8 +9,10 @@
 #include "active_tensegrity/core/base/rotation.h"
 #include "active_tensegrity/core/base/text.h"
 
-namespace active_tensegrity::core
+namespace active_tensegrity::design
 {
+using namespace core;
+
 namespace
 {
 std::string vec(const Vec3& v)
@@ -312,4 +314,4 @@ std::string towerScene(const TowerSpec& s)
   return y.str();
 }
 
-}  // namespace active_tensegrity::core
+}  // namespace active_tensegrity::design

@@ -4,7 +4,7 @@
 #include <limits>
 #include <string>
 
-namespace active_tensegrity::core
+namespace active_tensegrity::design
 {
 /// The ranges of the generators' parameters: every value in them gives a scene that loads (the generators and
 /// tensegrity_generate refuse the rest, naming the parameter and the value).
@@ -74,4 +74,4 @@ struct TowerSpec
 
 std::string towerScene(const TowerSpec& spec);
 
-}  // namespace active_tensegrity::core
+}  // namespace active_tensegrity::design
