@@ -1,4 +1,4 @@
-// tensegrity_generate: writes the scene of a standard structure (core/scene/generators.h, lattice.h), ready to run.
+// tensegrity_generate: writes the scene of a standard structure (design/generators.h, lattice.h), ready to run.
 #include <algorithm>
 #include <cmath>
 #include <fstream>

@@ -23,9 +23,9 @@
 #include "active_tensegrity/core/solvers/modal.h"
 #include "active_tensegrity/core/scene/scene.h"
 #include "active_tensegrity/core/solvers/structure_check.h"
-#include "active_tensegrity/core/outputs/vtk_writer.h"
 #include "active_tensegrity/ros/bag_writer.h"
 #include "cli.h"
+#include "vtk_writer.h"
 
 namespace at = active_tensegrity::core;
 namespace tools = active_tensegrity::tools;
@@ -304,7 +304,7 @@ public:
     try
     {
       if (!o.vtk_dir.empty())
-        vtk_ = std::make_unique<at::VtkWriter>(model, o.vtk_dir);
+        vtk_ = std::make_unique<tools::VtkWriter>(model, o.vtk_dir);
     }
     catch (const std::exception& e)
     {
@@ -428,7 +428,7 @@ private:
 
   std::ofstream file_, contacts_, nodes_, members_, summary_;
   std::ostream* csv_ = &std::cout;
-  std::unique_ptr<at::VtkWriter> vtk_;
+  std::unique_ptr<tools::VtkWriter> vtk_;
   bool vtk_failed_ = false;
   std::unique_ptr<active_tensegrity::ros_layer::BagWriter> bag_;
 };

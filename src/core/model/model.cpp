@@ -141,28 +141,29 @@ std::vector<StrutPair> Model::checkedPairList(std::vector<int>* slots) const
   return out;
 }
 
+namespace
+{
+template <class T>
+int findNamed(const std::vector<T>& items, const std::string& n)
+{
+  for (size_t i = 0; i < items.size(); ++i)
+    if (items[i].name == n)
+      return static_cast<int>(i);
+  return -1;
+}
+}  // namespace
+
 int Model::findNode(const std::string& n) const
 {
-  for (size_t i = 0; i < nodes.size(); ++i)
-    if (nodes[i].name == n)
-      return static_cast<int>(i);
-  return -1;
+  return findNamed(nodes, n);
 }
-
 int Model::findBody(const std::string& n) const
 {
-  for (size_t i = 0; i < bodies.size(); ++i)
-    if (bodies[i].name == n)
-      return static_cast<int>(i);
-  return -1;
+  return findNamed(bodies, n);
 }
-
 int Model::findActuator(const std::string& n) const
 {
-  for (size_t i = 0; i < actuators.size(); ++i)
-    if (actuators[i].name == n)
-      return static_cast<int>(i);
-  return -1;
+  return findNamed(actuators, n);
 }
 
 void finalizeModel(Model& model)

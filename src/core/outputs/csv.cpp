@@ -1,21 +1,9 @@
 #include "active_tensegrity/core/outputs/csv.h"
 
 #include <algorithm>
-#include <chrono>
-#include <cmath>
-#include <limits>
 
+#include "active_tensegrity/core/model/model.h"
 #include "active_tensegrity/core/outputs/observables.h"
-#include "active_tensegrity/core/solvers/adaptive.h"
-#include "active_tensegrity/core/solvers/dynamics.h"
-#include "active_tensegrity/core/contact/broad_phase.h"
-#include "active_tensegrity/core/contact/contact.h"
-#include "active_tensegrity/core/contact/contact_search.h"
-#include "active_tensegrity/core/base/geometry.h"
-#include "active_tensegrity/core/model/kinematics.h"
-#include "active_tensegrity/core/solvers/statics.h"
-#include "active_tensegrity/core/solvers/structure_check.h"
-#include "active_tensegrity/core/base/text.h"
 
 namespace active_tensegrity::core
 {

@@ -1,21 +1,18 @@
 #include "active_tensegrity/core/outputs/observables.h"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
+#include <functional>
 #include <limits>
+#include <stdexcept>
+#include <string>
 
-#include "active_tensegrity/core/model/actuation_schedule.h"
-#include "active_tensegrity/core/solvers/adaptive.h"
-#include "active_tensegrity/core/solvers/dynamics.h"
+#include "active_tensegrity/core/base/geometry.h"
 #include "active_tensegrity/core/contact/broad_phase.h"
 #include "active_tensegrity/core/contact/contact.h"
 #include "active_tensegrity/core/contact/contact_search.h"
-#include "active_tensegrity/core/base/geometry.h"
 #include "active_tensegrity/core/model/kinematics.h"
-#include "active_tensegrity/core/solvers/statics.h"
-#include "active_tensegrity/core/solvers/structure_check.h"
-#include "active_tensegrity/core/base/text.h"
+#include "active_tensegrity/core/solvers/dynamics.h"
 
 namespace active_tensegrity::core
 {

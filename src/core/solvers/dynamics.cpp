@@ -127,15 +127,6 @@ DynamicsSolver::~DynamicsSolver() = default;
 DynamicsSolver::DynamicsSolver(DynamicsSolver&&) noexcept = default;
 DynamicsSolver& DynamicsSolver::operator=(DynamicsSolver&&) noexcept = default;
 
-const Model& DynamicsSolver::model() const
-{
-  return impl_->model;
-}
-NaturalSolver& DynamicsSolver::natural()
-{
-  return impl_->solver;
-}
-
 Summary DynamicsSolver::prepare(State& s, const ActuationLaw& law)
 {
   if (impl_->carriesOwn(s))
@@ -231,13 +222,6 @@ const std::vector<ContactPairState>* DynamicsSolver::contactsAt(const State& s) 
   return &s.natural.contacts;
 }
 
-double DynamicsSolver::actuationForce(State& s, int actuator)
-{
-  if (!formActuatorForces(s))
-    return std::numeric_limits<double>::quiet_NaN();
-  return s.natural.actuator_force[static_cast<size_t>(actuator)];
-}
-
 bool DynamicsSolver::formActuatorForces(State& s)
 {
   Impl& m = *impl_;
@@ -288,17 +272,11 @@ void DynamicsSolver::resetTimings()
   impl_->stats_at_reset = impl_->solver.stats();
 }
 
-DynamicsSolver::Coefficients DynamicsSolver::coefficients() const
-{
-  const NaturalSolver::Coefficients c = impl_->solver.coefficients();
-  return { c.gamma, c.beta, c.alpha_m, c.alpha_f };
-}
-
 // ---- adaptive steps ----------------------------------------------------------------------------------------
 
 AdaptiveStepper::AdaptiveStepper(DynamicsSolver& solver, const SolverOptions& options) : solver_(solver)
 {
-  solver_.natural().setAdaptiveOptions(options);
+  solver_.impl_->solver.setAdaptiveOptions(options);
   each_ = [this](const NaturalState& n)
   {
     DynamicsSolver::Impl& m = *solver_.impl_;

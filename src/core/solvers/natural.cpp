@@ -93,27 +93,18 @@ Vec3 valueOf(const V3<T>& x)
   return Vec3(valueOf(x(0)), valueOf(x(1)), valueOf(x(2)));
 }
 
-// the constants of one pair's contact
-struct PairConstants
-{
-  double radius[2] = { 0.0, 0.0 };
-  double inv_length[2] = { 0.0, 0.0 };   // 1 / L
-  double inv_length2[2] = { 0.0, 0.0 };  // 1 / L^2
-  double stiffness90 = 0.0, core_stiffness90 = 0.0, core_gap = 0.0;
-  double floor_sin = 0.0;
-  double scale = 0.0;  // (L1 + L2) / 2
-};
-
 // the penetration below which a contact is not touching, relative to the struts' size or the sphere's height
 constexpr double kPenetrationRoundoff = 64.0 * std::numeric_limits<double>::epsilon();
 
 // One pair's contact on its four nodes (a, b of strut 1, then of strut 2), generic in the scalar so that the
 // tangents are its forward-mode derivatives. Fills F (when `force`) and the pair's state (values).
 template <typename T>
-void pairKernel(const Model& model, const PairConstants& pc, const V3<T> r[4], const V3<T> v[4], const T spin[2],
-                double impact_speed, bool force, Eigen::Matrix<T, 14, 1>& F, ContactPairState& st)
+void pairKernel(const Model& model, const NaturalContactSlot& cs, double floor_sin, const V3<T> r[4], const V3<T> v[4],
+                const T spin[2], double impact_speed, bool force, Eigen::Matrix<T, 14, 1>& F, ContactPairState& st)
 {
   using std::sqrt;
+  const double inv_length2[2] = { cs.inv_length[0] * cs.inv_length[0], cs.inv_length[1] * cs.inv_length[1] };
+  const double scale = 0.5 / cs.inv_length[0] + 0.5 / cs.inv_length[1];  // (L1 + L2) / 2
   const ContactSettings& set = model.contact;
   F.setZero();
   const V3<T> u1 = r[1] - r[0], u2 = r[3] - r[2], w = r[0] - r[2];
@@ -142,7 +133,7 @@ void pairKernel(const Model& model, const PairConstants& pc, const V3<T> r[4], c
   const V3<T> p1 = r[0] + s * u1, p2 = r[2] + t * u2, d = p1 - p2;
   const T h = d.norm();
   V3<T> n;
-  if (h > 1e-12 * pc.scale)
+  if (h > 1e-12 * scale)
     n = d / h;
   else
   {
@@ -156,7 +147,7 @@ void pairKernel(const Model& model, const PairConstants& pc, const V3<T> r[4], c
     if (n.dot(r[0] + r[1] - r[2] - r[3]) < 0.0)
       n = -n;
   }
-  const double r1 = pc.radius[0], r2 = pc.radius[1];
+  const double r1 = cs.radius[0], r2 = cs.radius[1];
   const T zeta = r1 + r2 - h;
   const V3<T> vp1 = v[0] + s * (v[1] - v[0]), vp2 = v[2] + t * (v[3] - v[2]);
   const T rate = -n.dot(vp1 - vp2);
@@ -165,7 +156,7 @@ void pairKernel(const Model& model, const PairConstants& pc, const V3<T> r[4], c
   st.penetration = valueOf(zeta);
   // (a penetration within the round-off of the axes' distance is none: a contact that begins exactly where a step
   // ends would otherwise switch on and off between Newton's iterates)
-  st.active = st.penetration > kPenetrationRoundoff * pc.scale;
+  st.active = st.penetration > kPenetrationRoundoff * scale;
   st.point_a = valueOf(V3<T>(p1 - r1 * n));
   st.point_b = valueOf(V3<T>(p2 + r2 * n));
   st.penetration_rate = valueOf(rate);
@@ -185,15 +176,15 @@ void pairKernel(const Model& model, const PairConstants& pc, const V3<T> r[4], c
   else
   {
     const T sin2 = 1.0 - b * b / (a * e);
-    const bool above = sin2 > pc.floor_sin * pc.floor_sin;
-    const T root = above ? T(sqrt(sqrt(sin2))) : T(sqrt(pc.floor_sin));
-    const T k = pc.stiffness90 / root;
+    const bool above = sin2 > floor_sin * floor_sin;
+    const T root = above ? T(sqrt(sqrt(sin2))) : T(sqrt(floor_sin));
+    const T k = cs.stiffness90 / root;
     st.stiffness = valueOf(k);
     T elastic = k * zeta * sqrt(zeta);
-    const T zc = zeta - pc.core_gap;
-    if (pc.core_stiffness90 > 0.0 && zc > 0.0)
+    const T zc = zeta - cs.core_gap;
+    if (cs.core_stiffness90 > 0.0 && zc > 0.0)
     {
-      const T kc = pc.core_stiffness90 / root;
+      const T kc = cs.core_stiffness90 / root;
       st.core_penetration = valueOf(zc);
       st.core_stiffness = valueOf(kc);
       elastic += kc * zc * sqrt(zc);
@@ -213,9 +204,9 @@ void pairKernel(const Model& model, const PairConstants& pc, const V3<T> r[4], c
   if (!(set.friction > 0.0))
     return;
   // friction at the contact points as material points: w = u x u_dot / L^2 + w_s e (e = u / L, w_s the spin rate)
-  const V3<T> e1 = pc.inv_length[0] * u1, e2 = pc.inv_length[1] * u2;
-  const V3<T> w1 = pc.inv_length2[0] * u1.cross(v[1] - v[0]) + spin[0] * e1;
-  const V3<T> w2 = pc.inv_length2[1] * u2.cross(v[3] - v[2]) + spin[1] * e2;
+  const V3<T> e1 = cs.inv_length[0] * u1, e2 = cs.inv_length[1] * u2;
+  const V3<T> w1 = inv_length2[0] * u1.cross(v[1] - v[0]) + spin[0] * e1;
+  const V3<T> w2 = inv_length2[1] * u2.cross(v[3] - v[2]) + spin[1] * e2;
   const V3<T> vtol = (vp1 - r1 * w1.cross(n)) - (vp2 + r2 * w2.cross(n));
   const V3<T> vt = vtol - n.dot(vtol) * n;
   const T slip = vt.norm();
@@ -231,7 +222,7 @@ void pairKernel(const Model& model, const PairConstants& pc, const V3<T> r[4], c
   st.force_on_a += st.friction_on_a;
   // f at PA = P1 - r1 n: the power f . (v_P1 - r1 w1 x n) = f . v_P1 - (r1 / L1^2) u1_dot . ((n x f) x u1)
   const V3<T> m = n.cross(fa);
-  const V3<T> turn1 = (r1 * pc.inv_length2[0]) * m.cross(u1), turn2 = (r2 * pc.inv_length2[1]) * m.cross(u2);
+  const V3<T> turn1 = (r1 * inv_length2[0]) * m.cross(u1), turn2 = (r2 * inv_length2[1]) * m.cross(u2);
   F.template segment<3>(0) += (1.0 - s) * fa + turn1;
   F.template segment<3>(3) += s * fa - turn1;
   F.template segment<3>(6) += -(1.0 - t) * fa + turn2;
@@ -241,48 +232,44 @@ void pairKernel(const Model& model, const PairConstants& pc, const V3<T> r[4], c
   F(13) = -r2 * e2.dot(m);
 }
 
-// the constants of one ground contact: a sphere at a node, of a strut (its nodes a and b) or a point mass
-struct GroundConstants
-{
-  double radius = 0.0, stiffness = 0.0;
-  bool strut = false;
-  int sphere_end = 0;  // 0: at node a, 1: at node b
-  double inv_length = 0.0, inv_length2 = 0.0;
-};
-
 // One ground contact (contact.h: Hertz or linear normal force, Lankarani-Nikravesh damping, modified Coulomb friction
 // at the sphere's lowest point as a material point), generic in the scalar. Nodes: r[0], r[1] the strut's a and b
 // (the sphere's centre at r[sphere_end]), or r[0] the point mass; F: 3 per node (a, b), then the spin at F(12).
 template <typename T>
-void groundKernel(const Model& model, const GroundConstants& gc, const V3<T> r[4], const V3<T> v[4], const T spin[2],
+void groundKernel(const Model& model, const NaturalContactSlot& cs, const V3<T> r[4], const V3<T> v[4], const T spin[2],
                   double impact_speed, bool force, Eigen::Matrix<T, 14, 1>& F, ContactPairState& st)
 {
   using std::sqrt;
+  // a sphere of radius cs.radius[0] and stiffness cs.stiffness90 at a node: of a strut (its nodes a and b, the sphere
+  // at cs.sphere_end) or of a point mass
+  const double radius = cs.radius[0], stiffness = cs.stiffness90;
+  const bool strut = cs.struts[0] >= 0;
+  const double inv_length = cs.inv_length[0], inv_length2 = inv_length * inv_length;
   const GroundSettings& ground = model.ground;
   F.setZero();
-  const int at = gc.strut ? gc.sphere_end : 0;
+  const int at = strut ? cs.sphere_end : 0;
   const V3<T>& c = r[at];
-  const T zeta = ground.height + gc.radius - c.z();
+  const T zeta = ground.height + radius - c.z();
   const T rate = -v[at].z();
   st.normal = Vec3::UnitZ();
   st.gap = -valueOf(zeta);
   st.penetration = valueOf(zeta);
-  st.active = st.penetration > kPenetrationRoundoff * (gc.radius + std::abs(valueOf(c.z())));
-  st.point_a = valueOf(c) - gc.radius * Vec3::UnitZ();
+  st.active = st.penetration > kPenetrationRoundoff * (radius + std::abs(valueOf(c.z())));
+  st.point_a = valueOf(c) - radius * Vec3::UnitZ();
   st.point_b = Vec3(valueOf(c.x()), valueOf(c.y()), ground.height);
   st.penetration_rate = valueOf(rate);
   st.region = ClosestRegion::kInterior;
   if (!st.active || !force)
     return;
-  st.stiffness = gc.stiffness;
+  st.stiffness = stiffness;
   T fn;
   if (ground.law == ContactLaw::kLinear)
-    fn = gc.stiffness * zeta + ground.linear_damping * rate;
+    fn = stiffness * zeta + ground.linear_damping * rate;
   else
   {
     const double damping = 3.0 * (1.0 - ground.restitution * ground.restitution) /
                            (4.0 * std::max(impact_speed, model.contact.min_impact_speed));
-    fn = gc.stiffness * zeta * sqrt(zeta) * (1.0 + damping * rate);
+    fn = stiffness * zeta * sqrt(zeta) * (1.0 + damping * rate);
   }
   if (!(fn > 0.0))
     return;
@@ -292,14 +279,14 @@ void groundKernel(const Model& model, const GroundConstants& gc, const V3<T> r[4
   if (!(ground.friction > 0.0))
     return;
   // the lowest point PA = c + rho, rho = -R z, moving with the strut's w = u x u_dot / L^2 + w_s e
-  const V3<T> rho(T(0.0), T(0.0), T(-gc.radius));
+  const V3<T> rho(T(0.0), T(0.0), T(-radius));
   V3<T> vpa = v[at];
   V3<T> u = V3<T>::Zero(), e = V3<T>::Zero();
-  if (gc.strut)
+  if (strut)
   {
     u = r[1] - r[0];
-    e = gc.inv_length * u;
-    const V3<T> w = gc.inv_length2 * u.cross(v[1] - v[0]) + spin[0] * e;
+    e = inv_length * u;
+    const V3<T> w = inv_length2 * u.cross(v[1] - v[0]) + spin[0] * e;
     vpa += w.cross(rho);
   }
   const V3<T> vt(vpa.x(), vpa.y(), T(0.0));
@@ -316,44 +303,16 @@ void groundKernel(const Model& model, const GroundConstants& gc, const V3<T> r[4
   st.friction_on_a = valueOf(f);
   st.force_on_a += st.friction_on_a;
   F.template segment<3>(3 * at) += f;
-  if (!gc.strut)
+  if (!strut)
     return;
   // the moment m = rho x f: w . m = u_dot . (m x u) / L^2 + w_s e . m
   const V3<T> m = rho.cross(f);
-  const V3<T> turn = gc.inv_length2 * m.cross(u);
+  const V3<T> turn = inv_length2 * m.cross(u);
   F.template segment<3>(0) -= turn;
   F.template segment<3>(3) += turn;
   F(12) = e.dot(m);
 }
 
-PairConstants pairConstants(const NaturalContactSlot& cs, double floor_sin)
-{
-  PairConstants pc;
-  for (int k = 0; k < 2; ++k)
-  {
-    pc.radius[k] = cs.radius[k];
-    pc.inv_length[k] = cs.inv_length[k];
-    pc.inv_length2[k] = cs.inv_length[k] * cs.inv_length[k];
-    pc.scale += 0.5 / cs.inv_length[k];
-  }
-  pc.stiffness90 = cs.stiffness90;
-  pc.core_stiffness90 = cs.core_stiffness90;
-  pc.core_gap = cs.core_gap;
-  pc.floor_sin = floor_sin;
-  return pc;
-}
-
-GroundConstants groundConstants(const NaturalContactSlot& cs)
-{
-  GroundConstants gc;
-  gc.radius = cs.radius[0];
-  gc.stiffness = cs.stiffness90;
-  gc.strut = cs.struts[0] >= 0;
-  gc.sphere_end = cs.sphere_end;
-  gc.inv_length = cs.inv_length[0];
-  gc.inv_length2 = cs.inv_length[0] * cs.inv_length[0];
-  return gc;
-}
 }  // namespace
 
 NaturalModel buildNaturalModel(const Model& model, bool spin)
@@ -847,27 +806,23 @@ ContactPairState naturalContact(const NaturalModel& nm, const NaturalContactSlot
   const Model& model = *nm.model;
   ContactPairState st;
   st.pair = cs.slot;
-  PairConstants pc;
-  GroundConstants gc;
   if (cs.ground)
   {
     st.body_a = model.groundContactOf(cs.slot).body;
     st.body_b = -1;
-    gc = groundConstants(cs);
   }
   else
   {
     const auto [body_a, body_b] = model.pairBodies(cs.slot);
     st.body_a = body_a;
     st.body_b = body_b;
-    pc = pairConstants(cs, nm.floor_sin);
   }
   const auto kernel = [&](auto r, auto v, auto spin, bool with_force, auto& f)
   {
     if (cs.ground)
-      groundKernel(model, gc, r, v, spin, impact_speed, with_force, f, st);
+      groundKernel(model, cs, r, v, spin, impact_speed, with_force, f, st);
     else
-      pairKernel(model, pc, r, v, spin, impact_speed, with_force, f, st);
+      pairKernel(model, cs, nm.floor_sin, r, v, spin, impact_speed, with_force, f, st);
   };
   {
     // (apart: no force, no tangents, and no derivatives to carry through the closest points)
@@ -974,7 +929,7 @@ ContactPairState contactAtPoses(const Model& model, int slot, const Eigen::Vecto
       pointMotion(model, PointRef{ g.body, g.local }, q, *qd, r[0], v[0]);
     else
       r[0] = pointPosition(model, PointRef{ g.body, g.local }, q);
-    groundKernel(model, groundConstants(cs), r, v, spin, impact_speed, force, f, st);
+    groundKernel(model, cs, r, v, spin, impact_speed, force, f, st);
     return st;
   }
   const auto [body_a, body_b] = model.pairBodies(slot);
@@ -992,8 +947,7 @@ ContactPairState contactAtPoses(const Model& model, int slot, const Eigen::Vecto
   cs.stiffness90 = p.stiffness90;
   cs.core_stiffness90 = p.core_stiffness90;
   cs.core_gap = p.core_gap;
-  const PairConstants pc = pairConstants(cs, std::sin(model.contact.min_crossing_angle));
-  pairKernel(model, pc, r, v, spin, impact_speed, force, f, st);
+  pairKernel(model, cs, std::sin(model.contact.min_crossing_angle), r, v, spin, impact_speed, force, f, st);
   return st;
 }
 }  // namespace
@@ -1015,6 +969,39 @@ constexpr double kNearFloor = 1e-4;        // m: the least motion the near pairs
 constexpr int kDirectPairsMost = 64;       // up to this many strut pairs are checked without the broad phase
 constexpr double kListMarginLeast = 2e-3;  // m: the least margin of the listed contacts
 constexpr double kListMarginSteps = 8.0;   // the margin in steps' motions
+
+// The length and lengthening rate of cable k (Model::cables) at s under u.
+void cableLengthRate(const NaturalModel& nm, int k, const NaturalState& s, const ActuationValues& u, double& l,
+                     double& rate)
+{
+  const std::vector<int>& nodes = nm.cable_nodes[static_cast<size_t>(k)];
+  l = rate = 0.0;
+  for (size_t i = 0; i + 1 < nodes.size(); ++i)
+  {
+    const Vec3 d = naturalNodePosition(nm, nodes[i + 1], s.x, u) - naturalNodePosition(nm, nodes[i], s.x, u);
+    const double li = d.norm();
+    l += li;
+    if (li > 0.0)
+      rate += d.dot(naturalNodeVelocity(nm, nodes[i + 1], s.v, u) - naturalNodeVelocity(nm, nodes[i], s.v, u)) / li;
+  }
+}
+
+// Whether the axes of strut pair c passed through each other while its nodes moved in straight lines from from(i) to
+// to(i).
+template <class From, class To>
+bool pairPassedThrough(const NaturalModel& nm, const NaturalContactSlot& c, const From& from, const To& to)
+{
+  AxisPose start[2], end[2];
+  for (int i = 0; i < 2; ++i)
+  {
+    const int a = c.nodes[2 * i], b = c.nodes[2 * i + 1];
+    const Vec3 a0 = from(a), b0 = from(b), a1 = to(a), b1 = to(b);
+    start[i] = { 0.5 * (a0 + b0), (b0 - a0).normalized() };
+    end[i] = { 0.5 * (a1 + b1), (b1 - a1).normalized() };
+  }
+  return axesPassedThrough(start[0], start[1], end[0], end[1], 0.5 * nm.struts[static_cast<size_t>(c.struts[0])].length,
+                           0.5 * nm.struts[static_cast<size_t>(c.struts[1])].length);
+}
 }  // namespace
 
 // ---- the solver ----------------------------------------------------------------------------------------
@@ -1102,12 +1089,6 @@ void NaturalSolver::forces(const Eigen::VectorXd& x, const Eigen::VectorXd& v, b
     if (!tangents)
       continue;
     // dF_b/du = -c w_s [u_dot]x, dF_b/du_dot = c w_s [u]x, dF_b/dw_s = c u x u_dot; u = r_b - r_a
-    const auto skew = [](const Vec3& w)
-    {
-      Mat3 m;
-      m << 0.0, -w.z(), w.y(), w.z(), 0.0, -w.x(), -w.y(), w.x(), 0.0;
-      return m;
-    };
     const Mat3 du = -c * ws * skew(ud), dud = c * ws * skew(u);
     const int cols[2] = { ca, cb };
     const double sign[2] = { -1.0, 1.0 };
@@ -1258,13 +1239,6 @@ void NaturalSolver::contactForces(const Eigen::VectorXd& /*x: forces() cached th
   }
 }
 
-double NaturalSolver::actuationForce(const NaturalState& s, const ActuationValues& u, int actuator)
-{
-  std::vector<double> all;
-  actuationForces(s, u, all);
-  return all[static_cast<size_t>(actuator)];
-}
-
 void NaturalSolver::actuationForces(const NaturalState& s, const ActuationValues& u, std::vector<double>& out)
 {
   out.assign(model_.actuators.size(), 0.0);
@@ -1277,17 +1251,8 @@ void NaturalSolver::actuationForces(const NaturalState& s, const ActuationValues
   for (size_t a = 0; a < model_.actuators.size(); ++a)
     for (const int c : model_.actuators[a].cables)
     {
-      const std::vector<int>& nodes = nm_.cable_nodes[static_cast<size_t>(c)];
-      double l = 0.0, rate = 0.0;
-      for (size_t i = 0; i + 1 < nodes.size(); ++i)
-      {
-        const Vec3 d = naturalNodePosition(nm_, nodes[i + 1], s.x, u) - naturalNodePosition(nm_, nodes[i], s.x, u);
-        const double li = d.norm();
-        l += li;
-        if (li > 0.0)
-          rate +=
-              d.dot(naturalNodeVelocity(nm_, nodes[i + 1], s.v, u) - naturalNodeVelocity(nm_, nodes[i], s.v, u)) / li;
-      }
+      double l, rate;
+      cableLengthRate(nm_, c, s, u, l, rate);
       out[a] += cableLaw(model_.cables[static_cast<size_t>(c)], l, rate, u, model_.damping_enabled).tension;
     }
   // the nodes each drives: the reaction that prescribes each one's motion, along the direction
@@ -1417,16 +1382,8 @@ EnergyPoint NaturalSolver::energyAt(const NaturalState& s, const ActuationValues
   for (size_t k = 0; k < model_.cables.size(); ++k)
   {
     const Cable& c = model_.cables[k];
-    const std::vector<int>& nodes = nm_.cable_nodes[k];
-    double l = 0.0, rate = 0.0;
-    for (size_t i = 0; i + 1 < nodes.size(); ++i)
-    {
-      const Vec3 d = position(nodes[i + 1]) - position(nodes[i]);
-      const double li = d.norm();
-      l += li;
-      if (li > 0.0)
-        rate += d.dot(velocity(nodes[i + 1]) - velocity(nodes[i])) / li;
-    }
+    double l, rate;
+    cableLengthRate(nm_, static_cast<int>(k), s, u, l, rate);
     const CableState cs = cableLaw(c, l, rate, u, true);
     e.elastic += cablePotentialEnergy(c, cs);
     if (c.damping > 0.0 && !cs.slack)
@@ -1647,26 +1604,11 @@ void NaturalSolver::solve(const Eigen::VectorXd& rhs, Eigen::VectorXd& out)
 int NaturalSolver::firstPassedThrough() const
 {
   // the near strut pairs' axes from the step's start (node_now_, as findNear left them) to the iterate x_
+  const auto from = [&](int i) { return node_now_[static_cast<size_t>(i)]; };
+  const auto to = [&](int i) { return naturalNodePosition(nm_, i, x_, u_); };
   for (const int k : near_)
-  {
-    const NaturalContactSlot& c = listed_[k].c;
-    if (c.ground)
-      continue;
-    AxisPose start[2], end[2];
-    for (int i = 0; i < 2; ++i)
-    {
-      const Vec3 a0 = node_now_[static_cast<size_t>(c.nodes[2 * i])],
-                 b0 = node_now_[static_cast<size_t>(c.nodes[2 * i + 1])];
-      const Vec3 a1 = naturalNodePosition(nm_, c.nodes[2 * i], x_, u_);
-      const Vec3 b1 = naturalNodePosition(nm_, c.nodes[2 * i + 1], x_, u_);
-      start[i] = { 0.5 * (a0 + b0), (b0 - a0).normalized() };
-      end[i] = { 0.5 * (a1 + b1), (b1 - a1).normalized() };
-    }
-    const double half_a = 0.5 * nm_.struts[static_cast<size_t>(c.struts[0])].length;
-    const double half_b = 0.5 * nm_.struts[static_cast<size_t>(c.struts[1])].length;
-    if (axesPassedThrough(start[0], start[1], end[0], end[1], half_a, half_b))
-      return c.slot;
-  }
+    if (!listed_[k].c.ground && pairPassedThrough(nm_, listed_[k].c, from, to))
+      return listed_[k].c.slot;
   return -1;
 }
 
@@ -1847,9 +1789,7 @@ void NaturalSolver::assembleStatic(const Eigen::VectorXd& x, const Eigen::Vector
 
 void NaturalSolver::addStaticMass(double mu)
 {
-  for (int k = 0; k < nm_.mass.outerSize(); ++k)
-    for (Eigen::SparseMatrix<double>::InnerIterator it(nm_.mass, k); it; ++it)
-      entries_.add(static_cast<int>(it.row()), static_cast<int>(it.col()), mu * it.value());
+  entries_.addMatrix(nm_.mass, mu);
 }
 
 bool NaturalSolver::factorizeStatic()
@@ -1954,21 +1894,11 @@ int NaturalSolver::passedThrough(const Eigen::VectorXd& x0, const ActuationValue
   }
   else
     candidates_ = direct_pairs_;
+  const auto from = [&](int i) { return node_now_[static_cast<size_t>(i)]; };
+  const auto to = [&](int i) { return points_[static_cast<size_t>(i)]; };
   for (const int slot : candidates_)
-  {
-    const NaturalContactSlot c = naturalContactSlot(nm_, slot);
-    AxisPose start[2], end[2];
-    for (int i = 0; i < 2; ++i)
-    {
-      const size_t a = static_cast<size_t>(c.nodes[2 * i]), b = static_cast<size_t>(c.nodes[2 * i + 1]);
-      start[i] = { 0.5 * (node_now_[a] + node_now_[b]), (node_now_[b] - node_now_[a]).normalized() };
-      end[i] = { 0.5 * (points_[a] + points_[b]), (points_[b] - points_[a]).normalized() };
-    }
-    const double half_a = 0.5 * nm_.struts[static_cast<size_t>(c.struts[0])].length;
-    const double half_b = 0.5 * nm_.struts[static_cast<size_t>(c.struts[1])].length;
-    if (axesPassedThrough(start[0], start[1], end[0], end[1], half_a, half_b))
+    if (pairPassedThrough(nm_, naturalContactSlot(nm_, slot), from, to))
       return slot;
-  }
   return -1;
 }
 
@@ -2409,7 +2339,7 @@ Summary NaturalSolver::endStep(NaturalState& s, double h, double c1)
   return out;
 }
 
-Summary NaturalSolver::stepOnce(NaturalState& s, double h, const ActuationLaw& law)
+Summary NaturalSolver::step(NaturalState& s, double h, const ActuationLaw& law)
 {
   const double t_end = s.t + h;
   Summary total = stepInPieces(
@@ -2450,7 +2380,7 @@ Summary NaturalSolver::advance(NaturalState& s, double t_end, const ActuationLaw
     {
       const double h = remaining <= 1.05 * options_.dt ? remaining : options_.dt;
       const double t1 = s.t + h;
-      const Summary r = stepOnce(s, h, law);
+      const Summary r = step(s, h, law);
       total.iterations += r.iterations;
       total.step_cuts += r.step_cuts;
       if (!r.ok())

@@ -72,15 +72,8 @@ int steps(const std::string& scene, const std::vector<at::Override>& overrides, 
   else if (!peaks)
     std::printf("heap allocations per step (solver and loop, after the first output): %.2f\n",
                 static_cast<double>(allocations) / std::max(1, last.solver_steps));
-  if (dynamic)
-    std::printf("factorizations per step: %.3f, symbolic analyses: %ld\n",
-                static_cast<double>(last.timings.factorizations) / std::max(1, last.solver_steps),
-                last.timings.analyses);
-  else
-    std::printf("factorizations per step: %.3f (one-body rows eliminated %.3f), symbolic analyses: %ld\n",
-                static_cast<double>(last.timings.factorizations) / std::max(1, last.solver_steps),
-                static_cast<double>(last.timings.reduced_factorizations) / std::max(1, last.solver_steps),
-                last.timings.analyses);
+  std::printf("factorizations per step: %.3f, symbolic analyses: %ld\n",
+              static_cast<double>(last.timings.factorizations) / std::max(1, last.solver_steps), last.timings.analyses);
   std::printf("where the time goes (last run, us per step, share of its wall time):\n");
   const int n = std::max(1, last.solver_steps);
   for (const auto& [part, seconds] : at::timeBreakdown(last))

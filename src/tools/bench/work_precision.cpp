@@ -108,13 +108,20 @@ Trace traceNatural(const at::Model& model)
       at::ActuationLaw::writing([&model](double t, at::ActuationValues& u) { at::scheduledActuation(model, t, u); });
   at::NaturalState s = at::naturalInitialState(nm);
   double last_t = 0.0, last_sum = 0.0, callbacks = 0.0;
+  std::vector<double> forces;
   const auto t0 = std::chrono::steady_clock::now();
   const auto output = [&](const at::NaturalState& st)
   {
     const at::ActuationValues u = at::scheduledActuation(model, st.t);
     const Eigen::VectorXd q = at::naturalToBodyCoordinates(nm, st.x, u);
     tr.t.push_back(st.t);
-    tr.force.push_back(model.actuators.empty() ? 0.0 : solver.actuationForce(st, u, 0));
+    if (model.actuators.empty())
+      tr.force.push_back(0.0);
+    else
+    {
+      solver.actuationForces(st, u, forces);
+      tr.force.push_back(forces[0]);
+    }
     std::vector<double> h;
     for (const at::OutputLayer& layer : model.layers)
       h.push_back(at::nodesHeight(model, layer.nodes, q));

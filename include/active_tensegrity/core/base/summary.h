@@ -52,22 +52,7 @@ struct StepTimings
   double total = 0.0;          // whole step() / followPath() calls (the rest is vector work and bookkeeping)
   long newton_iterations = 0;
   long factorizations = 0;
-  long analyses = 0;  // symbolic analyses of the Newton matrix (its pattern grows when a new pair touches)
-  long static_pivot_factorizations = 0;  // of them, the approximate static-pivot LU (SparseLinearSolver)
-  long body_block_factorizations = 0;    // of them, the approximate body blocks (SparseLinearSolver)
-  long reduced_factorizations = 0;       // of them, exact ones with the one-body rows eliminated (ReducedLinearSolver)
-  long full_newton_retries = 0;   // dynamics: steps retried in full Newton after modified Newton ran out of iterations
-  long contact_reach_misses = 0;  // dynamics: converged iterates that moved beyond the contact slots' reach
-  long fresh_starts = 0;     // dynamics: steps begun with a new matrix because kept ones had diverged (modified Newton)
-  long newton_switches = 0;  // dynamics: steps that went on in full Newton when modified Newton did not contract with a
-                             // matrix exact at one of their own iterates
-  long body_block_distrusts = 0;  // dynamics: body-block matrices that did not contract in the step that built them,
-                                  // followed by exact factorizations (SparseLinearSolver::distrustBodyBlocks)
-  long body_block_rebuilds = 0;   // dynamics, fixed steps: such matrices that had contracted at first, the iterate
-                                  // 100 Newton tolerances or more from where they were built: rebuilt there as body
-                                  // blocks
-  long static_pivots_kept = 0;    // dynamics: steps that kept a static-pivot matrix though the touching pairs had
-                                  // changed, the next factorization being static pivots too (the body blocks paused)
+  long analyses = 0;       // symbolic analyses of the Newton matrix (a new pattern)
   long most_touching = 0;  // dynamics: the most contact slots touching at the end of an accepted step (not of one the
                            // adaptive step control refused); a maximum, not a sum
 
@@ -82,16 +67,6 @@ struct StepTimings
     newton_iterations += o.newton_iterations;
     factorizations += o.factorizations;
     analyses += o.analyses;
-    static_pivot_factorizations += o.static_pivot_factorizations;
-    body_block_factorizations += o.body_block_factorizations;
-    reduced_factorizations += o.reduced_factorizations;
-    full_newton_retries += o.full_newton_retries;
-    contact_reach_misses += o.contact_reach_misses;
-    fresh_starts += o.fresh_starts;
-    newton_switches += o.newton_switches;
-    body_block_distrusts += o.body_block_distrusts;
-    body_block_rebuilds += o.body_block_rebuilds;
-    static_pivots_kept += o.static_pivots_kept;
     most_touching = std::max(most_touching, o.most_touching);
     return *this;
   }

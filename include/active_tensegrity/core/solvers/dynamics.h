@@ -46,9 +46,6 @@ public:
   /// The touching contacts of `state` with their forces, by contact slot, when it is the state the last accepted
   /// step ended in (or initialize made); else null.
   const std::vector<ContactPairState>* contactsAt(const State& state) const;
-  /// The force actuator `actuator` exerts at s (N): a driven node's reaction along its direction, a driven row's
-  /// multiplier, plus the tension of each cable it pulls in (formActuatorForces; NaN when s cannot be initialized).
-  double actuationForce(State& s, int actuator);
   /// Forms every actuator's force at s into State::natural.actuator_force, which observables.h's actuationForce reads
   /// (a step leaves them unformed: a driven node's reaction costs a force evaluation). s is a state this solver made,
   /// or it is initialized first at its actuation values; false when that fails.
@@ -68,15 +65,6 @@ public:
   /// analyses, the most contacts touching at an accepted step's end, the time in step calls).
   const StepTimings& timings() const;
   void resetTimings();
-
-  struct Coefficients
-  {
-    double gamma, beta, alpha_m, alpha_f;
-  };
-  Coefficients coefficients() const;
-
-  const Model& model() const;
-  NaturalSolver& natural();
 
 private:
   /// Gives `state` natural coordinates formed from its q and qd (initialize) unless it carries its own (a state a step

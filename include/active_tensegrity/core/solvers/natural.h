@@ -279,10 +279,7 @@ public:
   /// One step of h; on failure s is unchanged.
   Summary tryStep(NaturalState& s, double h, const ActuationLaw& law);
   /// One step of h, halved on failure (at most options.max_step_cuts times); on failure s is at the last good instant.
-  Summary step(NaturalState& s, double h, const ActuationLaw& law)
-  {
-    return stepOnce(s, h, law);
-  }
+  Summary step(NaturalState& s, double h, const ActuationLaw& law);
   /// Positions and velocities of s moved onto the constraints under u by the least change in the mass metric (Newton on
   /// the positions to a correction of at most 1e-12 (1 + |x|), then the velocity rows), for a state formed from
   /// elsewhere (body poses, a caller's positions).
@@ -295,19 +292,6 @@ public:
   const StepEnergyCheck& lastEnergyCheck() const
   {
     return last_check_;
-  }
-  const SolverOptions& options() const
-  {
-    return options_;
-  }
-  /// The integrator's effective Newmark coefficients and generalized-alpha weights (0 with Newmark).
-  struct Coefficients
-  {
-    double gamma, beta, alpha_m, alpha_f;
-  };
-  Coefficients coefficients() const
-  {
-    return { gamma_, beta_, alpha_m_, alpha_f_ };
   }
   /// Fixed steps of options.dt to t_end (a failed step is halved up to max_step_cuts times), or adaptive steps
   /// when options.adaptive (error, onset and energy control as AdaptiveStepper's). on_step after each.
@@ -367,11 +351,9 @@ public:
   void appliedForces(const Eigen::VectorXd& x, const Eigen::VectorXd& v, const ActuationValues& u,
                      Eigen::VectorXd& force, Eigen::MatrixXd* stiffness, Eigen::MatrixXd* damping);
 
-  /// The force actuator `actuator` exerts at s under u (N; s the state the last step ended in, or initialized):
-  /// along its direction at each node it drives, the reaction that prescribes the node's motion, or a driven row's
-  /// multiplier; plus the tension of each cable it pulls in.
-  double actuationForce(const NaturalState& s, const ActuationValues& u, int actuator);
-  /// Every actuator's force at s under u into `out` (Model::actuators order).
+  /// Every actuator's force at s under u into `out` (Model::actuators order, N; s the state the last step ended in, or
+  /// initialized): along its direction at each node it drives, the reaction that prescribes the node's motion, or a
+  /// driven row's multiplier; plus the tension of each cable it pulls in.
   void actuationForces(const NaturalState& s, const ActuationValues& u, std::vector<double>& out);
 
   /// The energy of s and the powers acting on it (energy.h's account; s the state the last step ended in, or
@@ -407,7 +389,6 @@ private:
                   const std::function<void(const NaturalState&)>& on_step, bool adaptive);
   void forces(const Eigen::VectorXd& x, const Eigen::VectorXd& v, bool tangents);
   void contactForces(const Eigen::VectorXd& x, const Eigen::VectorXd& v, bool tangents);
-  Summary stepOnce(NaturalState& s, double h, const ActuationLaw& law);
 
   const NaturalModel& nm_;
   const Model& model_;
@@ -456,11 +437,11 @@ private:
         add(c, r + i, g(i));
       }
     }
-    void addMatrix(const Eigen::SparseMatrix<double>& m)
+    void addMatrix(const Eigen::SparseMatrix<double>& m, double w = 1.0)
     {
       for (int k = 0; k < m.outerSize(); ++k)
         for (Eigen::SparseMatrix<double>::InnerIterator it(m, k); it; ++it)
-          add(static_cast<int>(it.row()), static_cast<int>(it.col()), it.value());
+          add(static_cast<int>(it.row()), static_cast<int>(it.col()), w * it.value());
     }
   };
   /// How a sparse Newton matrix is factorized: with partial pivoting (sparse LU), or with static pivots (faster, the

@@ -95,13 +95,13 @@ public:
   /// it from the thread that steps.)
   const std::vector<ContactPairState>* contactsAt(const State& state) const;
 
-  const StepTimings& timings() const
+  const BodyStepTimings& timings() const
   {
     return timings_;
   }
   void resetTimings()
   {
-    timings_ = StepTimings();
+    timings_ = BodyStepTimings();
     most_touching_before_ = 0;
   }
   /// The step control refused the step that tryStep just accepted (on its error estimate or a contact onset):
@@ -206,7 +206,7 @@ private:
   mutable bool end_contacts_ready_ = false;
   /// Whether `s` is the state the last accepted step ended in (end_*).
   bool atEnd(const State& s) const;
-  StepTimings timings_;
+  BodyStepTimings timings_;
   long most_touching_before_ = 0;  // timings_.most_touching before the last accepted step's end (stepRefused)
   StepEstimate estimate_;
   // modified Newton (options_.reuse_jacobian): the factorization in linear_ and what it was built for

@@ -90,7 +90,7 @@ public:
 
   /// Where the solver's time went since construction (forces, contact, constraints, factorization, solve,
   /// total; Newton iterations and factorizations).
-  const StepTimings& timings() const
+  const BodyStepTimings& timings() const
   {
     return timings_;
   }
@@ -152,7 +152,7 @@ private:
   std::vector<CriticalPoint> critical_points_;
   double damped_mu_hint_ = 0.0;  // the damping at which the last damped Newton first kept a step
   double wander_bound_ = 2.0;    // the diagonal of the nodes' bounding box at the start, at least 2
-  StepTimings timings_;
+  BodyStepTimings timings_;
   Eigen::VectorXd force_rows_;  // 1 on the multipliers of kPoints constraints (forces), else 0
   Eigen::VectorXd zero_q_, F_, cforce_, phi_, r_, dx_, fplus_, fminus_;
 };

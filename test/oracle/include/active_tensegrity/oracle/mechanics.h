@@ -25,9 +25,30 @@
 #include "active_tensegrity/core/model/kinematics.h"
 #include "active_tensegrity/core/model/model.h"
 #include "active_tensegrity/core/base/slot_values.h"
+#include "active_tensegrity/core/base/summary.h"
 
 namespace active_tensegrity::core
 {
+/// The body coordinates' solvers' counts: StepTimings and their own linear solvers' and Newton policy's.
+struct BodyStepTimings : StepTimings
+{
+  long static_pivot_factorizations = 0;  // factorizations with the approximate static-pivot LU (SparseLinearSolver)
+  long body_block_factorizations = 0;    // ... with the approximate body blocks (SparseLinearSolver)
+  long reduced_factorizations = 0;       // ... exact, with the one-body rows eliminated (ReducedLinearSolver)
+  long full_newton_retries = 0;   // dynamics: steps retried in full Newton after modified Newton ran out of iterations
+  long contact_reach_misses = 0;  // dynamics: converged iterates that moved beyond the contact slots' reach
+  long fresh_starts = 0;     // dynamics: steps begun with a new matrix because kept ones had diverged (modified Newton)
+  long newton_switches = 0;  // dynamics: steps that went on in full Newton when modified Newton did not contract with a
+                             // matrix exact at one of their own iterates
+  long body_block_distrusts = 0;  // dynamics: body-block matrices that did not contract in the step that built them,
+                                  // followed by exact factorizations (SparseLinearSolver::distrustBodyBlocks)
+  long body_block_rebuilds = 0;   // dynamics, fixed steps: such matrices that had contracted at first, the iterate
+                                  // 100 Newton tolerances or more from where they were built: rebuilt there as body
+                                  // blocks
+  long static_pivots_kept = 0;    // dynamics: steps that kept a static-pivot matrix though the touching pairs had
+                                  // changed, the next factorization being static pivots too (the body blocks paused)
+};
+
 /// The equations of one model plus optional extra constraints (e.g. statics' spin locks), with a
 /// sparse Jacobian whose pattern is fixed at construction: rows and columns are [q; lambda], one
 /// group per body then one per constraint. Not thread-safe (contact scratch): one System per thread.

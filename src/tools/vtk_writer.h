@@ -23,17 +23,17 @@
 #include "active_tensegrity/core/model/model.h"
 #include "active_tensegrity/core/solvers/state.h"
 
-namespace active_tensegrity::core
+namespace active_tensegrity::tools
 {
 class VtkWriter
 {
 public:
   /// Files go to `directory` (created when missing) as <stem>_<k>.vtp, k = 000000, 000001 ..., and
   /// <stem>.pvd. Throws std::runtime_error when the directory cannot be made or written.
-  VtkWriter(const Model& model, const std::string& directory, const std::string& stem = "run");
+  VtkWriter(const core::Model& model, const std::string& directory, const std::string& stem = "run");
   /// Writes the next .vtp and adds it to the .pvd (which is complete after every write, so that a run
   /// stopped early still has a collection). Throws std::runtime_error when a file cannot be written.
-  void write(const State& state);
+  void write(const core::State& state);
   int written() const
   {
     return written_;
@@ -41,7 +41,7 @@ public:
   std::string collectionPath() const;
 
 private:
-  const Model& model_;
+  const core::Model& model_;
   std::string directory_, stem_;
   int written_ = 0;
   std::ofstream pvd_;
@@ -49,4 +49,4 @@ private:
   std::vector<int> strut_index_;  // per body: its index among the struts, -1 for point masses
 };
 
-}  // namespace active_tensegrity::core
+}  // namespace active_tensegrity::tools

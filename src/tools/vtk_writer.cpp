@@ -1,4 +1,4 @@
-#include "active_tensegrity/core/outputs/vtk_writer.h"
+#include "vtk_writer.h"
 
 #include <cmath>
 #include <cstdio>
@@ -12,8 +12,10 @@
 #include "active_tensegrity/core/outputs/observables.h"
 #include "active_tensegrity/core/model/kinematics.h"
 
-namespace active_tensegrity::core
+namespace active_tensegrity::tools
 {
+using namespace core;
+
 namespace
 {
 const char* kClosing = "  </Collection>\n</VTKFile>\n";
@@ -201,4 +203,4 @@ void VtkWriter::write(const State& state)
     throw std::runtime_error("cannot write '" + collectionPath() + "'");
 }
 
-}  // namespace active_tensegrity::core
+}  // namespace active_tensegrity::tools
