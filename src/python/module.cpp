@@ -625,7 +625,7 @@ at::Model dynamicModel(at::Model model)
 
 bool finite(const at::State& s)
 {
-  return s.q.allFinite() && s.qd.allFinite() && s.lambda.allFinite();
+  return s.q.allFinite() && s.qd.allFinite() && s.natural.lambda.allFinite();
 }
 
 /// A dynamic simulation stepped from Python: the ROS node's loop without ROS (fixed steps of solver.dt, the

@@ -111,7 +111,7 @@ void fillAnswer(const planning::PlanResult& plan, Answer& res)
 
 bool finite(const core::State& s)
 {
-  if (!s.q.allFinite() || !s.qd.allFinite() || !s.lambda.allFinite())
+  if (!s.q.allFinite() || !s.qd.allFinite() || !s.natural.lambda.allFinite())
     return false;
   for (const core::ActuationValue& u : s.u)
     if (!std::isfinite(u.value) || !std::isfinite(u.rate))

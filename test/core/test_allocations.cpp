@@ -154,6 +154,6 @@ TEST(ActuationLaw, ItsTwoFormsGiveTheSameValuesAndTheSameRunBitForBit)
     ASSERT_TRUE(sb.step(b, m.solver.dt, returning).ok());
   }
   EXPECT_EQ(a.q, b.q);
-  EXPECT_EQ(a.lambda, b.lambda);
+  EXPECT_EQ(a.natural.lambda, b.natural.lambda);
   EXPECT_EQ(a.u[0].value, b.u[0].value);
 }

@@ -460,7 +460,7 @@ TEST(BodyBlocks, TheTowersNewtonMatrixIsCloseToItsBodyBlocks)
   // three instants of the fold, the last two with struts in contact (measured: 3.2e-6, 0.016, 0.016).
   int touching = 0;
   const TowerVisit check =
-      [&touching](const Model& m, BodyDynamicsSolver& solver, const State& s, const ActuationLaw& law)
+      [&touching](const Model& m, BodyDynamicsSolver& solver, const BodyState& s, const ActuationLaw& law)
   {
     const double h = m.solver.dt;
     touching = static_cast<int>(activeContacts(m, s).size());

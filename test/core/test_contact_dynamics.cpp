@@ -242,7 +242,7 @@ TEST(ContactNewton, FullJacobianWithContactMatchesFiniteDifferences)
   // one step inside the contact with friction sliding: the body coordinates' Newton matrix over [qdd; lambda]
   const Model m = crossedCylinders(0.8, 0.3, 60.0, 0.2);
   BodyDynamicsSolver solver(m, options(1e-4));
-  State s = initialState(m);
+  BodyState s = bodyInitialState(m);
   s.qd.segment<3>(7) = Vec3(0.3, -0.2, -kSpeed);
   ASSERT_TRUE(solver.initialize(s, noActuation()).ok());
   for (int k = 0; k < 10; ++k)  // 1 ms: the surfaces overlap by about 0.5 mm

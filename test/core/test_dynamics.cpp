@@ -88,7 +88,7 @@ TEST_P(NewtonJacobian, FullStepJacobianMatchesFiniteDifferences)
   const Model model = mixedModel();
   std::mt19937 rng(7);
   BodyDynamicsSolver solver(model, options(GetParam(), 1e-3, 0.6, 0.3025, 0.7));
-  State s = initialState(model);
+  BodyState s = bodyInitialState(model);
   s.q = perturbed(model.q0, 0.05, rng);
   s.qd = randomVector(model.nq, 0.5, rng);
   s.qdd = randomVector(model.nq, 2.0, rng);

@@ -103,7 +103,7 @@ TEST(EnergyPoint, CablePullInPowerIsTheElasticEnergysRateAtFixedPositions)
   Model m = loadScene(scenePath("prism_pinned.yaml"));
   ASSERT_EQ(m.actuators.size(), 1u);
   const System sys(m);
-  State s = initialState(m);
+  BodyState s = bodyInitialState(m);
   s.qd.setZero(m.nq);
   s.lambda.setZero(sys.nLambda());
   for (const double value : { 0.0005, 0.0015 })
@@ -111,7 +111,7 @@ TEST(EnergyPoint, CablePullInPowerIsTheElasticEnergysRateAtFixedPositions)
     const double rate = 0.3, ds = 1e-7;
     s.u = ActuationValues{ ActuationValue{ value, rate, 0.0 } };
     const EnergyPoint p = energyPoint(sys, s, {});
-    State plus = s, minus = s;
+    BodyState plus = s, minus = s;
     plus.u[0].value += ds;
     minus.u[0].value -= ds;
     const double dv_ds = (energyPoint(sys, plus, {}).elastic - energyPoint(sys, minus, {}).elastic) / (2.0 * ds);

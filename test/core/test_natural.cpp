@@ -312,7 +312,7 @@ std::vector<Vec3> centresBody(const Model& model, double t_end)
 {
   BodyDynamicsSolver solver(model, model.solver);
   const ActuationLaw law = [&model](double t) { return scheduledActuation(model, t); };
-  State s = initialState(model);
+  BodyState s = bodyInitialState(model);
   EXPECT_TRUE(solver.initialize(s, law).ok());
   while (s.t < t_end - 1e-12)
   {
@@ -383,7 +383,7 @@ TEST(Natural, ActuationForcesAgreeWithBodyCoordinatesAndTheDrivenBodysBalance)
               { { "solver.integrator", "newmark" }, { "solver.dt", "2e-4" }, { "solver.newton_tolerance", "1e-10" } });
     const ActuationLaw law = [&model](double t) { return scheduledActuation(model, t); };
     BodyDynamicsSolver body(model, model.solver);
-    State bs = initialState(model);
+    BodyState bs = bodyInitialState(model);
     ASSERT_TRUE(body.initialize(bs, law).ok());
     const NaturalModel nm = buildNaturalModel(model);
     NaturalSolver natural(nm, model.solver);
@@ -398,7 +398,7 @@ TEST(Natural, ActuationForcesAgreeWithBodyCoordinatesAndTheDrivenBodysBalance)
         bs.t = t1;
         ASSERT_TRUE(natural.tryStep(ns, model.solver.dt, law).ok());
       }
-      const double fb = actuationForce(model, bs, 0);
+      const double fb = bodyActuationForce(model, bs, 0);
       const double fn = firstActuatorForce(natural, ns, scheduledActuation(model, ns.t));
       EXPECT_GT(std::abs(fb), 1000.0);
       EXPECT_NEAR(fn, fb, 1e-5 * std::abs(fb)) << "at " << t_end << " s";
@@ -498,7 +498,7 @@ TEST(Natural, EnergyAccountAgreesWithBodyCoordinatesAndCloses)
   // vanishes with the step (as EnergyAccount.ClosesAsTheStepShrinks has it for the body coordinates)
   Model model = scene("quadruplex_linear_contact.yaml");
   {
-    const State bs = initialState(model);
+    const BodyState bs = bodyInitialState(model);
     const System system(model);
     const EnergyPoint body = energyPoint(system, bs, {});
     const NaturalModel nm = buildNaturalModel(model);
@@ -579,7 +579,7 @@ TEST(Natural, StaticPathsAgreeWithBodyCoordinates)
     const Model model = scene(name);
     const int steps = model.analysis.steps;
     BodyStaticSolver body(model, model.solver);
-    State bs = initialState(model);
+    BodyState bs = bodyInitialState(model);
     ASSERT_TRUE(body.solve(bs, bs.u).ok());
     ActuationValues u_end = bs.u;
     for (ActuationValue& v : u_end)
@@ -607,7 +607,7 @@ TEST(Natural, StaticPathsAgreeWithBodyCoordinates)
     {
       for (size_t k = 0; k < body_path.size(); ++k)
         ASSERT_LT(difference(k), 1e-9) << "load step " << k + 1;
-      const double fb = actuationForce(model, bs, 0), fn = actuationForce(model, ns, 0);
+      const double fb = bodyActuationForce(model, bs, 0), fn = actuationForce(model, ns, 0);
       EXPECT_GT(std::abs(fb), 100.0);
       EXPECT_NEAR(fn, fb, 1e-8 * std::abs(fb));
     }

@@ -133,7 +133,7 @@ TEST(ReducedLinearSolver, SolvesTheTowersDynamicNewtonMatricesThroughContact)
   // matrix is, with every strut's norm and pin and every driven point's rows eliminated.
   std::mt19937 rng(11);
   int touching = 0;
-  const TowerVisit check = [&](const Model& m, BodyDynamicsSolver& solver, const State& s, const ActuationLaw& law)
+  const TowerVisit check = [&](const Model& m, BodyDynamicsSolver& solver, const BodyState& s, const ActuationLaw& law)
   {
     const double h = m.solver.dt;
     touching = static_cast<int>(activeContacts(m, s).size());
@@ -164,7 +164,7 @@ TEST(ReducedLinearSolver, StaticsFactorizesWithIt)
   // the body coordinates' statics reduces every factorization it can, whatever the size (the quadruplex: 52 unknowns)
   const Model model = loadScene(std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) + "/config/scenes/quadruplex.yaml");
   BodyStaticSolver solver(model, model.solver);
-  State s = initialState(model);
+  BodyState s = bodyInitialState(model);
   ASSERT_TRUE(solver.solve(s, s.u).ok());
   ActuationValues end = s.u;
   for (ActuationValue& v : end)

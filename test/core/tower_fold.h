@@ -17,7 +17,7 @@ namespace active_tensegrity::test
 /// What walkTowerFold() shows at each instant: the model, its solver (residualAndJacobian) and state, the
 /// actuation law.
 using TowerVisit =
-    std::function<void(const core::Model&, core::BodyDynamicsSolver&, const core::State&, const core::ActuationLaw&)>;
+    std::function<void(const core::Model&, core::BodyDynamicsSolver&, const core::BodyState&, const core::ActuationLaw&)>;
 
 /// Steps config/scenes/tower.yaml's dynamic fold (V = its scene's speed) at its dt to each of `times`
 /// (ascending, s) and calls `visit` there; a step that fails fails the test.
@@ -27,7 +27,7 @@ inline void walkTowerFold(const std::vector<double>& times, const TowerVisit& vi
   const Model m = loadScene(std::string(ACTIVE_TENSEGRITY_SOURCE_DIR) + "/config/scenes/tower.yaml",
                             { parseOverride("analysis.type=dynamic") });
   BodyDynamicsSolver solver(m, m.solver);
-  State s = initialState(m);
+  BodyState s = bodyInitialState(m);
   const ActuationLaw law = [&m](double t) { return scheduledActuation(m, t); };
   ASSERT_TRUE(solver.initialize(s, law).ok());
   const double h = m.solver.dt;

@@ -62,7 +62,7 @@ TEST(DownstreamLayout, SameLayoutAsTheLibrary)
   expectSame("EigenLayoutProbe", layoutHere(&at::EigenLayoutProbe::vector), library.probe);
   expectSame("Constraint", layoutHere(&at::Constraint::coefficients), library.constraint);
   expectSame("Model", layoutHere(&at::Model::gravity), library.model);
-  expectSame("State", layoutHere(&at::State::lambda), library.state);
+  expectSame("State", layoutHere(&at::State::natural), library.state);
 }
 
 TEST(DownstreamLayout, SceneLoadedAndRunThroughTheLibrary)

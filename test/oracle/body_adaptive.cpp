@@ -21,7 +21,7 @@ BodyAdaptiveStepper::BodyAdaptiveStepper(BodyDynamicsSolver& solver, const Solve
 
 BodyAdaptiveStepper::~BodyAdaptiveStepper() = default;
 
-const EnergyPoint& BodyAdaptiveStepper::startEnergy(const State& s)
+const EnergyPoint& BodyAdaptiveStepper::startEnergy(const BodyState& s)
 {
   // (kept only for the very state it was formed at: a caller may put another state in, as the node's reset does)
   if (!start_energy_valid_ || start_energy_t_ != s.t || start_energy_q_ != s.q ||
@@ -40,8 +40,8 @@ const EnergyPoint& BodyAdaptiveStepper::startEnergy(const State& s)
   return start_energy_;
 }
 
-Summary BodyAdaptiveStepper::advanceTo(State& s, double t_end, const ActuationLaw& law,
-                                       const std::function<void(const State&)>& on_step)
+Summary BodyAdaptiveStepper::advanceTo(BodyState& s, double t_end, const ActuationLaw& law,
+                                       const std::function<void(const BodyState&)>& on_step)
 {
   Summary total;
   const double eps = 1e-12 * std::max(1.0, std::abs(t_end));

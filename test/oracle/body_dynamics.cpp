@@ -98,7 +98,7 @@ BodyDynamicsSolver::BodyDynamicsSolver(const Model& model, const SolverOptions& 
   }
 }
 
-void BodyDynamicsSolver::predict(const State& s, double h, const Eigen::VectorXd& qdd_new, Eigen::VectorXd& q,
+void BodyDynamicsSolver::predict(const BodyState& s, double h, const Eigen::VectorXd& qdd_new, Eigen::VectorXd& q,
                                  Eigen::VectorXd& qd, Eigen::VectorXd& acc) const
 {
   const auto& c = coef_;
@@ -108,7 +108,7 @@ void BodyDynamicsSolver::predict(const State& s, double h, const Eigen::VectorXd
   qd = s.qd + h * ((1.0 - c.gamma) * s.acc + c.gamma * acc);
 }
 
-void BodyDynamicsSolver::residualAndJacobian(const State& s, double h, const ActuationValues& u,
+void BodyDynamicsSolver::residualAndJacobian(const BodyState& s, double h, const ActuationValues& u,
                                              const Eigen::VectorXd& qdd_new, const Eigen::VectorXd& lambda_new,
                                              Eigen::VectorXd& r, BlockSparseMatrix* jac)
 {
@@ -116,7 +116,7 @@ void BodyDynamicsSolver::residualAndJacobian(const State& s, double h, const Act
   residual(s, h, u, qdd_new, lambda_new, r, jac);
 }
 
-void BodyDynamicsSolver::prepareContact(const State& s, double h)
+void BodyDynamicsSolver::prepareContact(const BodyState& s, double h)
 {
   const ScopeTimer timer(timings_.contact);
   const Model& model = system_.model();
@@ -143,7 +143,7 @@ void BodyDynamicsSolver::prepareContact(const State& s, double h)
   findNearContacts(s, std::max(2.0 * reach, kNearFloor));
 }
 
-void BodyDynamicsSolver::findNearContacts(const State& s, double motion)
+void BodyDynamicsSolver::findNearContacts(const BodyState& s, double motion)
 {
   const Model& model = system_.model();
   near_motion_ = motion;
@@ -166,7 +166,7 @@ void BodyDynamicsSolver::findNearContacts(const State& s, double motion)
   }
 }
 
-bool BodyDynamicsSolver::atEnd(const State& s) const
+bool BodyDynamicsSolver::atEnd(const BodyState& s) const
 {
   // (not the time: callers round it to their step grid; the contacts depend on q, qd and the memory of the
   // evaluated slots, no other slot touching there) Bitwise.
@@ -178,7 +178,7 @@ bool BodyDynamicsSolver::atEnd(const State& s) const
   return true;
 }
 
-const std::vector<ContactPairState>* BodyDynamicsSolver::contactsAt(const State& state) const
+const std::vector<ContactPairState>* BodyDynamicsSolver::contactsAt(const BodyState& state) const
 {
   if (!atEnd(state))
     return nullptr;
@@ -203,7 +203,7 @@ const std::vector<ContactPairState>* BodyDynamicsSolver::contactsAt(const State&
   return &end_contacts_;
 }
 
-void BodyDynamicsSolver::updateContactMemory(State& s, const Eigen::VectorXd& q_start)
+void BodyDynamicsSolver::updateContactMemory(BodyState& s, const Eigen::VectorXd& q_start)
 {
   const ScopeTimer timer(timings_.contact);
   const Model& model = system_.model();
@@ -301,8 +301,9 @@ double BodyDynamicsSolver::errorEstimate(const Eigen::VectorXd& a0, const Eigen:
   return c * e;
 }
 
-void BodyDynamicsSolver::residual(const State& s, double h, const ActuationValues& u, const Eigen::VectorXd& qdd_new,
-                                  const Eigen::VectorXd& lambda_new, Eigen::VectorXd& r, BlockSparseMatrix* jac)
+void BodyDynamicsSolver::residual(const BodyState& s, double h, const ActuationValues& u,
+                                  const Eigen::VectorXd& qdd_new, const Eigen::VectorXd& lambda_new, Eigen::VectorXd& r,
+                                  BlockSparseMatrix* jac)
 {
   const double da = (1.0 - coef_.alpha_f) / (1.0 - coef_.alpha_m);  // d acc_{n+1} / d qdd_{n+1}
   const double bh2 = coef_.beta * h * h * da;                       // d q / d qdd
@@ -334,12 +335,12 @@ void BodyDynamicsSolver::residual(const State& s, double h, const ActuationValue
   r.tail(system_.nLambda()) = phi_ / bh2;
 }
 
-bool BodyDynamicsSolver::continuesHistory(const State& s) const
+bool BodyDynamicsSolver::continuesHistory(const BodyState& s) const
 {
   return history_count_ > 0 && s.t == last_end_t_ && sameBits(s.qdd, last_end_qdd_);
 }
 
-void BodyDynamicsSolver::firstGuess(const State& s, double h, Eigen::VectorXd& qdd, Eigen::VectorXd& lambda) const
+void BodyDynamicsSolver::firstGuess(const BodyState& s, double h, Eigen::VectorXd& qdd, Eigen::VectorXd& lambda) const
 {
   // Only from the state the last accepted step ended in (a step cut retries from it too). Through the
   // last three step ends the guess is quadratic: in smooth motion at the tower's dt it is 10-30 times
@@ -371,7 +372,7 @@ void BodyDynamicsSolver::firstGuess(const State& s, double h, Eigen::VectorXd& q
   lambda = w2 * s.lambda + w1 * history_[0].lambda + w0 * history_[1].lambda;
 }
 
-void BodyDynamicsSolver::rememberStep(const State& start, double t_end, const Eigen::VectorXd& qdd_end)
+void BodyDynamicsSolver::rememberStep(const BodyState& start, double t_end, const Eigen::VectorXd& qdd_end)
 {
   const bool chained = continuesHistory(start);
   if (chained)
@@ -395,7 +396,7 @@ bool BodyDynamicsSolver::factorizeNewtonMatrix()
   return reduced_.factorize(jac_, static_cast<int>(system_.model().bodies.size()));
 }
 
-Summary BodyDynamicsSolver::attemptOrFullNewton(State& s, double h, const ActuationLaw& law)
+Summary BodyDynamicsSolver::attemptOrFullNewton(BodyState& s, double h, const ActuationLaw& law)
 {
   Summary sum = attempt(s, h, law, false);
   if (sum.ok() || sum.status == SolveStatus::kPassedThrough || !options_.reuse_jacobian)
@@ -412,7 +413,7 @@ Summary BodyDynamicsSolver::attemptOrFullNewton(State& s, double h, const Actuat
   return sum;
 }
 
-Summary BodyDynamicsSolver::attempt(State& s, double h, const ActuationLaw& law, bool full_newton)
+Summary BodyDynamicsSolver::attempt(BodyState& s, double h, const ActuationLaw& law, bool full_newton)
 {
   Summary sum;
   law(s.t + h, u_iter_);  // a member: no allocation in the step loop (with a writing law)
@@ -645,25 +646,25 @@ Summary BodyDynamicsSolver::attempt(State& s, double h, const ActuationLaw& law,
   return sum;
 }
 
-Summary BodyDynamicsSolver::advance(State& s, double h, const ActuationLaw& law)
+Summary BodyDynamicsSolver::advance(BodyState& s, double h, const ActuationLaw& law)
 {
   return stepInPieces(
       h, options_, [&](double piece) { return attemptOrFullNewton(s, piece, law); }, [&]() { return s.t; });
 }
 
-Summary BodyDynamicsSolver::tryStep(State& s, double h, const ActuationLaw& law)
+Summary BodyDynamicsSolver::tryStep(BodyState& s, double h, const ActuationLaw& law)
 {
   const ScopeTimer timer(timings_.total);
   return attemptOrFullNewton(s, h, law);
 }
 
-Summary BodyDynamicsSolver::step(State& s, double h, const ActuationLaw& law)
+Summary BodyDynamicsSolver::step(BodyState& s, double h, const ActuationLaw& law)
 {
   const ScopeTimer timer(timings_.total);
   return advance(s, h, law);
 }
 
-Summary BodyDynamicsSolver::initialize(State& s, const ActuationLaw& law)
+Summary BodyDynamicsSolver::initialize(BodyState& s, const ActuationLaw& law)
 {
   Summary sum;
   history_count_ = 0;
@@ -741,7 +742,7 @@ Summary BodyDynamicsSolver::initialize(State& s, const ActuationLaw& law)
   return sum;
 }
 
-Summary BodyDynamicsSolver::restartAccelerations(State& s)
+Summary BodyDynamicsSolver::restartAccelerations(BodyState& s)
 {
   Summary sum;
   history_count_ = 0;
@@ -760,7 +761,7 @@ Summary BodyDynamicsSolver::restartAccelerations(State& s)
   return consistentAccelerations(s, exact);
 }
 
-Summary BodyDynamicsSolver::consistentAccelerations(State& s, SparseLinearSolver& exact)
+Summary BodyDynamicsSolver::consistentAccelerations(BodyState& s, SparseLinearSolver& exact)
 {
   Summary sum;
   const int nq = system_.nq();

@@ -83,7 +83,7 @@ bool jumped(const Eigen::VectorXd& found, const Eigen::VectorXd& predicted, doub
   return true;
 }
 
-void accept(State& s, const Eigen::VectorXd& q, const Eigen::VectorXd& lambda, const ActuationValues& u)
+void accept(BodyState& s, const Eigen::VectorXd& q, const Eigen::VectorXd& lambda, const ActuationValues& u)
 {
   s.q = q;
   s.lambda = lambda;
@@ -157,7 +157,7 @@ void BodyStaticSolver::assemble(const Eigen::VectorXd& q, const Eigen::VectorXd&
   r_.tail(system_.nLambda()) = phi_;
 }
 
-Summary BodyStaticSolver::solve(State& s, const ActuationValues& u)
+Summary BodyStaticSolver::solve(BodyState& s, const ActuationValues& u)
 {
   s.natural = NaturalState();  // (the dynamics' coordinates, which the equilibrium does not keep)
   if (s.lambda.size() != system_.nLambda())
@@ -177,12 +177,13 @@ Summary BodyStaticSolver::solve(State& s, const ActuationValues& u)
   return damped;
 }
 
-Summary BodyStaticSolver::relax(State& s, const ActuationValues& u_in, long max_steps, const std::function<bool()>& stop)
+Summary BodyStaticSolver::relax(BodyState& s, const ActuationValues& u_in, long max_steps,
+                                const std::function<bool()>& stop)
 {
   ActuationValues u = u_in;
   for (ActuationValue& v : u)
     v.rate = v.accel = 0.0;
-  State trial = s;
+  BodyState trial = s;
   Summary first = solve(trial, u);
   if (first.ok())
   {
@@ -198,7 +199,7 @@ Summary BodyStaticSolver::relax(State& s, const ActuationValues& u_in, long max_
   model.solver.adaptive = false;
   BodyDynamicsSolver dyn(model, model.solver);
   const ActuationLaw law = [u](double) { return u; };
-  State d = s;
+  BodyState d = s;
   unspin(model, d.q);
   d.t = 0.0;
   d.u = u;
@@ -281,7 +282,7 @@ bool BodyStaticSolver::factorizeFull()
   return ok;
 }
 
-Summary BodyStaticSolver::newton(State& s, const ActuationValues& u)
+Summary BodyStaticSolver::newton(BodyState& s, const ActuationValues& u)
 {
   Summary sum;
   const int nq = system_.nq();
@@ -352,7 +353,7 @@ Summary BodyStaticSolver::newton(State& s, const ActuationValues& u)
   return sum;
 }
 
-Summary BodyStaticSolver::dampedNewton(State& s, const ActuationValues& u, int max_trials)
+Summary BodyStaticSolver::dampedNewton(BodyState& s, const ActuationValues& u, int max_trials)
 {
   // Levenberg-Marquardt with the mass matrix: (K + mu M) dq. A step is kept only when it lowers the
   // residual (forces plus stiffness-scaled constraint violation). Convergence is judged on plain Newton
@@ -581,7 +582,7 @@ void BodyStaticSolver::confirmSign(double w)
     c.sign_after = path_factor_sign_;
     // the stiffness on both sides (a dense eigenproblem each, at the first kMaxCriticalPointSpectra
     // critical points of a path only)
-    State after;
+    BodyState after;
     after.q = path_factor_q_;
     after.lambda = path_factor_lambda_;
     after.u = path_factor_u_;
@@ -755,8 +756,8 @@ Summary BodyStaticSolver::correct(Eigen::VectorXd& q, Eigen::VectorXd& lambda, c
   return sum;
 }
 
-Summary BodyStaticSolver::followPath(State& s, const ActuationValues& u_end, int steps,
-                                     const std::function<void(const State&, const Summary&)>& on_step)
+Summary BodyStaticSolver::followPath(BodyState& s, const ActuationValues& u_end, int steps,
+                                     const std::function<void(const BodyState&, const Summary&)>& on_step)
 {
   const ScopeTimer total_timer(timings_.total);
   Summary total;
@@ -783,7 +784,7 @@ Summary BodyStaticSolver::followPath(State& s, const ActuationValues& u_end, int
   bool have_tangent = pathTangent(s.q, 0.0, tangent);
   if (arc_length_)
     return followArcLength(s, steps, on_step, tangent, have_tangent);
-  State previous = s;
+  BodyState previous = s;
   bool have_previous = false;
   const double floor = 100.0 * options_.newton_tolerance;
   double w = 0.0;  // path parameter reached
@@ -799,7 +800,7 @@ Summary BodyStaticSolver::followPath(State& s, const ActuationValues& u_end, int
       const double w_next = w_target - (w + dw) <= 1e-9 / steps ? w_target : w + dw;
       const ActuationValues u = pathPoint(w_next);
       // predictor: the tangent, else the secant through the last two equilibria, else the last one
-      State trial = s;
+      BodyState trial = s;
       if (have_tangent)
       {
         trial.q += (w_next - w) * tangent.head(nq);
@@ -907,8 +908,8 @@ Summary BodyStaticSolver::followPath(State& s, const ActuationValues& u_end, int
   return total;
 }
 
-Summary BodyStaticSolver::followArcLength(State& s, int steps,
-                                          const std::function<void(const State&, const Summary&)>& on_step,
+Summary BodyStaticSolver::followArcLength(BodyState& s, int steps,
+                                          const std::function<void(const BodyState&, const Summary&)>& on_step,
                                           Eigen::VectorXd tangent, bool have_tangent)
 {
   // Pseudo-arc-length continuation (Keller) in (q, w) with the metric <a, b> = a_q . b_q + psi^2 a_w b_w,
@@ -1087,7 +1088,7 @@ Summary BodyStaticSolver::followArcLength(State& s, int steps,
   return total;
 }
 
-double BodyStaticSolver::forceResidual(const State& s)
+double BodyStaticSolver::forceResidual(const BodyState& s)
 {
   const Eigen::VectorXd zero = Eigen::VectorXd::Zero(system_.nq());
   system_.appliedForce(s.q, zero, s.u, F_, nullptr, 0.0, 0.0);

@@ -15,7 +15,7 @@ EnergyMeter::EnergyMeter(const System& system) : system_(system)
   }
 }
 
-EnergyPoint EnergyMeter::at(const State& state, const std::vector<ContactPairState>& contacts)
+EnergyPoint EnergyMeter::at(const BodyState& state, const std::vector<ContactPairState>& contacts)
 {
   const Model& model = system_.model();
   const Eigen::VectorXd& q = state.q;
@@ -63,7 +63,7 @@ EnergyPoint EnergyMeter::at(const State& state, const std::vector<ContactPairSta
   return e;
 }
 
-EnergyPoint energyPoint(const System& system, const State& state, const std::vector<ContactPairState>& contacts)
+EnergyPoint energyPoint(const System& system, const BodyState& state, const std::vector<ContactPairState>& contacts)
 {
   EnergyMeter meter(system);
   return meter.at(state, contacts);

@@ -33,7 +33,18 @@ void NearSlotCache::find(const Model& model, const BroadPhase& broad, const Eige
   if (moved < 0.0 || reach + moved > kept_reach_)
   {
     kept_reach_ = kSkin * reach;
-    nearContactSlots(model, broad, q, kept_reach_, candidates_, kept_, known_gap, &kept_gap_);
+    // (contact_search.h's nearContactSlots, with the gaps already known and kept)
+    contactCandidates(model, broad, q, kept_reach_, candidates_);
+    kept_.clear();
+    kept_gap_.clear();
+    for (int i : candidates_)
+    {
+      const double gap = gapAt(model, i, q, known_gap);
+      if (gap > 2.0 * kept_reach_)
+        continue;
+      kept_.push_back(i);
+      kept_gap_.push_back(gap);
+    }
     kept_bodies_.clear();
     for (int i : kept_)
     {

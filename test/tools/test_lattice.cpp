@@ -208,7 +208,7 @@ TEST(Lattice, SmallLatticeRunsDynamicStepsToConvergence)
   const at::RunResult r = at::runAnalysis(
       m, [](const at::State&) {}, {},
       [&finite](const at::State& s)
-      { finite = finite && s.q.allFinite() && s.qd.allFinite() && s.lambda.allFinite(); });
+      { finite = finite && s.q.allFinite() && s.qd.allFinite() && s.natural.lambda.allFinite(); });
   ASSERT_TRUE(r.summary.ok()) << r.summary.message;
   EXPECT_TRUE(finite);
   EXPECT_GE(r.solver_steps, 20);

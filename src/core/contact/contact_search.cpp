@@ -18,33 +18,14 @@ void contactCandidates(const Model& model, const BroadPhase& broad, const Eigen:
   appendGroundCandidates(model, q, margin, out);
 }
 
-namespace
-{
-double gapAt(const Model& model, int slot, const Eigen::VectorXd& q, const SlotValues* known_gap)
-{
-  if (known_gap && !std::isnan((*known_gap)[slot]))
-    return (*known_gap)[slot];
-  return contactGeometry(model, slot, q).gap;
-}
-}  // namespace
-
 void nearContactSlots(const Model& model, const BroadPhase& broad, const Eigen::VectorXd& q, double reach,
-                      std::vector<int>& candidates, std::vector<int>& out, const SlotValues* known_gap,
-                      std::vector<double>* gaps)
+                      std::vector<int>& candidates, std::vector<int>& out)
 {
   contactCandidates(model, broad, q, reach, candidates);
   out.clear();
-  if (gaps)
-    gaps->clear();
   for (int i : candidates)
-  {
-    const double gap = gapAt(model, i, q, known_gap);
-    if (gap > 2.0 * reach)
-      continue;
-    out.push_back(i);
-    if (gaps)
-      gaps->push_back(gap);
-  }
+    if (contactGeometry(model, i, q).gap <= 2.0 * reach)
+      out.push_back(i);
 }
 
 double bodyMotion(const Body& b, const Eigen::VectorXd& q0, const Eigen::VectorXd& q1)

@@ -29,7 +29,7 @@ EigenLayout libraryEigenLayout()
   l.probe = layoutOf(&EigenLayoutProbe::vector);
   l.constraint = layoutOf(&Constraint::coefficients);
   l.model = layoutOf(&Model::gravity);
-  l.state = layoutOf(&State::lambda);
+  l.state = layoutOf(&State::natural);
   return l;
 }
 

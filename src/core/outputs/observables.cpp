@@ -26,14 +26,8 @@ double actuationForce(const Model& model, const State& state, int actuator)
                              " s has no actuator forces formed (DynamicsSolver::formActuatorForces)");
     return state.natural.actuator_force[static_cast<size_t>(actuator)];
   }
+  // (a state without natural coordinates has no multipliers: a driven node's reaction is not known, its cables are)
   double force = 0.0;
-  for (int c : model.actuators[actuator].constraints)
-  {
-    int row = 0;  // (a few constraints per actuator: summed here rather than kept in a table)
-    for (int i = 0; i < c; ++i)
-      row += model.constraints[i].rows();
-    force -= state.lambda(row);
-  }
   for (int c : model.actuators[actuator].cables)
     force += evaluateCable(model, model.cables[c], state.q, state.qd, state.u, model.damping_enabled).tension;
   return force;
@@ -408,20 +402,6 @@ std::vector<double> strutAxialForces(const Model& model, const State& state, std
       add(pts[k], f);
       add(pts[k + 1], -f);
     }
-  }
-  Eigen::Index row = 0;
-  for (const Constraint& c : model.constraints)
-  {
-    const Eigen::Index rows = c.rows();
-    if (c.kind == Constraint::Kind::kPoints && row + rows <= state.lambda.size())
-    {
-      Vec3 w = Vec3::Zero();
-      for (Eigen::Index k = 0; k < rows; ++k)
-        w += state.lambda[row + k] * c.directions[static_cast<size_t>(k)];
-      add(c.a, -w);
-      add(c.b, w);
-    }
-    row += rows;
   }
   const double factor = loadFactor(model, state);
   for (const PointLoad& l : model.loads)

@@ -177,9 +177,6 @@ struct StaticSolver::Impl
     a.equilibrium = true;
     s.u = atRest(u);
     writeBodyPoses(nm, s);
-    s.qdd.setZero(model.nq);
-    s.acc.setZero(model.nq);
-    s.lambda.setZero(model.n_lambda);
     solver.staticContacts(x, s.u, a.contacts);
     solver.actuationForces(a, s.u, a.actuator_force);
   }

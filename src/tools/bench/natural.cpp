@@ -116,7 +116,7 @@ Run runBody(const at::Model& model)
   at::BodyDynamicsSolver solver(model, model.solver);
   const at::ActuationLaw law =
       at::ActuationLaw::writing([&model](double t, at::ActuationValues& u) { at::scheduledActuation(model, t, u); });
-  at::State s = at::initialState(model);
+  at::BodyState s = at::bodyInitialState(model);
   std::vector<Eigen::VectorXd> qs;
   qs.reserve(stops.times.size());
   const Clock::time_point t0 = Clock::now();
@@ -282,7 +282,7 @@ int naturalStatics(const std::string& scene, const at::Model& model, int repeat)
   const auto body = [&](Path* path)
   {
     at::BodyStaticSolver solver(model, model.solver);
-    at::State s = at::initialState(model);
+    at::BodyState s = at::bodyInitialState(model);
     at::Summary r = solver.solve(s, s.u);
     if (r.ok())
     {

@@ -111,7 +111,7 @@ int stress(const StressSelection& select)
         model, [](const at::State&) {}, {},
         [&](const at::State& s)
         {
-          finite = finite && s.q.allFinite() && s.qd.allFinite() && s.lambda.allFinite();
+          finite = finite && s.q.allFinite() && s.qd.allFinite() && s.natural.lambda.allFinite();
           for (const at::ContactPairState& p : at::activeContacts(model, s))
             max_force = std::max(max_force, p.normal_force);
           min_gap = std::min(min_gap, at::minimumGap(model, s.q));

@@ -9,7 +9,6 @@
 
 #include "active_tensegrity/core/contact/broad_phase.h"
 #include "active_tensegrity/core/model/model.h"
-#include "active_tensegrity/core/base/slot_values.h"
 
 namespace active_tensegrity::core
 {
@@ -27,11 +26,8 @@ void contactCandidates(const Model& model, const BroadPhase& broad, const Eigen:
 
 /// The contact slots within 2 reach (m) of touching at q: contactCandidates with boxes grown by reach, kept when
 /// their gap is at most 2 reach. While no body point moves by more than reach from q, every slot that touches
-/// is among them (two bodies close their distance by at most twice that). `candidates`: scratch. `known_gap`
-/// (optional, per slot): gaps already evaluated at this q (NaN: not evaluated), taken instead of the narrow phase.
-/// `gaps` (optional): the listed slots' gaps, in their order.
+/// is among them (two bodies close their distance by at most twice that). `candidates`: scratch.
 void nearContactSlots(const Model& model, const BroadPhase& broad, const Eigen::VectorXd& q, double reach,
-                      std::vector<int>& candidates, std::vector<int>& out, const SlotValues* known_gap = nullptr,
-                      std::vector<double>* gaps = nullptr);
+                      std::vector<int>& candidates, std::vector<int>& out);
 
 }  // namespace active_tensegrity::core

@@ -334,8 +334,7 @@ struct Model
   int nq = 0;          // total coordinates
   int n_lambda = 0;    // total constraint rows (model constraints only)
 
-  /// Contact slots: the strut pairs' (pairSlots()), then the ground contacts (per-slot values such as
-  /// State::contact_speed are laid out so).
+  /// Contact slots: the strut pairs' (pairSlots()), then the ground contacts.
   int contactSlots() const
   {
     return pairSlots() + static_cast<int>(ground_contacts.size());

@@ -36,7 +36,7 @@ struct EigenLayout
   TypeLayout probe;                // EigenLayoutProbe, member `vector`
   TypeLayout constraint;           // Constraint (model.h), member `coefficients`
   TypeLayout model;                // Model (model.h), member `gravity`
-  TypeLayout state;                // State (state.h), member `lambda`
+  TypeLayout state;                // State (state.h), member `natural`
 };
 
 /// The layout as the library was compiled (src/core/outputs/eigen_layout.cpp).

@@ -13,10 +13,11 @@
 namespace active_tensegrity::core
 {
 /// Force the actuator applies along its directions, summed over its targets (N); positive when it
-/// pushes the nodes the way they are driven. A static state: from the multipliers (the constraint force on a
-/// body is -Phi_q^T lambda, so each target contributes -lambda) and the pulled cables' tensions. A dynamics state:
-/// what DynamicsSolver::formActuatorForces formed (runAnalysis forms them before its callbacks see a state);
-/// throws std::logic_error when they were not.
+/// pushes the nodes the way they are driven. A state a solver made (State::natural): the forces it formed, a driven
+/// node's reaction or a driven row's multiplier plus the pulled cables' tensions (StaticSolver forms them at every
+/// equilibrium, DynamicsSolver::formActuatorForces at a step; runAnalysis forms them before its callbacks see a
+/// state); throws std::logic_error when they were not. A state without natural coordinates (initialState, a
+/// caller's q) has no reactions: the pulled cables' tensions alone.
 double actuationForce(const Model& model, const State& state, int actuator);
 
 /// Highest z of the model's height nodes above the ground level (m).
@@ -72,12 +73,11 @@ std::vector<CableState> cableStates(const Model& model, const State& state);
 /// The axial force of every strut (Model::bodies order, 0 for point masses), N, positive in tension: half
 /// the difference of the axial components of the forces applied at its two ends (F_top . u - F_bottom . u,
 /// u from the bottom end, local -z, to the top end): the tensions of the cables and springs attached or
-/// running over an end, the reactions of the constraints at an end (ball joints, pins, drives: -Phi_q^T
-/// lambda, from state.lambda) and the point loads there. Forces along the strut (contact, gravity,
-/// inertia) are not end forces: with none and at rest both ends give the same force. `end_imbalance`
-/// (when given) receives F_top . u + F_bottom . u per strut: the net axial force of the ends, which the
-/// forces along the strut balance (0 in a static state without them). A state the dynamics solver made
-/// (State::natural) gives each strut's length-row force, 2 L lambda, which its two ends share (net 0).
+/// running over an end and the point loads there. A state a solver made (State::natural, dynamics or statics) gives
+/// each strut's length-row force, 2 L lambda, which holds the joints' reactions too and which its two ends share
+/// (`end_imbalance`, when given: 0). A state without natural coordinates (initialState, a caller's q) has no
+/// reactions: its forces are the cables', springs' and loads' at the ends, and `end_imbalance` receives
+/// F_top . u + F_bottom . u per strut, the net axial force of those ends.
 std::vector<double> strutAxialForces(const Model& model, const State& state,
                                      std::vector<double>* end_imbalance = nullptr);
 

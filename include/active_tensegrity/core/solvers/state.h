@@ -9,7 +9,6 @@
 #include "active_tensegrity/core/contact/contact.h"
 #include "active_tensegrity/core/model/kinematics.h"
 #include "active_tensegrity/core/model/model.h"
-#include "active_tensegrity/core/base/slot_values.h"
 #include "active_tensegrity/core/base/summary.h"
 
 namespace active_tensegrity::core
@@ -46,26 +45,16 @@ struct State
   double t = 0.0;      // s (dynamics) or load parameter (statics)
   Eigen::VectorXd q;   // body coordinates, 7 per strut (centre, Euler parameters), 3 per point mass
   Eigen::VectorXd qd;  // their time derivatives
-  // The body coordinates' accelerations, generalized-alpha pseudo-accelerations, multipliers (of the model's
-  // constraints, then any solver-added ones) and contact memory: what statics and the body coordinates' dynamics
-  // (BodyDynamicsSolver) keep. The dynamics solver keeps its own in `natural` and leaves these as they were.
-  Eigen::VectorXd qdd;
-  Eigen::VectorXd acc;
-  Eigen::VectorXd lambda;
-  ActuationValues u;  // actuation values at t
-  /// Per contact slot (strut pairs, then ground contacts): the impact speed v_0 (m/s) of a live contact, 0 when apart
-  /// (the body coordinates' dynamics).
-  SlotValues contact_speed;
+  ActuationValues u;   // actuation values at t
   /// The coordinates the dynamics solver integrates (natural.h): the free nodes' positions, velocities and
   /// accelerations, the strut-length and row multipliers, the touching contacts. q and qd above are their body
   /// poses and rates when a solver (dynamics or statics) made the state; a state made otherwise (a caller's q) has
   /// none (x empty), and the solvers form them from q and qd.
   NaturalState natural;
-  /// The impact speed slot remembers (0: not touching): the natural coordinates' when the state has them, else
-  /// contact_speed's.
+  /// The impact speed slot remembers (0: not touching, or a state without natural coordinates).
   double contactSpeed(int slot) const
   {
-    return natural.x.size() > 0 ? natural.contactSpeed(slot) : slot < contact_speed.size() ? contact_speed[slot] : 0.0;
+    return natural.contactSpeed(slot);
   }
 };
 

@@ -5,8 +5,7 @@
 /// not a coordinate, so statics needs no spin locks (nor the spin rates dynamics gives a scene with friction: statics
 /// has none, and its matrices are the smaller for it). The solved state carries its natural coordinates
 /// (State::natural, marked as an equilibrium) and their body poses (State::q, each strut's frame carried onto its axis
-/// along the shortest arc from its pose before); its multipliers are the natural ones (State::lambda, the body
-/// coordinates', stays zero).
+/// along the shortest arc from its pose before) and its multipliers (State::natural.lambda).
 #pragma once
 
 #include <functional>

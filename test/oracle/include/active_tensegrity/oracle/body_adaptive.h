@@ -6,6 +6,7 @@
 #include <functional>
 #include <memory>
 
+#include "active_tensegrity/oracle/body_state.h"
 #include "active_tensegrity/core/solvers/adaptive.h"
 #include "active_tensegrity/core/solvers/energy.h"
 #include "active_tensegrity/oracle/body_dynamics.h"
@@ -25,8 +26,8 @@ public:
   /// Advances `state` to t_end exactly (the last step is shortened to land on it) with the steps the
   /// error control allows; calls on_step after every accepted step. On failure (a step below dt_min
   /// that still does not converge) the state stays at the last good instant and the summary says why.
-  Summary advanceTo(State& state, double t_end, const ActuationLaw& law,
-                    const std::function<void(const State&)>& on_step = {});
+  Summary advanceTo(BodyState& state, double t_end, const ActuationLaw& law,
+                    const std::function<void(const BodyState&)>& on_step = {});
 
   /// The energy at the last accepted step's end (energy.h), and that step's energy check (failed only for a step
   /// accepted at dt_min).
@@ -51,12 +52,12 @@ public:
 
 private:
   /// The energy of `s` (the start of the next step): kept from the last accepted step's end when s is that state.
-  const EnergyPoint& startEnergy(const State& s);
+  const EnergyPoint& startEnergy(const BodyState& s);
 
   BodyDynamicsSolver& solver_;
   SolverOptions options_;
   StepSizeControl control_;
-  State trial_;
+  BodyState trial_;
   AdaptiveStats stats_;
   EnergyPoint start_energy_;
   double start_energy_t_ = 0.0;

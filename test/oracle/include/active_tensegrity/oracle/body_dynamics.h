@@ -16,6 +16,7 @@
 #include "active_tensegrity/oracle/reduced_linear_solver.h"
 #include "active_tensegrity/oracle/sparse_linear_solver.h"
 #include "active_tensegrity/core/solvers/state.h"
+#include "active_tensegrity/oracle/body_state.h"
 #include "active_tensegrity/core/base/summary.h"
 #include "active_tensegrity/oracle/mechanics.h"
 
@@ -42,12 +43,12 @@ public:
   /// Makes `state` consistent with the constraints at state.t: positions and velocities projected
   /// onto them in the mass metric (positions by Newton to |Phi| <= 1e-12 (1 + |q|)), accelerations and
   /// multipliers solved.
-  Summary initialize(State& state, const ActuationLaw& law);
+  Summary initialize(BodyState& state, const ActuationLaw& law);
   /// Advances by h (halving it on failure); on failure `state` is left at the last good instant.
-  Summary step(State& state, double h, const ActuationLaw& law);
+  Summary step(BodyState& state, double h, const ActuationLaw& law);
   /// One attempt at a step of h, never cut: on success `state` is advanced and estimate() describes
   /// the step; on failure `state` is unchanged.
-  Summary tryStep(State& state, double h, const ActuationLaw& law);
+  Summary tryStep(BodyState& state, double h, const ActuationLaw& law);
   /// Says whether the steps will vary (AdaptiveStepper sets it): the body blocks then solve every body
   /// alone (BodyBlockSolver::allowGroups), as their groups would follow the step size, and body blocks that
   /// stop contracting in the step that built them are distrusted even when they contracted at first and the
@@ -78,14 +79,14 @@ public:
   /// that switches them at a time steps onto it). The forces jump there, so the integration restarts from s as
   /// from an initial state: its accelerations and multipliers are made consistent with them
   /// (restartAccelerations; a trapezoidal step then gives a constant force's impulse exactly).
-  Summary setExternalLoads(std::vector<PointLoad> loads, State& s)
+  Summary setExternalLoads(std::vector<PointLoad> loads, BodyState& s)
   {
     system_.setExternalLoads(std::move(loads));
     return restartAccelerations(s);
   }
   /// The accelerations and multipliers consistent with the forces at s.q, s.qd (as initialize() makes them),
   /// after a jump of the applied forces; positions and velocities are kept.
-  Summary restartAccelerations(State& s);
+  Summary restartAccelerations(BodyState& s);
 
   /// The active contacts of `state` (as activeContacts(model, state) gives them, ordered by contact slot)
   /// when it is the state the last accepted step ended in, evaluated with that step's contact memory; else
@@ -93,7 +94,7 @@ public:
   /// them); the first call at that end adds the touching ones' forces, so per-step consumers (peaks, messages)
   /// need no contact pass of their own and a step no one asks about pays for no forces. (Not thread-safe: call
   /// it from the thread that steps.)
-  const std::vector<ContactPairState>* contactsAt(const State& state) const;
+  const std::vector<ContactPairState>* contactsAt(const BodyState& state) const;
 
   const BodyStepTimings& timings() const
   {
@@ -123,39 +124,39 @@ public:
 
   /// The Newton residual and Jacobian of one step at the unknowns (qdd_new, lambda_new); exposed for
   /// the finite-difference test of the full Jacobian.
-  void residualAndJacobian(const State& start, double h, const ActuationValues& u, const Eigen::VectorXd& qdd_new,
+  void residualAndJacobian(const BodyState& start, double h, const ActuationValues& u, const Eigen::VectorXd& qdd_new,
                            const Eigen::VectorXd& lambda_new, Eigen::VectorXd& r, BlockSparseMatrix* jac);
 
 private:
   /// M qdd + Phi_q^T lambda = F - Qv, Phi_q qdd = gamma at s.q, s.qd into s.qdd, s.acc, s.lambda, with `exact`
   /// holding the factorization of [M Phi_q^T; Phi_q 0] there.
-  Summary consistentAccelerations(State& s, SparseLinearSolver& exact);
+  Summary consistentAccelerations(BodyState& s, SparseLinearSolver& exact);
   /// Impact speeds v_0 the next step from `start` uses per checked pair (into step_speeds_): the
   /// remembered one of a live contact, else the approach rate at `start` (floored at min_impact_speed)
   /// for pairs close enough to touch within h.
-  void prepareContact(const State& start, double h);
-  void residual(const State& start, double h, const ActuationValues& u, const Eigen::VectorXd& qdd_new,
+  void prepareContact(const BodyState& start, double h);
+  void residual(const BodyState& start, double h, const ActuationValues& u, const Eigen::VectorXd& qdd_new,
                 const Eigen::VectorXd& lambda_new, Eigen::VectorXd& r, BlockSparseMatrix* jac);
   /// After a converged step from positions q_start: remember v_0 of pairs in contact at `end`, forget
   /// separated ones; records the contact onsets in estimate_.
-  void updateContactMemory(State& end, const Eigen::VectorXd& q_start);
+  void updateContactMemory(BodyState& end, const Eigen::VectorXd& q_start);
   /// The contact slots of `start` within 2 motion (m) of touching into near_ (the only ones a step in which no
   /// body point moves further than `motion` evaluates), with their impact speeds into step_speeds_.
-  void findNearContacts(const State& start, double motion);
+  void findNearContacts(const BodyState& start, double motion);
   /// The local error estimate of a step of h from algorithmic accelerations a0 to a1 (StepEstimate).
   double errorEstimate(const Eigen::VectorXd& a0, const Eigen::VectorXd& a1, double h) const;
   /// One Newton solve of a step of h (modified Newton as options allow, or full Newton).
-  Summary attempt(State& state, double h, const ActuationLaw& law, bool full_newton);
+  Summary attempt(BodyState& state, double h, const ActuationLaw& law, bool full_newton);
   /// attempt(), and when modified Newton fails (no convergence, or a matrix built at a diverged iterate that is
   /// singular), the same step again in full Newton (an exact factorization per iteration) before the caller cuts
   /// it: a kept matrix can diverge where Newton's own converges (friction as the six-bar robot lands on a face:
   /// 2689 step cuts on its roll without the retry, 6 with it).
-  Summary attemptOrFullNewton(State& state, double h, const ActuationLaw& law);
+  Summary attemptOrFullNewton(BodyState& state, double h, const ActuationLaw& law);
   /// A step of h, halved on failure (a loop over the pieces, at most max_step_cuts levels deep, never
   /// below dt_min).
-  Summary advance(State& state, double h, const ActuationLaw& law);
-  void predict(const State& start, double h, const Eigen::VectorXd& qdd_new, Eigen::VectorXd& q, Eigen::VectorXd& qd,
-               Eigen::VectorXd& acc) const;
+  Summary advance(BodyState& state, double h, const ActuationLaw& law);
+  void predict(const BodyState& start, double h, const Eigen::VectorXd& qdd_new, Eigen::VectorXd& q,
+               Eigen::VectorXd& qd, Eigen::VectorXd& acc) const;
 
   System system_;
   SolverOptions options_;
@@ -205,7 +206,7 @@ private:
   mutable std::vector<ContactPairState> end_contacts_;
   mutable bool end_contacts_ready_ = false;
   /// Whether `s` is the state the last accepted step ended in (end_*).
-  bool atEnd(const State& s) const;
+  bool atEnd(const BodyState& s) const;
   BodyStepTimings timings_;
   long most_touching_before_ = 0;  // timings_.most_touching before the last accepted step's end (stepRefused)
   StepEstimate estimate_;
@@ -233,9 +234,9 @@ private:
     Eigen::VectorXd qdd, lambda;
   };
   /// Whether `s` is where the last accepted step ended (the history extends to it).
-  bool continuesHistory(const State& s) const;
-  void firstGuess(const State& s, double h, Eigen::VectorXd& qdd, Eigen::VectorXd& lambda) const;
-  void rememberStep(const State& start, double t_end, const Eigen::VectorXd& qdd_end);
+  bool continuesHistory(const BodyState& s) const;
+  void firstGuess(const BodyState& s, double h, Eigen::VectorXd& qdd, Eigen::VectorXd& lambda) const;
+  void rememberStep(const BodyState& start, double t_end, const Eigen::VectorXd& qdd_end);
   Sample history_[2];
   int history_count_ = 0;
   double last_end_t_ = 0.0;

@@ -14,6 +14,7 @@
 #include "active_tensegrity/oracle/mechanics.h"
 #include "active_tensegrity/oracle/reduced_linear_solver.h"
 #include "active_tensegrity/core/solvers/state.h"
+#include "active_tensegrity/oracle/body_state.h"
 #include "active_tensegrity/core/solvers/statics.h"
 #include "active_tensegrity/core/solvers/structure_check.h"
 #include "active_tensegrity/core/base/summary.h"
@@ -38,7 +39,7 @@ public:
   /// plain Newton fails, a damped (Levenberg-Marquardt) Newton from the same start. Struts are first turned
   /// about their own axes to satisfy their spin locks (their nodes do not move): a state from dynamics,
   /// where friction spins struts, is a valid start.
-  Summary solve(State& state, const ActuationValues& u);
+  Summary solve(BodyState& state, const ActuationValues& u);
 
   /// The equilibrium at actuation u nearest to state's configuration (velocities ignored): solve() from
   /// it, and when that fails, dynamic relaxation with kinetic damping (the dynamics at fixed actuation, the
@@ -47,7 +48,8 @@ public:
   /// the equilibrium (u set, velocities zero); on failure it is left unchanged and the status and message say why.
   /// `stop` (when given) is polled every relaxation step: true ends the search (status kMaxIterations, the
   /// message says it was stopped).
-  Summary relax(State& state, const ActuationValues& u, long max_steps = 20000, const std::function<bool()>& stop = {});
+  Summary relax(BodyState& state, const ActuationValues& u, long max_steps = 20000,
+                const std::function<bool()>& stop = {});
 
   /// Follows the path of equilibria from state's actuation to u_end, the path parameter w running from 0 to
   /// 1 (u = (1 - w) u_start + w u_end) in `steps` equal load steps; calls `on_step` after every one
@@ -59,8 +61,8 @@ public:
   /// 100 newton_tolerance) is refused and the increment cut; when cutting to the smallest increment does not
   /// help, the path ends with status kBranchJump. Critical points passed are listed in criticalPoints()
   /// and as warnings in the returned summary. Stops at the first increment that fails after all cuts.
-  Summary followPath(State& state, const ActuationValues& u_end, int steps,
-                     const std::function<void(const State&, const Summary&)>& on_step);
+  Summary followPath(BodyState& state, const ActuationValues& u_end, int steps,
+                     const std::function<void(const BodyState&, const Summary&)>& on_step);
 
   /// The point loads' factor along the path: f(w) = start + w (end - start) (default 1 to 1: loads as given);
   /// solve() applies f(0) until a path moves it.
@@ -86,7 +88,7 @@ public:
   }
 
   /// Force residual of the equilibrium equations at (q, lambda), N (max norm of -F + Phi_q^T lambda).
-  double forceResidual(const State& state);
+  double forceResidual(const BodyState& state);
 
   /// Where the solver's time went since construction (forces, contact, constraints, factorization, solve,
   /// total; Newton iterations and factorizations).
@@ -101,9 +103,9 @@ public:
   }
 
 private:
-  Summary newton(State& state, const ActuationValues& u);
+  Summary newton(BodyState& state, const ActuationValues& u);
   /// Levenberg-Marquardt from state; at most max_trials factorizations (0: 4 max_iterations).
-  Summary dampedNewton(State& state, const ActuationValues& u, int max_trials = 0);
+  Summary dampedNewton(BodyState& state, const ActuationValues& u, int max_trials = 0);
   /// Factorizes jac_ with the sparse LU of solve() and the damped Newton (timed).
   bool factorizeFull();
   /// r_ (and jac_ when asked) at (q, lambda) under u.
@@ -117,8 +119,9 @@ private:
   /// The path tangent dx/dw at q and w with the current path factorization (false without one).
   bool pathTangent(const Eigen::VectorXd& q, double w, Eigen::VectorXd& tangent);
   /// followPath with setArcLength(true); tangent: dx/dw at the start, when have_tangent.
-  Summary followArcLength(State& state, int steps, const std::function<void(const State&, const Summary&)>& on_step,
-                          Eigen::VectorXd tangent, bool have_tangent);
+  Summary followArcLength(BodyState& state, int steps,
+                          const std::function<void(const BodyState&, const Summary&)>& on_step, Eigen::VectorXd tangent,
+                          bool have_tangent);
   /// Modified-Newton correction of (q, lambda) to the equilibrium under u (w: for the determinant record;
   /// predicted_step: how far the predictor moved the coordinates, max norm).
   Summary correct(Eigen::VectorXd& q, Eigen::VectorXd& lambda, const ActuationValues& u, double w,
@@ -148,7 +151,7 @@ private:
   int path_factor_sign_ = 0;     // the sign of its determinant
   int sign_ = 0;                 // the path's determinant sign at the last accepted equilibrium (0: none yet)
   double sign_parameter_ = 0.0;  // the path parameter of the factorization that showed it
-  State sign_state_;             // ... and the state it was made at (q, lambda, u)
+  BodyState sign_state_;         // ... and the state it was made at (q, lambda, u)
   std::vector<CriticalPoint> critical_points_;
   double damped_mu_hint_ = 0.0;  // the damping at which the last damped Newton first kept a step
   double wander_bound_ = 2.0;    // the diagonal of the nodes' bounding box at the start, at least 2

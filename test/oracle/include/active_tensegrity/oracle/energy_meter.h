@@ -4,6 +4,7 @@
 
 #include <vector>
 
+#include "active_tensegrity/oracle/body_state.h"
 #include "active_tensegrity/core/solvers/energy.h"
 #include "active_tensegrity/core/model/kinematics.h"
 #include "active_tensegrity/oracle/mechanics.h"
@@ -13,7 +14,7 @@ namespace active_tensegrity::core
 /// The energy of `state` (positions, velocities, multipliers and actuation values at state.t). `contacts`: the
 /// active contacts of the state (DynamicsSolver::contactsAt, activeContacts) with their forces; their elastic
 /// energy and dissipated power are summed, no other slot is evaluated.
-EnergyPoint energyPoint(const System& system, const State& state, const std::vector<ContactPairState>& contacts);
+EnergyPoint energyPoint(const System& system, const BodyState& state, const std::vector<ContactPairState>& contacts);
 
 /// energyPoint for a sequence of states (every step of a run): the cables' point slots are found once and the
 /// points' motion comes from frames formed once per state (no allocation once sized).
@@ -22,7 +23,7 @@ class EnergyMeter
 public:
   explicit EnergyMeter(const System& system);
   /// energyPoint(system, state, contacts), the same number.
-  EnergyPoint at(const State& state, const std::vector<ContactPairState>& contacts);
+  EnergyPoint at(const BodyState& state, const std::vector<ContactPairState>& contacts);
 
 private:
   const System& system_;

@@ -24,7 +24,7 @@
 #include "active_tensegrity/oracle/near_slot_cache.h"
 #include "active_tensegrity/core/model/kinematics.h"
 #include "active_tensegrity/core/model/model.h"
-#include "active_tensegrity/core/base/slot_values.h"
+#include "active_tensegrity/oracle/slot_values.h"
 #include "active_tensegrity/core/base/summary.h"
 
 namespace active_tensegrity::core

@@ -6,7 +6,7 @@
 
 #include <Eigen/Core>
 
-#include "active_tensegrity/core/base/slot_values.h"
+#include "active_tensegrity/oracle/slot_values.h"
 #include "active_tensegrity/core/contact/broad_phase.h"
 #include "active_tensegrity/core/contact/contact_search.h"
 #include "active_tensegrity/core/model/model.h"
