@@ -4,12 +4,6 @@
 
 namespace active_tensegrity::core
 {
-Mat3 skew(const Vec3& a)
-{
-  Mat3 s;
-  s << 0.0, -a.z(), a.y(), a.z(), 0.0, -a.x(), -a.y(), a.x(), 0.0;
-  return s;
-}
 
 Mat3 rotationMatrix(const Vec4& theta)
 {

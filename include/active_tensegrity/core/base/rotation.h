@@ -16,7 +16,12 @@ using Mat4 = Eigen::Matrix4d;
 using Mat34 = Eigen::Matrix<double, 3, 4>;
 
 /// Cross-product matrix: skew(a) * b = a x b.
-Mat3 skew(const Vec3& a);
+inline Mat3 skew(const Vec3& a)
+{
+  Mat3 s;
+  s << 0.0, -a.z(), a.y(), a.z(), 0.0, -a.x(), -a.y(), a.x(), 0.0;
+  return s;
+}
 
 /// A(Theta) = (e0^2 - e.e) I + 2 e e^T + 2 e0 skew(e); the exact quadratic form, valid for any Theta
 /// (orthonormal only when |Theta| = 1).
