@@ -1,4 +1,4 @@
-// tensegrity_formfind: finds the self-equilibrated form of a scene (core/scene/form_finding.h) and writes it as a
+// tensegrity_formfind: finds the self-equilibrated form of a scene (design/form_finding.h) and writes it as a
 // loadable scene whose rest lengths give the prestress exactly.
 #include <cmath>
 #include <cstdio>

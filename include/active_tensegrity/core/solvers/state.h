@@ -29,7 +29,8 @@ struct NaturalState
   std::vector<NaturalTouch> touching;      // the contacts touching, ascending by slot (the others remember nothing)
   std::vector<ContactPairState> contacts;  // and their states and forces (the same slots in the same order)
   Eigen::VectorXd frame_spin;              // per strut: the spin angle its body frame (State::q) carries (rad)
-  std::vector<double> actuator_force;      // per actuator: the force it exerts (N; DynamicsSolver::actuationForce)
+  std::vector<double>
+      actuator_force;  // per actuator: the force it exerts (N; DynamicsSolver::formActuatorForces, StaticSolver)
   /// A static equilibrium (StaticSolver): velocities and accelerations zero, no contact memory; the dynamics
   /// starts from it by initializing (DynamicsSolver::initialize).
   bool equilibrium = false;
