@@ -13,6 +13,8 @@
 #include "active_tensegrity/core/model/model.h"
 #include "active_tensegrity/core/scene/scene.h"
 #include "active_tensegrity/core/solvers/state.h"
+#include "active_tensegrity/design/form_finding.h"
+#include "active_tensegrity/design/generators.h"
 
 namespace at = active_tensegrity::core;
 
@@ -85,4 +87,16 @@ TEST(DownstreamLayout, SceneLoadedAndRunThroughTheLibrary)
       at::runAnalysis(model, [&outputs](const at::State& s) { outputs += s.q.allFinite() ? 1 : 0; });
   EXPECT_TRUE(r.summary.ok()) << r.summary.message;
   EXPECT_GT(outputs, 0);
+}
+
+// The design library through the same exported config: a generated prism loads, and form-finding returns its form
+TEST(Downstream, DesignLibraryGeneratesAndFindsAForm)
+{
+  active_tensegrity::design::PrismSpec spec;
+  spec.struts = 4;
+  const std::string yaml = active_tensegrity::design::prismScene(spec);
+  EXPECT_EQ(at::loadSceneFromString(yaml, "prism").bodies.size(), 4u);
+  active_tensegrity::design::FormFindingOptions options;
+  const active_tensegrity::design::FormFindingResult form = active_tensegrity::design::findForm(yaml, "prism", options);
+  EXPECT_EQ(form.positions.size(), 8u);
 }
