@@ -160,26 +160,6 @@ Summary DynamicsSolver::initialize(State& s, const ActuationLaw& law)
   return out;
 }
 
-Summary DynamicsSolver::tryStep(State& s, double h, const ActuationLaw& law)
-{
-  Impl& m = *impl_;
-  if (const Summary init = prepare(s, law); !init.ok())
-    return init;
-  // (from the natural coordinates' own time, which the caller's may differ from by its rounding: the step lands on
-  // s.t + h)
-  const double t1 = s.t + h;
-  Summary out;
-  ScopeTimer timer(m.timings.total);
-  out = m.solver.tryStep(s.natural, t1 - s.natural.t, law);
-  m.countTimings();
-  if (!out.ok())
-    return out;
-  s.u = m.solver.actuation();  // (the step's end: the law is not asked again)
-  m.stepped(s);
-  m.ended(s);
-  return out;
-}
-
 Summary DynamicsSolver::step(State& s, double h, const ActuationLaw& law)
 {
   Impl& m = *impl_;

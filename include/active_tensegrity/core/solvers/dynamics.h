@@ -36,8 +36,6 @@ public:
   Summary initialize(State& state, const ActuationLaw& law);
   /// Advances by h (halving it on failure); on failure `state` is left at the last good instant.
   Summary step(State& state, double h, const ActuationLaw& law);
-  /// One attempt at a step of h, never cut: on success `state` is advanced; on failure it is unchanged.
-  Summary tryStep(State& state, double h, const ActuationLaw& law);
   /// Forces from outside the scene from `s` on (on strut axes and point masses; each checked before any is
   /// applied). The forces jump there, so the integration restarts from s: its accelerations and multipliers are made
   /// consistent with them. Throws std::invalid_argument naming a load the natural coordinates cannot take.
@@ -53,7 +51,7 @@ public:
   /// The energy of s and the powers acting on it (energy.h's account).
   EnergyPoint energyAt(const State& s);
 
-  /// With `defer` true, step and tryStep leave the body poses (State::q, qd) to writePoses and mark the state
+  /// With `defer` true, step leaves the body poses (State::q, qd) to writePoses and mark the state
   /// (NaturalState::poses_pending): a loop that reads them at some steps only saves writing them at the others. The
   /// struts' frames are carried at every step (natural.h, carryBodyFrames), so the poses are the same either way. Off
   /// by default.
