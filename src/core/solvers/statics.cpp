@@ -47,6 +47,23 @@ ActuationValues blend(const ActuationValues& a, const ActuationValues& b, double
   return u;
 }
 
+/// `sum` failed with `status` and `message`.
+Summary failed(Summary sum, SolveStatus status, const std::string& message)
+{
+  sum.status = status;
+  sum.message = message;
+  return sum;
+}
+
+/// Newton ran out of iterations: `sum` (its residual, the last increment) says so.
+Summary notConverged(Summary sum, int max_iterations)
+{
+  std::ostringstream msg;
+  msg << "static Newton did not converge in " << max_iterations << " iterations (last increment " << sum.residual
+      << ")";
+  return failed(sum, SolveStatus::kMaxIterations, msg.str());
+}
+
 ActuationValues atRest(ActuationValues u)
 {
   for (ActuationValue& v : u)
@@ -423,11 +440,7 @@ Summary StaticSolver::Impl::newton(Eigen::VectorXd& x, Eigen::VectorXd& lambda, 
     ++sum.iterations;
     ++timings.newton_iterations;
     if (!r().allFinite())
-    {
-      sum.status = SolveStatus::kNonFinite;
-      sum.message = "non-finite static residual";
-      return sum;
-    }
+      return failed(sum, SolveStatus::kNonFinite, "non-finite static residual");
     if (r().lpNorm<Eigen::Infinity>() == 0.0)
     {
       // exactly in equilibrium (e.g. the unstressed start, where the tangent is singular): nothing to do
@@ -445,11 +458,7 @@ Summary StaticSolver::Impl::newton(Eigen::VectorXd& x, Eigen::VectorXd& lambda, 
     rhs = -r();
     solve(rhs, dx);
     if (!dx.allFinite())
-    {
-      sum.status = SolveStatus::kNonFinite;
-      sum.message = "non-finite static Newton increment";
-      return sum;
-    }
+      return failed(sum, SolveStatus::kNonFinite, "non-finite static Newton increment");
     xt += dx.head(n);
     lt += dx.tail(rows);
     sum.residual = dx.head(n).lpNorm<Eigen::Infinity>();
@@ -471,12 +480,7 @@ Summary StaticSolver::Impl::newton(Eigen::VectorXd& x, Eigen::VectorXd& lambda, 
       return sum;
     }
   }
-  sum.status = SolveStatus::kMaxIterations;
-  std::ostringstream msg;
-  msg << "static Newton did not converge in " << options.max_iterations << " iterations (last increment "
-      << sum.residual << ")";
-  sum.message = msg.str();
-  return sum;
+  return notConverged(sum, options.max_iterations);
 }
 
 Summary StaticSolver::Impl::dampedNewton(Eigen::VectorXd& x_io, Eigen::VectorXd& lambda_io, const ActuationValues& u,
@@ -734,21 +738,15 @@ Summary StaticSolver::Impl::correct(Eigen::VectorXd& x, Eigen::VectorXd& lambda,
     else
       assemble(x, lambda, u, false);
     if (!r().allFinite())
-    {
-      sum.status = SolveStatus::kNonFinite;
-      sum.message = "non-finite static residual";
-      return sum;
-    }
+      return failed(sum, SolveStatus::kNonFinite, "non-finite static residual");
     if (r().lpNorm<Eigen::Infinity>() == 0.0)
       return sum;
     rhs = -r();
     solve(rhs, dx);
     if (!dx.allFinite())
     {
-      sum.status = SolveStatus::kNonFinite;
-      sum.message = "non-finite static Newton increment";
       path_factor_valid = false;
-      return sum;
+      return failed(sum, SolveStatus::kNonFinite, "non-finite static Newton increment");
     }
     const double tol = options.newton_tolerance;
     const double step = dx.head(n).lpNorm<Eigen::Infinity>();
@@ -819,12 +817,7 @@ Summary StaticSolver::Impl::correct(Eigen::VectorXd& x, Eigen::VectorXd& lambda,
     if (scaled > 1e12)
       break;  // diverging
   }
-  sum.status = SolveStatus::kMaxIterations;
-  std::ostringstream msg;
-  msg << "static Newton did not converge in " << options.max_iterations << " iterations (last increment "
-      << sum.residual << ")";
-  sum.message = msg.str();
-  return sum;
+  return notConverged(sum, options.max_iterations);
 }
 
 Summary StaticSolver::followPath(State& s, const ActuationValues& u_end, int steps,
